@@ -1,0 +1,1 @@
+"""ISAC multi-UAV collaborative target tracking."""

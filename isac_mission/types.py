@@ -1,0 +1,71 @@
+"""Domain types shared by the library, the simulator and the service.
+
+Arrays are numpy float64. Shapes are given in brackets: M UAVs, K base stations. Positions are in the
+scenario plane (x east, y north) in metres; the target state is [x, y, vx, vy] in m and m/s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class Gaussian:
+    """A Gaussian belief over the target state: mean x [4] and covariance P [4, 4]."""
+
+    x: FloatArray
+    P: FloatArray
+
+
+@dataclass(frozen=True)
+class Detections:
+    """One slot's measurements.
+
+    range_m [M] and radial_velocity_mps [M] hold NaN where a UAV's detection did not arrive;
+    uav_xy_m [M, 2] are the positions at which the measurements were taken.
+    """
+
+    slot: int
+    range_m: FloatArray
+    radial_velocity_mps: FloatArray
+    uav_xy_m: FloatArray
+
+    @property
+    def received(self) -> BoolArray:
+        """[M] True where both the range and the radial velocity of UAV m arrived."""
+        return np.isfinite(self.range_m) & np.isfinite(self.radial_velocity_mps)
+
+
+@dataclass(frozen=True)
+class SolveReport:
+    """How a slot plan was obtained: status is "ok" or "infeasible"; reason says why if not ok."""
+
+    status: str
+    reason: str = ""
+    ao_iterations: int = 0
+    position_iterations: int = 0
+    bandwidth_iterations: int = 0
+    solve_s: float = 0.0
+    objective_history: tuple[float, ...] = field(default_factory=tuple)
+
+
+@dataclass(frozen=True)
+class SlotPlan:
+    """The planner's decision for one slot.
+
+    uav_xy_m [M, 2]: waypoints for this slot; bs_of_uav [M]: 0-based BS index per UAV;
+    bandwidth_share [M]: eta, sums to 1; pcrb_trace: tr(C) at the predicted state for this plan.
+    """
+
+    uav_xy_m: FloatArray
+    bs_of_uav: IntArray
+    bandwidth_share: FloatArray
+    pcrb_trace: float
+    report: SolveReport
