@@ -102,9 +102,7 @@ class TargetConfig(_Section):
     initial_state: tuple[float, float, float, float] = Field(
         (600.0, 1600.0, 30.0, 0.0), description="x_0 = [x, y, vx, vy] in m and m/s."
     )
-    process_noise_intensity: float = Field(
-        0.5, ge=0, description="kappa in W (eq. 4), m^2/s^3."
-    )
+    process_noise_intensity: float = Field(0.5, ge=0, description="kappa in W (eq. 4), m^2/s^3.")
     rcs_dbsm: float = Field(-10.0, description="sigma_RCS.")
 
 
@@ -151,9 +149,7 @@ class PlannerConfig(_Section):
         description="resolve: P1-F.1 from q_{n-1} each slot; keep: Lemma 2 (docs/model.md).",
     )
     epsilon: float = Field(1e-3, gt=0, lt=1, description="Relative-decrease stop (Alg. 1, 2).")
-    line_search_step: float = Field(
-        0.05, gt=0, le=1, description="Delta omega of the line search."
-    )
+    line_search_step: float = Field(0.05, gt=0, le=1, description="Delta omega of the line search.")
     max_ao_iterations: int = Field(8, ge=1)
     max_position_iterations: int = Field(8, ge=1)
     max_bandwidth_iterations: int = Field(8, ge=1)
@@ -227,9 +223,7 @@ class Scenario:
     @property
     def radar_gain(self) -> float:
         """c0 in SNR^s = c0 / d^4 [m^4]: lambda^2 Pu sigma_RCS / ((4 pi)^3 sigma_0^2)."""
-        return (
-            self.wavelength**2 * self.Pu * self.rcs_m2 / ((4 * math.pi) ** 3 * self.noise_w)
-        )
+        return self.wavelength**2 * self.Pu * self.rcs_m2 / ((4 * math.pi) ** 3 * self.noise_w)
 
     def with_changes(self, **changes: Any) -> Scenario:
         """A copy with some fields replaced (no re-validation: for studies and tests)."""
@@ -436,7 +430,9 @@ def _format_validation_error(source: str, err: ValidationError) -> str:
 def parse_scenario(data: Any, source: str = "<config>") -> Scenario:
     """Validate a mapping (as read from YAML) and resolve it. Raises ConfigError."""
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: the file must hold a mapping of sections, got {type(data).__name__}")
+        raise ConfigError(
+            f"{source}: the file must hold a mapping of sections, got {type(data).__name__}"
+        )
     try:
         spec = ScenarioFile.model_validate(data)
     except ValidationError as err:
@@ -444,7 +440,9 @@ def parse_scenario(data: Any, source: str = "<config>") -> Scenario:
     try:
         return resolve(spec)
     except ConfigError as err:
-        raise ConfigError("\n".join(f"{source}: {line}" for line in str(err).splitlines())) from None
+        raise ConfigError(
+            "\n".join(f"{source}: {line}" for line in str(err).splitlines())
+        ) from None
 
 
 def load_scenario(path: str | Path) -> Scenario:

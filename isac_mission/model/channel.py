@@ -33,7 +33,9 @@ def control_range(P_bs: float, beta0: float, noise_w: float, gamma_th: float, dH
     return float(np.sqrt(sq)) if sq > 0 else 0.0
 
 
-def min_share(horizontal_m: FloatArray, r_th: float, dH: float, rho0: float, B: float) -> FloatArray:
+def min_share(
+    horizontal_m: FloatArray, r_th: float, dH: float, rho0: float, B: float
+) -> FloatArray:
     """eta_min = R_th / R~ (20a): the smallest share that meets R_th at this distance."""
     return r_th / full_band_rate(horizontal_m, dH, rho0, B)
 
@@ -45,4 +47,4 @@ def rate_radius(eta: FloatArray, r_th: float, dH: float, rho0: float, B: float) 
     """
     exponent = np.minimum(r_th / (np.asarray(eta, dtype=float) * B), 1000.0)
     sq = rho0 / np.expm1(exponent * np.log(2.0)) - dH**2
-    return np.sqrt(np.maximum(sq, 0.0))
+    return np.asarray(np.sqrt(np.maximum(sq, 0.0)))
