@@ -1,0 +1,85 @@
+"""Exact checks of the original constraints (14a)-(14j) on candidate plans.
+
+The SCA subproblem only approximates 14b, 14i and 14j; every plan the planner returns passes these
+checks. Functions take batches: positions [L, M, 2], shares [L, M] -> [L] booleans.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.model.channel import full_band_rate
+from isac_mission.types import BoolArray, FloatArray, IntArray
+
+
+@dataclass(frozen=True)
+class SlotConstraints:
+    """The data the constraints of one slot depend on.
+
+    prev_xy [M, 2]: q_{n-1}; serving_bs_xy [M, 2]: w_{k_m} of the chosen association;
+    bs_xy [K, 2]; target_xy [2]: predicted target position (14j).
+    """
+
+    prev_xy: FloatArray
+    serving_bs_xy: FloatArray
+    bs_xy: FloatArray
+    target_xy: FloatArray
+    scenario: Scenario
+
+    def full_rates(self, uav_xy: FloatArray) -> FloatArray:
+        """R~ [..., M] of each UAV on its serving BS, bit/s."""
+        s = self.scenario
+        dist = np.linalg.norm(uav_xy - self.serving_bs_xy, axis=-1)
+        return np.asarray(full_band_rate(dist, s.dH, s.rho0, s.B))
+
+    def position_violations(self, uav_xy: FloatArray, tol_m: float = 0.0) -> dict[str, BoolArray]:
+        """Per constraint, [L] True where positions [L, M, 2] violate 14b, 14h, 14i or 14j."""
+        s = self.scenario
+        q = np.asarray(uav_xy).reshape(-1, s.M, 2)
+        nearest_bs = np.min(
+            np.linalg.norm(q[:, :, None, :] - self.bs_xy[None, None], axis=-1), axis=2
+        )
+        step = np.linalg.norm(q - self.prev_xy[None], axis=-1)
+        to_target = np.linalg.norm(q - self.target_xy[None, None], axis=-1)
+        out = {
+            "14b control range": np.any(nearest_bs > s.d_th + tol_m, axis=1),
+            "14h max speed": np.any(step > s.v_max * s.dt + tol_m, axis=1),
+            "14j target distance": np.any(to_target < s.d_safe - tol_m, axis=1),
+        }
+        if s.M > 1:
+            iu = np.triu_indices(s.M, 1)
+            gaps = np.linalg.norm(q[:, :, None, :] - q[:, None, :, :], axis=-1)[:, iu[0], iu[1]]
+            out["14i UAV separation"] = np.any(gaps < s.d_safe - tol_m, axis=1)
+        return out
+
+    def rate_violations(self, uav_xy: FloatArray, eta: FloatArray) -> BoolArray:
+        """[L] True where some UAV's rate eta R~ is below R_th (14a), relative tolerance 1e-12."""
+        s = self.scenario
+        rates = np.asarray(eta) * self.full_rates(np.asarray(uav_xy).reshape(-1, s.M, 2))
+        return np.asarray(np.any(rates < s.r_th * (1 - 1e-12), axis=-1))
+
+    def feasible(self, uav_xy: FloatArray, eta: FloatArray, tol_m: float = 0.0) -> BoolArray:
+        """[L] True where (positions, shares) satisfy 14a-14j (14c/14d hold by construction)."""
+        bad = self.rate_violations(uav_xy, eta)
+        for v in self.position_violations(uav_xy, tol_m).values():
+            bad = bad | v
+        return np.asarray(~bad)
+
+    def describe_violations(self, uav_xy: FloatArray, eta: FloatArray) -> list[str]:
+        """Names of the constraints one plan (uav_xy [M, 2], eta [M]) violates."""
+        names = [k for k, v in self.position_violations(uav_xy).items() if bool(v[0])]
+        if bool(self.rate_violations(uav_xy, eta)[0]):
+            names.insert(0, "14a rate")
+        if abs(float(np.sum(eta)) - 1.0) > 1e-9 or np.any(np.asarray(eta) < 0):
+            names.append("14c/14d shares")
+        return names
+
+
+def capacity_ok(bs_of_uav: IntArray, n_bs: int, capacity: int) -> bool:
+    """14e-14g: every UAV on one valid BS, at most N_a UAVs per BS."""
+    if np.any(bs_of_uav < 0) or np.any(bs_of_uav >= n_bs):
+        return False
+    return bool(np.bincount(bs_of_uav, minlength=n_bs).max() <= capacity)

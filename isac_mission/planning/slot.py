@@ -1,0 +1,200 @@
+"""plan_slot(): one slot of the planner (Algorithm 2) and the benchmark strategies.
+
+One pure function per slot: (scenario via the kit, previous plan, predicted track, prior
+information) -> plan. No clock state, no RNG, no I/O: the offline simulation and the live service
+call the same function. The strategies share it:
+
+- proposed: positions by Algorithm 1 and shares by (P1.2.1), alternated (Algorithm 2);
+- sd: static deployment, UAVs stay where they are, shares optimised;
+- aba: average bandwidth (eta = 1/M), positions by Algorithm 1;
+- crb: the proposed optimiser with the measurement-only objective tr(J_M^-1);
+- comm: the communication-optimal plan of Section III-A.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.planning.association import AssociationLP, associate
+from isac_mission.planning.bandwidth import BandwidthSubproblem, optimise_shares
+from isac_mission.planning.communication import communication_optimal, lemma1_shares
+from isac_mission.planning.feasibility import SlotConstraints, capacity_ok
+from isac_mission.planning.positions import PositionSubproblem, optimise_positions
+from isac_mission.tracking.pcrb import PlanningObjective, SensingParams
+from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
+
+Method = Literal["proposed", "sd", "aba", "crb", "comm"]
+METHODS: tuple[Method, ...] = ("proposed", "sd", "aba", "crb", "comm")
+
+
+@dataclass(frozen=True)
+class SlotInput:
+    """What the planner knows at the start of slot n.
+
+    prev_xy [M, 2]: where the UAVs are (q_{n-1}); prev_eta [M]: last slot's shares;
+    prev_assoc [M] or None: last slot's BS per UAV; x_pred [4]: predicted target state;
+    J_pred [4, 4]: prior information of the bound at this slot.
+    """
+
+    prev_xy: FloatArray
+    prev_eta: FloatArray
+    prev_assoc: IntArray | None
+    x_pred: FloatArray
+    J_pred: FloatArray
+
+
+class SolverKit:
+    """The convex problems of one scenario, built once (DPP) and re-solved every slot."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        s = scenario
+        self.scenario = s
+        self.sensing = SensingParams.from_scenario(s)
+        self.positions = PositionSubproblem(s, s.planner.solver)
+        self.shares = BandwidthSubproblem(s.M)
+        self.association = AssociationLP(s.M, s.K, s.n_a)
+
+    def warm_up(self) -> None:
+        """Solve every problem once so that the first real slot does not pay for compilation."""
+        s = self.scenario
+        plan_slot(
+            SlotInput(
+                prev_xy=s.uav_start_xy,
+                prev_eta=np.full(s.M, 1.0 / s.M),
+                prev_assoc=None,
+                x_pred=s.x0,
+                J_pred=np.asarray(np.linalg.inv(s.P0), dtype=float),
+            ),
+            self,
+            "proposed",
+        )
+
+
+def _plan(
+    xy: FloatArray,
+    assoc: IntArray,
+    eta: FloatArray,
+    objective: PlanningObjective,
+    report: SolveReport,
+) -> SlotPlan:
+    full = PlanningObjective(objective.J_pred, objective.x_pred, objective.sensing)
+    return SlotPlan(
+        uav_xy_m=xy,
+        bs_of_uav=assoc,
+        bandwidth_share=eta,
+        pcrb_trace=full.value(xy, eta),
+        report=report,
+    )
+
+
+def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> SlotPlan:
+    """Plan one slot with the given strategy. An infeasible slot returns a best-effort plan (the
+    communication-optimal one, or staying put for sd) with report.status == "infeasible"."""
+    t0 = time.perf_counter()
+    s = kit.scenario
+    cfg = s.planner
+    if cfg.association == "keep" and inp.prev_assoc is not None:
+        assoc = inp.prev_assoc
+    else:
+        assoc = associate(
+            inp.prev_xy, s.bs_xy, capacity=s.n_a, dH=s.dH, rho0=s.rho0, B=s.B, lp=kit.association
+        )
+    serving = s.bs_xy[assoc]
+    cons = SlotConstraints(inp.prev_xy, serving, s.bs_xy, inp.x_pred[:2], s)
+    moves = method not in ("sd",)
+    step = s.v_max * s.dt if moves else 0.0
+    comm = communication_optimal(inp.prev_xy, serving, max_step_m=step, dH=s.dH, rho0=s.rho0, B=s.B)
+    objective = PlanningObjective(
+        inp.J_pred, inp.x_pred, kit.sensing, measurement_only=(method == "crb")
+    )
+
+    def elapsed() -> float:
+        return time.perf_counter() - t0
+
+    def fallback(reason: str) -> SlotPlan:
+        return _plan(
+            comm.uav_xy,
+            assoc,
+            comm.eta,
+            objective,
+            SolveReport("infeasible", reason, solve_s=elapsed()),
+        )
+
+    if comm.worst_rate_bps < s.r_th:
+        return fallback(
+            f"infeasible: communication-optimal worst rate R_c* = {comm.worst_rate_bps / 1e6:.3f} "
+            f"Mbit/s < R_th = {s.r_th / 1e6:.3f} Mbit/s"
+        )
+    if method == "comm":
+        violated = cons.describe_violations(comm.uav_xy, comm.eta)
+        status = "ok" if not violated else "infeasible"
+        return _plan(
+            comm.uav_xy,
+            assoc,
+            comm.eta,
+            objective,
+            SolveReport(status, ", ".join(violated), solve_s=elapsed()),
+        )
+
+    Q = inp.prev_xy
+    if method == "aba":
+        eta = np.full(s.M, 1.0 / s.M)
+    else:
+        eta = inp.prev_eta
+        if bool(cons.rate_violations(Q[None], eta[None])[0]):
+            eta = lemma1_shares(cons.full_rates(Q))
+    f = objective.value(Q, eta)
+    history = [f]
+    n_pos = n_bw = n_ao = 0
+    search = {"epsilon": cfg.epsilon, "step": cfg.line_search_step}
+    for ao_iteration in range(1, cfg.max_ao_iterations + 1):
+        n_ao = ao_iteration
+        if moves:
+            res = optimise_positions(
+                Q,
+                eta,
+                objective.value_and_gradients,
+                objective.values,
+                cons,
+                kit.positions,
+                max_iterations=cfg.max_position_iterations,
+                **search,
+            )
+            Q, n_pos = res.point, n_pos + res.iterations
+        if method != "aba":
+            res = optimise_shares(
+                Q,
+                eta,
+                objective.value_and_gradients,
+                objective.values,
+                cons,
+                kit.shares,
+                max_iterations=cfg.max_bandwidth_iterations,
+                **search,
+            )
+            eta, n_bw = res.point, n_bw + res.iterations
+        f_new = objective.value(Q, eta)
+        history.append(f_new)
+        decrease = (f - f_new) / f if np.isfinite(f) else np.inf
+        f = f_new
+        if decrease <= cfg.epsilon or not (moves and method != "aba"):
+            break
+    violated = cons.describe_violations(Q, eta)
+    if not capacity_ok(assoc, s.K, s.n_a):
+        violated.append("14e capacity")
+    if violated:
+        return fallback("infeasible: no plan satisfies " + ", ".join(violated))
+    report = SolveReport(
+        "ok",
+        ao_iterations=n_ao,
+        position_iterations=n_pos,
+        bandwidth_iterations=n_bw,
+        solve_s=elapsed(),
+        objective_history=tuple(float(v) for v in history),
+    )
+    return _plan(Q, assoc, eta, objective, report)

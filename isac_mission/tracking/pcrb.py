@@ -1,0 +1,244 @@
+"""Posterior Cramér-Rao bound (eq. 9-12) with the Tichavsky recursion, and its planning objective.
+
+The bound's information J_n = (F J_{n-1}^-1 F^T + W)^-1 + H^T R^-1 H is kept on the full matrix
+(eq. 11 as printed would forget past measurements: docs/model.md). H and R are evaluated at the
+predicted state. The objective of (P1) is f(Q, eta) = tr(C) with C = J^-1 at that state; this module
+gives f and its analytic gradients with respect to the UAV positions Q [M, 2] and shares eta [M].
+
+The measurement information is a sum of rank-one terms J_M = sum_m a_m g_m g_m^T + b_m k_m k_m^T with
+g_m = d(d_m)/dx, k_m = d(v_m)/dx, a_m = 1/sigma_d^2 and b_m = 1/sigma_v^2 (eq. 8).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.types import FloatArray
+
+
+@dataclass(frozen=True)
+class SensingParams:
+    """Constants of eq. 8: SNR^s = radar_gain / d^4 [m^4]; alpha_d, alpha_v; B [Hz]; Ts [s]."""
+
+    radar_gain: float
+    alpha_d: float
+    alpha_v: float
+    B: float
+    Ts: float
+
+    @classmethod
+    def from_scenario(cls, s: Scenario) -> SensingParams:
+        return cls(s.radar_gain, s.alpha_d, s.alpha_v, s.B, s.Ts)
+
+    def range_information(self, range_m: FloatArray, eta: FloatArray) -> FloatArray:
+        """a = 1 / sigma_d^2 = radar_gain (eta B)^2 / (alpha_d d^4) [1/m^2], shape of range_m."""
+        return self.radar_gain * (np.asarray(eta) * self.B) ** 2 / (self.alpha_d * range_m**4)
+
+    def velocity_information(self, range_m: FloatArray) -> FloatArray:
+        """b = 1 / sigma_v^2 = radar_gain Ts^2 / (alpha_v d^4) [s^2/m^2], shape of range_m."""
+        return self.radar_gain * self.Ts**2 / (self.alpha_v * np.asarray(range_m) ** 4)
+
+    def variances(self, range_m: FloatArray, eta: FloatArray) -> FloatArray:
+        """r_diag [2M]: sigma_d^2 (m^2) then sigma_v^2 (m^2/s^2) for ranges [M] and shares [M]."""
+        return np.concatenate(
+            [1.0 / self.range_information(range_m, eta), 1.0 / self.velocity_information(range_m)]
+        )
+
+
+def scaled_inverse(A: FloatArray) -> FloatArray:
+    """Inverse of a symmetric positive-definite matrix [n, n] via Jacobi (diagonal) scaling.
+
+    Information matrices here mix entries of order 1e20 (literal eq. 8 ranges) with entries of
+    order 1; scaling by the diagonal first keeps the inverse accurate to a few ulps.
+    """
+    s = 1.0 / np.sqrt(np.diag(A))
+    scaled = A * s[:, None] * s[None, :]
+    inv = np.linalg.inv(scaled) * s[:, None] * s[None, :]
+    return np.asarray(0.5 * (inv + inv.T))
+
+
+@dataclass(frozen=True)
+class Bound:
+    """The bound at one slot: information J [4, 4] and PCRB matrix C = J^-1 [4, 4]."""
+
+    J: FloatArray
+    C: FloatArray
+
+    @classmethod
+    def from_information(cls, J: FloatArray) -> Bound:
+        return cls(J=J, C=scaled_inverse(J))
+
+    @classmethod
+    def from_covariance(cls, C: FloatArray) -> Bound:
+        return cls(J=scaled_inverse(C), C=C)
+
+    @property
+    def trace(self) -> float:
+        """tr(C): m^2 + (m/s)^2 as in the paper's objective."""
+        return float(np.trace(self.C))
+
+    @property
+    def position_trace(self) -> float:
+        """tr(C[:2, :2]) in m^2."""
+        return float(np.trace(self.C[:2, :2]))
+
+    @property
+    def velocity_trace(self) -> float:
+        """tr(C[2:, 2:]) in (m/s)^2."""
+        return float(np.trace(self.C[2:, 2:]))
+
+
+def predict_information(prev: Bound, F: FloatArray, W: FloatArray) -> FloatArray:
+    """J_pred [4, 4] = (F J_{n-1}^-1 F^T + W)^-1: the prior information at slot n."""
+    return scaled_inverse(F @ prev.C @ F.T + W)
+
+
+def measurement_directions(
+    x: FloatArray, uav_xy: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(g [M, 4], k [M, 4], d [M]): range and radial-velocity gradients d(d_m)/dx, d(v_m)/dx and
+    the ranges, at target state x [4] seen from uav_xy [M, 2] (the rows of H in eq. 10)."""
+    r = x[None, :2] - uav_xy
+    d = np.linalg.norm(r, axis=1)
+    u = r / d[:, None]
+    v_r = u @ x[2:]
+    m = uav_xy.shape[0]
+    g = np.zeros((m, 4))
+    g[:, :2] = u
+    k = np.empty((m, 4))
+    k[:, :2] = (x[None, 2:] - v_r[:, None] * u) / d[:, None]
+    k[:, 2:] = u
+    return g, k, d
+
+
+def measurement_information(x: FloatArray, uav_xy: FloatArray, r_diag: FloatArray) -> FloatArray:
+    """J_M [4, 4] = H^T R^-1 H (eq. 12) for variances r_diag [2M]; a non-finite variance (a
+    measurement that did not arrive) contributes nothing."""
+    g, k, _ = measurement_directions(x, uav_xy)
+    H = np.vstack([g, k])
+    with np.errstate(divide="ignore"):
+        w = np.where(np.isfinite(r_diag), 1.0 / r_diag, 0.0)
+    return np.asarray((H * w[:, None]).T @ H)
+
+
+def bound_step(
+    prev: Bound,
+    F: FloatArray,
+    W: FloatArray,
+    x_pred: FloatArray,
+    uav_xy: FloatArray,
+    r_diag: FloatArray,
+) -> Bound:
+    """One step of the recursion: J_n = J_pred + H^T R^-1 H at the predicted state x_pred [4]."""
+    J = predict_information(prev, F, W) + measurement_information(x_pred, uav_xy, r_diag)
+    return Bound.from_information(0.5 * (J + J.T))
+
+
+@dataclass(frozen=True)
+class PlanningObjective:
+    """f(Q, eta) = tr((J_pred + J_M(Q, eta))^-1) at the predicted state (Section II-D).
+
+    J_pred [4, 4]: prior information at this slot; x_pred [4]: predicted target state.
+    measurement_only=True drops J_pred (the CRB-criterion benchmark: f = tr(J_M^-1)).
+    """
+
+    J_pred: FloatArray
+    x_pred: FloatArray
+    sensing: SensingParams
+    measurement_only: bool = False
+
+    def _information(self, uav_xy: FloatArray, eta: FloatArray) -> tuple[FloatArray, ...]:
+        g, k, d = measurement_directions(self.x_pred, uav_xy)
+        a = self.sensing.range_information(d, eta)
+        b = self.sensing.velocity_information(d)
+        J = (g * a[:, None]).T @ g + (k * b[:, None]).T @ k
+        if not self.measurement_only:
+            J = J + self.J_pred
+        return J, g, k, d, a, b
+
+    def value(self, uav_xy: FloatArray, eta: FloatArray) -> float:
+        """f for positions [M, 2] and shares [M]; +inf where J is singular (CRB-criterion)."""
+        J = self._information(uav_xy, eta)[0]
+        try:
+            return float(np.trace(scaled_inverse(0.5 * (J + J.T))))
+        except np.linalg.LinAlgError:
+            return float("inf")
+
+    def values(self, uav_xy: FloatArray, eta: FloatArray) -> FloatArray:
+        """f for a batch: positions [L, M, 2] and shares [L, M] (or [M]) -> [L]."""
+        x = self.x_pred
+        r = x[None, None, :2] - uav_xy
+        d = np.linalg.norm(r, axis=2)
+        u = r / d[..., None]
+        v_r = np.einsum("lmi,i->lm", u, x[2:])
+        kp = (x[None, None, 2:] - v_r[..., None] * u) / d[..., None]
+        eta_b = np.broadcast_to(eta, d.shape)
+        a = self.sensing.range_information(d, eta_b)
+        b = self.sensing.velocity_information(d)
+        L = d.shape[0]
+        J = np.zeros((L, 4, 4))
+        J[:, :2, :2] = np.einsum("lm,lmi,lmj->lij", a, u, u) + np.einsum(
+            "lm,lmi,lmj->lij", b, kp, kp
+        )
+        J[:, :2, 2:] = np.einsum("lm,lmi,lmj->lij", b, kp, u)
+        J[:, 2:, :2] = np.transpose(J[:, :2, 2:], (0, 2, 1))
+        J[:, 2:, 2:] = np.einsum("lm,lmi,lmj->lij", b, u, u)
+        if not self.measurement_only:
+            J = J + self.J_pred[None]
+        s = 1.0 / np.sqrt(np.einsum("lii->li", J))
+        scaled = J * s[:, :, None] * s[:, None, :]
+        out = np.full(L, np.inf)
+        ok = np.linalg.det(scaled) > 1e-300
+        if np.any(ok):
+            inv = np.linalg.inv(scaled[ok])
+            out[ok] = np.einsum("lii,li->l", inv, s[ok] ** 2)
+        return out
+
+    def value_and_gradients(
+        self, uav_xy: FloatArray, eta: FloatArray
+    ) -> tuple[float, FloatArray, FloatArray]:
+        """(f, df/dQ [M, 2] in m^2/m, df/deta [M]) by the analytic chain rule.
+
+        d tr(J^-1) = -tr(C dJ C) with C = J^-1; dJ comes from the rank-one terms' derivatives with
+        respect to r = p - q_m (then d/dq = -d/dr) and from a_m ∝ eta_m^2.
+        """
+        J, g, k, d, a, b = self._information(uav_xy, eta)
+        C = scaled_inverse(0.5 * (J + J.T))
+        C2 = C @ C
+        x = self.x_pred
+        w = x[2:]
+        u = g[:, :2]
+        kp = k[:, :2]
+        v_r = u @ w
+        perp = np.eye(2)[None] - u[:, :, None] * u[:, None, :]  # [M, 2, 2]
+        m = uav_xy.shape[0]
+        # dg/dr_j and dk/dr_j: [M, 2 (j), 4]
+        dg = np.zeros((m, 2, 4))
+        dg[:, :, :2] = perp / d[:, None, None]
+        dk = np.zeros((m, 2, 4))
+        inv_d = 1.0 / d
+        dk[:, :, :2] = (
+            -u[:, :, None] * w[None, None, :] * inv_d[:, None, None] ** 2
+            - kp[:, :, None] * u[:, None, :] * inv_d[:, None, None]
+            - v_r[:, None, None] * perp * inv_d[:, None, None] ** 2
+            + v_r[:, None, None] * u[:, :, None] * u[:, None, :] * inv_d[:, None, None] ** 2
+        )
+        dk[:, :, 2:] = perp * inv_d[:, None, None]
+        gC2g = np.einsum("mi,ij,mj->m", g, C2, g)
+        kC2k = np.einsum("mi,ij,mj->m", k, C2, k)
+        gC2dg = np.einsum("mi,ij,mrj->mr", g, C2, dg)
+        kC2dk = np.einsum("mi,ij,mrj->mr", k, C2, dk)
+        da = -4.0 * a[:, None] * u * inv_d[:, None]
+        db = -4.0 * b[:, None] * u * inv_d[:, None]
+        df_dr = -(
+            da * gC2g[:, None]
+            + 2 * a[:, None] * gC2dg
+            + db * kC2k[:, None]
+            + 2 * b[:, None] * kC2dk
+        )
+        grad_q = -df_dr
+        grad_eta = -(2.0 * a / np.asarray(eta)) * gC2g
+        return float(np.trace(C)), grad_q, grad_eta
