@@ -1,0 +1,63 @@
+"""Shared fixtures: scenarios, seeded generators, free loopback ports, and the --full switch."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from isac_mission.config import Scenario, load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--full",
+        action="store_true",
+        default=False,
+        help="Run long tests at full size (Monte Carlo runs, soak length).",
+    )
+
+
+@pytest.fixture(scope="session")
+def full_size(request: pytest.FixtureRequest) -> bool:
+    """True when the suite runs with --full."""
+    return bool(request.config.getoption("--full"))
+
+
+@pytest.fixture(scope="session")
+def paper() -> Scenario:
+    """config/paper.yaml: Table I with the calibrated sensing model."""
+    return load_scenario(ROOT / "config" / "paper.yaml")
+
+
+@pytest.fixture(scope="session")
+def paper_literal() -> Scenario:
+    """config/paper-literal.yaml: Table I exactly as printed."""
+    return load_scenario(ROOT / "config" / "paper-literal.yaml")
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)
+
+
+def _free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that was free a moment ago."""
+    return _free_port(socket.SOCK_DGRAM)
+
+
+@pytest.fixture
+def free_tcp_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    return _free_port(socket.SOCK_STREAM)

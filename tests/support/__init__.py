@@ -1,0 +1,1 @@
+"""Test helpers shared by the unit, numerics and e2e tests (not part of the package)."""
