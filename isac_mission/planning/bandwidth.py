@@ -57,6 +57,23 @@ def lp_vertex(grad: FloatArray, eta_min: FloatArray) -> FloatArray:
     return np.asarray(eta)
 
 
+def starting_candidates(start_eta: FloatArray, eta_min: FloatArray) -> FloatArray:
+    """[C, M] feasible starting shares: start_eta, equal shares (if feasible) and the M vertices of
+    (P1.2.1)'s feasible set (all UAVs at their floor, the rest to one UAV).
+
+    f is not convex in eta (range information grows as eta^2), so it has a local minimum near each
+    vertex; a descent from last slot's shares alone keeps the bandwidth on last slot's UAV.
+    """
+    M = len(eta_min)
+    floor = eta_min * (1 + SHARE_MARGIN)
+    vertices = np.tile(floor, (M, 1)) + np.eye(M) * (1.0 - floor.sum())
+    cands = [start_eta[None], vertices]
+    equal = np.full(M, 1.0 / M)
+    if np.all(equal >= floor):
+        cands.insert(1, equal[None])
+    return np.vstack(cands)
+
+
 def optimise_shares(
     uav_xy: FloatArray,
     start_eta: FloatArray,
@@ -72,8 +89,15 @@ def optimise_shares(
     """Descent search for the shares at fixed positions uav_xy [M, 2] from start_eta [M]."""
     s = constraints.scenario
     eta_min = s.r_th / constraints.full_rates(uav_xy)
-    eta = start_eta
     M = uav_xy.shape[0]
+    eta = start_eta
+    if eta_min.sum() * (1 + SHARE_MARGIN) <= 1.0:
+        cands = starting_candidates(start_eta, eta_min)
+        at = np.broadcast_to(uav_xy, (len(cands), M, 2))
+        ok = constraints.feasible(at, cands)
+        values = np.where(ok, objective_values(at, cands), np.inf)
+        if np.isfinite(values.min()):
+            eta = cands[int(np.argmin(values))]
     f = objective_values(uav_xy[None], eta)[0]
     feasible_now = bool(constraints.feasible(uav_xy[None], eta[None])[0])
     it = 0

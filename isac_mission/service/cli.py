@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, cast
 
 import typer
 from rich.console import Console
@@ -12,6 +12,7 @@ from rich.table import Table
 
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.errors import ConfigError
+from isac_mission.planning.slot import METHODS, Method
 
 app = typer.Typer(
     add_completion=False,
@@ -59,6 +60,59 @@ def check_config(config: ConfigArg) -> None:
     for row in rows:
         table.add_row(*row)
     console.print(table)
+
+
+def _quiet_highs_banner() -> None:
+    """HiGHS prints a copyright banner on stdout at its first construction in a process."""
+    import os
+
+    import highspy
+
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+            highspy.Highs()
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+@app.command()
+def simulate(
+    config: ConfigArg,
+    runs: Annotated[int, typer.Option(min=1, help="Monte Carlo runs.")] = 20,
+    seed: Annotated[int | None, typer.Option(help="Base seed (default: the config's).")] = None,
+    out: Annotated[
+        Path | None, typer.Option(help="Output folder (traces, plots, summary).")
+    ] = None,
+    methods: Annotated[
+        str, typer.Option(help="Comma-separated: proposed, sd, aba, crb, comm.")
+    ] = "proposed,sd,aba,crb",
+    workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 2,
+    plots: Annotated[bool, typer.Option(help="Write the Fig. 2 / Fig. 3 style PNGs.")] = True,
+) -> None:
+    """Offline closed loop (Section II-C) for every method, Monte Carlo with common random numbers."""
+    from isac_mission.experiment.report import simulate_report
+
+    s = load_or_exit(config)
+    chosen = [m.strip() for m in methods.split(",") if m.strip()]
+    unknown = sorted(set(chosen) - set(METHODS))
+    if unknown or not chosen:
+        err_console.print(f"--methods: unknown {unknown}; choose from {', '.join(METHODS)}")
+        raise typer.Exit(2)
+    _quiet_highs_banner()
+    out_dir = out if out is not None else Path("out") / f"simulate-{s.mission_id}"
+    simulate_report(
+        s,
+        [cast(Method, m) for m in chosen],
+        runs=runs,
+        seed=s.seed if seed is None else seed,
+        out_dir=out_dir,
+        workers=workers,
+        plots=plots,
+        console=console,
+    )
 
 
 def main() -> None:

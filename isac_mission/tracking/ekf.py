@@ -18,7 +18,7 @@ from isac_mission.types import FloatArray, Gaussian
 
 def _filter(belief: Gaussian, F: FloatArray, W: FloatArray) -> ExtendedKalmanFilter:
     kf = ExtendedKalmanFilter(dim_x=4, dim_z=1)
-    kf.x = belief.x.astype(float).reshape(4, 1).copy()
+    kf.x = belief.x.astype(float).copy()
     kf.P = belief.P.astype(float).copy()
     kf.F = F
     kf.Q = W

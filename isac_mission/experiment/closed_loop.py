@@ -1,0 +1,173 @@
+"""The offline closed loop of Section II-C: predict, plan, fly, measure, update, for N slots.
+
+Every method of one Monte Carlo run sees the same random numbers (`RunNoise`): the same target path,
+the same initial estimate error and the same standard-normal measurement draws, scaled by each
+method's own noise standard deviations. The planner is the same `plan_slot` the live service calls.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.model.radar import measure
+from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.tracking.ekf import ekf_predict, ekf_update
+from isac_mission.tracking.pcrb import Bound, bound_step, predict_information, scaled_inverse
+from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan
+
+
+@dataclass(frozen=True)
+class RunNoise:
+    """Common random numbers of one run.
+
+    process [N, 4]: target process noise w_{n-1}; initial_error [4]: x_hat_0 - x_0;
+    measurement [N, 2M]: standard normals; miss_draw [N, M]: uniforms for missed detections.
+    """
+
+    seed: int
+    process: FloatArray
+    initial_error: FloatArray
+    measurement: FloatArray
+    miss_draw: FloatArray
+
+
+def draw_run_noise(s: Scenario, seed: int) -> RunNoise:
+    """Draw one run's random numbers from a seeded generator."""
+    rng = np.random.default_rng(seed)
+    W = process_noise(s.dt, s.kappa)
+    return RunNoise(
+        seed=seed,
+        process=rng.multivariate_normal(np.zeros(4), W, size=s.N),
+        initial_error=rng.multivariate_normal(np.zeros(4), s.P0),
+        measurement=rng.standard_normal((s.N, 2 * s.M)),
+        miss_draw=rng.uniform(size=(s.N, s.M)),
+    )
+
+
+def true_trajectory(s: Scenario, noise: RunNoise) -> FloatArray:
+    """[N + 1, 4] target states x_0..x_N of the constant-velocity model (eq. 3)."""
+    F = transition_matrix(s.dt)
+    xs = np.empty((s.N + 1, 4))
+    xs[0] = s.x0
+    for n in range(1, s.N + 1):
+        xs[n] = F @ xs[n - 1] + noise.process[n - 1]
+    return xs
+
+
+@dataclass(frozen=True)
+class SlotOutcome:
+    """Everything one slot produced (the trace's contract fields, DESIGN.md).
+
+    uav_xy [M, 2] where measurements were taken; r_diag [2M] variances used (NaN = missing);
+    target_* [4]; P, J [4, 4].
+    """
+
+    slot: int
+    method: str
+    plan: SlotPlan
+    uav_xy: FloatArray
+    target_true: FloatArray
+    target_pred: FloatArray
+    target_est: FloatArray
+    r_diag: FloatArray
+    P: FloatArray
+    bound: Bound
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """Per-slot arrays of one run of one method (slots 1..N).
+
+    est, true [N, 4]; pcrb [N, 4, 4] (C = J^-1); solve_s [N]; status [N]; uav_xy [N, M, 2];
+    eta [N, M]; assoc [N, M].
+    """
+
+    method: str
+    seed: int
+    est: FloatArray
+    true: FloatArray
+    pcrb: FloatArray
+    solve_s: FloatArray
+    status: list[str]
+    uav_xy: FloatArray
+    eta: FloatArray
+    assoc: IntArray
+
+
+def run_closed_loop(
+    s: Scenario,
+    method: Method,
+    noise: RunNoise,
+    kit: SolverKit,
+    on_slot: Callable[[SlotOutcome], None] | None = None,
+) -> RunResult:
+    """Fly one mission of N slots with the given planning method; returns per-slot results."""
+    F, W = transition_matrix(s.dt), process_noise(s.dt, s.kappa)
+    truth = true_trajectory(s, noise)
+    belief = Gaussian(x=s.x0 + noise.initial_error, P=s.P0.copy())
+    bound = Bound.from_covariance(s.P0.copy())
+    uav_xy, eta, assoc = s.uav_start_xy.copy(), np.full(s.M, 1.0 / s.M), None
+    rows: dict[str, list[object]] = {
+        k: [] for k in ("est", "pcrb", "solve_s", "status", "uav_xy", "eta", "assoc")
+    }
+    for n in range(1, s.N + 1):
+        pred = ekf_predict(belief, F, W)
+        J_pred = predict_information(bound, F, W)
+        prior = J_pred if s.bound_prior == "pcrb" else scaled_inverse(pred.P)
+        plan = plan_slot(SlotInput(uav_xy, eta, assoc, pred.x, prior), kit, method)
+        uav_xy, eta, assoc = plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav
+        # Measurements at the planned positions: noise from the true geometry; the filter and the
+        # bound use the variances at the predicted state (the target's truth is not theirs).
+        z_clean = measure(truth[n], uav_xy)
+        true_range = z_clean[: s.M]
+        var_true = kit.sensing.variances(true_range, eta)
+        z = z_clean + np.sqrt(var_true) * noise.measurement[n - 1]
+        r_diag = kit.sensing.variances(np.linalg.norm(pred.x[None, :2] - uav_xy, axis=1), eta)
+        missed = noise.miss_draw[n - 1] < s.missed_detection_prob
+        lost = np.concatenate([missed, missed])
+        z[lost] = np.nan
+        r_used = np.where(lost, np.nan, r_diag)
+        belief = ekf_update(pred, z, uav_xy, r_used)
+        bound = bound_step(bound, F, W, pred.x, uav_xy, r_used)
+        for key, value in (
+            ("est", belief.x),
+            ("pcrb", bound.C),
+            ("solve_s", plan.report.solve_s),
+            ("status", plan.report.status),
+            ("uav_xy", uav_xy),
+            ("eta", eta),
+            ("assoc", assoc),
+        ):
+            rows[key].append(value)
+        if on_slot is not None:
+            on_slot(
+                SlotOutcome(
+                    slot=n,
+                    method=method,
+                    plan=plan,
+                    uav_xy=uav_xy,
+                    target_true=truth[n],
+                    target_pred=pred.x,
+                    target_est=belief.x,
+                    r_diag=r_used,
+                    P=belief.P,
+                    bound=bound,
+                )
+            )
+    return RunResult(
+        method=method,
+        seed=noise.seed,
+        est=np.array(rows["est"]),
+        true=truth[1:],
+        pcrb=np.array(rows["pcrb"]),
+        solve_s=np.array(rows["solve_s"], dtype=float),
+        status=[str(v) for v in rows["status"]],
+        uav_xy=np.array(rows["uav_xy"]),
+        eta=np.array(rows["eta"]),
+        assoc=np.array(rows["assoc"], dtype=np.int64),
+    )

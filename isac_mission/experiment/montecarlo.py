@@ -1,0 +1,178 @@
+"""Monte Carlo over runs x methods with common random numbers, and the summary table.
+
+Run r of every method uses the noise drawn from seed + r. Metrics (docs/model.md, "Metrics"):
+location RMSE = sqrt(mean over runs and slots 1..N of ||p_hat - p||^2), velocity likewise; mean
+tr(PCRB) position and velocity parts over the same runs and slots; the efficiency ratio
+E||p_hat - p||^2 / tr(PCRB_pos) over slots 2..N.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.experiment.closed_loop import (
+    RunResult,
+    SlotOutcome,
+    draw_run_noise,
+    run_closed_loop,
+)
+from isac_mission.experiment.trace import SlotRecord, TraceWriter
+from isac_mission.planning.slot import Method, SolverKit
+
+# The paper's Section IV: % reduction of the proposed method's location and velocity error
+# against SD, ABA and CRB-criterion.
+PAPER_REDUCTIONS: dict[str, tuple[float, float]] = {
+    "sd": (61.1, 59.9),
+    "aba": (22.8, 29.1),
+    "crb": (9.0, 12.0),
+}
+
+
+@dataclass(frozen=True)
+class MethodSummary:
+    """Aggregates of one method over all runs (units: m^2, (m/s)^2, m, m/s, ms)."""
+
+    method: str
+    runs: int
+    pcrb_pos: float
+    pcrb_vel: float
+    loc_rmse: float
+    vel_rmse: float
+    efficiency: float
+    solve_median_ms: float
+    solve_p95_ms: float
+    infeasible_slots: int
+    slots: int
+
+    @property
+    def pcrb_total(self) -> float:
+        return self.pcrb_pos + self.pcrb_vel
+
+
+def summarize(results: Sequence[RunResult]) -> MethodSummary:
+    """Aggregate the runs of one method."""
+    err = np.array([r.est - r.true for r in results])  # [R, N, 4]
+    C = np.array([r.pcrb for r in results])  # [R, N, 4, 4]
+    loc_se = np.sum(err[..., :2] ** 2, axis=-1)
+    vel_se = np.sum(err[..., 2:] ** 2, axis=-1)
+    pos_tr = np.trace(C[..., :2, :2], axis1=-2, axis2=-1)
+    vel_tr = np.trace(C[..., 2:, 2:], axis1=-2, axis2=-1)
+    solve_ms = np.concatenate([r.solve_s for r in results]) * 1e3
+    return MethodSummary(
+        method=results[0].method,
+        runs=len(results),
+        pcrb_pos=float(pos_tr.mean()),
+        pcrb_vel=float(vel_tr.mean()),
+        loc_rmse=float(np.sqrt(loc_se.mean())),
+        vel_rmse=float(np.sqrt(vel_se.mean())),
+        efficiency=float(loc_se[:, 1:].mean() / pos_tr[:, 1:].mean()),
+        solve_median_ms=float(np.median(solve_ms)),
+        solve_p95_ms=float(np.percentile(solve_ms, 95)),
+        infeasible_slots=sum(s != "ok" for r in results for s in r.status),
+        slots=sum(len(r.status) for r in results),
+    )
+
+
+def reduction_pct(proposed: float, benchmark: float) -> float:
+    """How much lower the proposed value is than the benchmark's, in %."""
+    return 100.0 * (benchmark - proposed) / benchmark
+
+
+def outcome_record(o: SlotOutcome) -> SlotRecord:
+    """The trace line of one slot (DESIGN.md, "Trace")."""
+    rep = o.plan.report
+    return SlotRecord(
+        slot=o.slot,
+        method=o.method,
+        status=rep.status,
+        uav_xy=o.uav_xy,
+        eta=o.plan.bandwidth_share,
+        assoc=o.plan.bs_of_uav,
+        target_true=o.target_true,
+        target_est=o.target_est,
+        target_pred=o.target_pred,
+        r_diag=o.r_diag,
+        pcrb_trace=o.bound.trace,
+        solve_ms=rep.solve_s * 1e3,
+        P=o.P,
+        J=o.bound.J,
+        plan_xy=o.plan.uav_xy_m,
+        plan_pcrb_trace=o.plan.pcrb_trace,
+        reason=rep.reason,
+        extra={
+            "pcrb_pos": o.bound.position_trace,
+            "pcrb_vel": o.bound.velocity_trace,
+            "ao_iterations": rep.ao_iterations,
+            "position_iterations": rep.position_iterations,
+            "bandwidth_iterations": rep.bandwidth_iterations,
+        },
+    )
+
+
+def trace_path(trace_dir: Path, method: str, run: int) -> Path:
+    """Where run `run` of `method` is traced."""
+    return trace_dir / f"{method}_run{run:03d}.jsonl"
+
+
+def _run_one(s: Scenario, method: Method, run: int, seed: int, trace_dir: Path | None) -> RunResult:
+    kit = _kit_for(s)
+    noise = draw_run_noise(s, seed + run)
+    if trace_dir is None:
+        return run_closed_loop(s, method, noise, kit)
+    config = s.trace_config() | {"seed": seed + run, "method": method}
+    with TraceWriter(trace_path(trace_dir, method, run), config) as writer:
+        return run_closed_loop(
+            s, method, noise, kit, lambda o: writer.write_slot(outcome_record(o))
+        )
+
+
+_KITS: dict[int, SolverKit] = {}
+
+
+def _kit_for(s: Scenario) -> SolverKit:
+    """One SolverKit per scenario per process (building one compiles the cvxpy problems)."""
+    key = id(s)
+    if key not in _KITS:
+        _KITS.clear()
+        _KITS[key] = SolverKit(s)
+    return _KITS[key]
+
+
+def run_monte_carlo(
+    s: Scenario,
+    methods: Sequence[Method],
+    runs: int,
+    seed: int,
+    trace_dir: Path | None = None,
+    progress: Callable[[str, int], None] | None = None,
+    workers: int = 1,
+) -> dict[str, list[RunResult]]:
+    """Every method on runs 0..runs-1 (noise seed = seed + run); results per method by run.
+
+    progress(method, run) is called as each (method, run) finishes. workers > 1 runs them in
+    separate processes (results are identical: each run's noise depends on its seed only).
+    """
+    if trace_dir is not None:
+        trace_dir.mkdir(parents=True, exist_ok=True)
+    jobs = [(m, r) for r in range(runs) for m in methods]
+    out: dict[str, dict[int, RunResult]] = {m: {} for m in methods}
+    if workers <= 1:
+        for m, r in jobs:
+            out[m][r] = _run_one(s, m, r, seed, trace_dir)
+            if progress:
+                progress(m, r)
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(_run_one, s, m, r, seed, trace_dir): (m, r) for m, r in jobs}
+            for fut in as_completed(futures):
+                m, r = futures[fut]
+                out[m][r] = fut.result()
+                if progress:
+                    progress(m, r)
+    return {m: [out[m][r] for r in range(runs)] for m in methods}

@@ -1,0 +1,175 @@
+"""`simulate`'s report: Monte Carlo with a progress bar, the tables, summary.json and the plots."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from isac_mission.config import Scenario
+from isac_mission.experiment.montecarlo import (
+    PAPER_REDUCTIONS,
+    MethodSummary,
+    reduction_pct,
+    run_monte_carlo,
+    summarize,
+    trace_path,
+)
+from isac_mission.planning.slot import Method
+
+LABELS = {
+    "proposed": "Proposed",
+    "sd": "SD",
+    "aba": "ABA",
+    "crb": "CRB-criterion",
+    "comm": "Comm-optimal",
+}
+
+
+def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
+    """One row per method: bound, errors, efficiency, infeasible slots, planning time."""
+    t = Table(title=title)
+    for col in (
+        "method",
+        "PCRB pos m²",
+        "PCRB vel (m/s)²",
+        "RMSE loc m",
+        "RMSE vel m/s",
+        "MSE/PCRB",
+        "infeas.",
+        "plan ms med",
+        "p95",
+    ):
+        t.add_column(col, justify="right" if col != "method" else "left")
+    for s in summaries:
+        t.add_row(
+            LABELS.get(s.method, s.method),
+            f"{s.pcrb_pos:.4g}",
+            f"{s.pcrb_vel:.4g}",
+            f"{s.loc_rmse:.4g}",
+            f"{s.vel_rmse:.4g}",
+            f"{s.efficiency:.3f}",
+            f"{s.infeasible_slots}/{s.slots}",
+            f"{s.solve_median_ms:.1f}",
+            f"{s.solve_p95_ms:.1f}",
+        )
+    return t
+
+
+def reduction_rows(by_method: dict[str, MethodSummary]) -> list[dict[str, float | str | None]]:
+    """The proposed method's % reductions against each benchmark, beside the paper's."""
+    p = by_method["proposed"]
+    rows: list[dict[str, float | str | None]] = []
+    for bench in ("sd", "aba", "crb"):
+        if bench not in by_method:
+            continue
+        b = by_method[bench]
+        paper = PAPER_REDUCTIONS[bench]
+        rows.append(
+            {
+                "benchmark": bench,
+                "pcrb_pct": reduction_pct(p.pcrb_total, b.pcrb_total),
+                "loc_pct": reduction_pct(p.loc_rmse, b.loc_rmse),
+                "loc_paper_pct": paper[0],
+                "vel_pct": reduction_pct(p.vel_rmse, b.vel_rmse),
+                "vel_paper_pct": paper[1],
+            }
+        )
+    return rows
+
+
+def reduction_table(rows: list[dict[str, float | str | None]]) -> Table:
+    t = Table(title="Proposed vs benchmarks: % reduction (positive = proposed is better)")
+    for col in ("vs", "tr(PCRB)", "loc RMSE", "paper loc", "vel RMSE", "paper vel"):
+        t.add_column(col, justify="right" if col != "vs" else "left")
+    for r in rows:
+        t.add_row(
+            LABELS[str(r["benchmark"])],
+            f"{r['pcrb_pct']:+.1f} %",
+            f"{r['loc_pct']:+.1f} %",
+            f"{r['loc_paper_pct']:.1f} %",
+            f"{r['vel_pct']:+.1f} %",
+            f"{r['vel_paper_pct']:.1f} %",
+        )
+    return t
+
+
+def simulate_report(
+    s: Scenario,
+    methods: Sequence[Method],
+    *,
+    runs: int,
+    seed: int,
+    out_dir: Path,
+    workers: int,
+    plots: bool,
+    console: Console,
+) -> dict[str, MethodSummary]:
+    """Run the Monte Carlo, print the tables, write traces, summary.json and the plots."""
+    trace_dir = out_dir / "traces"
+    console.print(
+        f"[bold]{s.mission_id}[/]: M={s.M} UAVs, K={s.K} BSs, N={s.N} slots, "
+        f"{runs} runs x {len(methods)} methods, seeds {seed}..{seed + runs - 1}, "
+        f"sensing model {s.sensing_model}"
+    )
+    with Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=False,
+    ) as bar:
+        task = bar.add_task("missions", total=runs * len(methods))
+        results = run_monte_carlo(
+            s,
+            methods,
+            runs,
+            seed,
+            trace_dir=trace_dir,
+            progress=lambda m, r: bar.advance(task),
+            workers=workers,
+        )
+    summaries = {m: summarize(results[m]) for m in methods}
+    console.print(summary_table(list(summaries.values()), f"{s.mission_id}: {runs} runs"))
+    rows = reduction_rows(summaries) if "proposed" in summaries else []
+    if rows:
+        console.print(reduction_table(rows))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = {
+        "config": s.trace_config(),
+        "runs": runs,
+        "seed": seed,
+        "methods": {m: asdict(v) for m, v in summaries.items()},
+        "reductions": rows,
+    }
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    if plots:
+        from isac_mission.experiment.plots import (
+            plot_bandwidth,
+            plot_performance,
+            plot_trajectories,
+        )
+        from isac_mission.experiment.trace import read_trace
+
+        first = "proposed" if "proposed" in methods else methods[0]
+        run0 = read_trace(trace_path(trace_dir, first, 0))
+        written = [
+            plot_trajectories(run0, out_dir / "fig2a_trajectories.png"),
+            plot_bandwidth(run0, out_dir / "fig2b_bandwidth.png"),
+            plot_performance(
+                {
+                    LABELS.get(m, m): [read_trace(trace_path(trace_dir, m, r)) for r in range(runs)]
+                    for m in methods
+                },
+                out_dir / "fig3_performance.png",
+            ),
+        ]
+        console.print("plots: " + ", ".join(str(p) for p in written))
+    console.print(f"traces: {trace_dir}/  summary: {out_dir / 'summary.json'}")
+    return summaries
