@@ -153,6 +153,10 @@ class PlannerConfig(_Section):
     max_ao_iterations: int = Field(8, ge=1)
     max_position_iterations: int = Field(8, ge=1)
     max_bandwidth_iterations: int = Field(8, ge=1)
+    per_uav_steps: bool = Field(
+        True,
+        description="Line-search each UAV's own step after Algorithm 1's common one (docs/model.md).",
+    )
     solver: str = Field("CLARABEL", description="cvxpy solver for the SOCP subproblems.")
     feasibility_tol_m: float = Field(
         1e-6, gt=0, description="Slack allowed when re-checking 14a-14j on a returned plan."

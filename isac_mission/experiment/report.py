@@ -38,6 +38,7 @@ def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
         "method",
         "PCRB pos m²",
         "PCRB vel (m/s)²",
+        "PCRB pos 2nd half",
         "RMSE loc m",
         "RMSE vel m/s",
         "MSE/PCRB",
@@ -51,6 +52,7 @@ def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
             LABELS.get(s.method, s.method),
             f"{s.pcrb_pos:.4g}",
             f"{s.pcrb_vel:.4g}",
+            f"{s.pcrb_pos_late:.4g}",
             f"{s.loc_rmse:.4g}",
             f"{s.vel_rmse:.4g}",
             f"{s.efficiency:.3f}",
@@ -135,7 +137,7 @@ def simulate_report(
             progress=lambda m, r: bar.advance(task),
             workers=workers,
         )
-    summaries = {m: summarize(results[m]) for m in methods}
+    summaries: dict[str, MethodSummary] = {m: summarize(results[m]) for m in methods}
     console.print(summary_table(list(summaries.values()), f"{s.mission_id}: {runs} runs"))
     rows = reduction_rows(summaries) if "proposed" in summaries else []
     if rows:

@@ -9,6 +9,7 @@ original constraints. The cvxpy problem is built once per M with Parameters (DPP
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -95,7 +96,10 @@ class PositionSubproblem:
             self.pair_normal.value = 2.0 * diff_p
             self.pair_rhs.value = ds2 + np.sum(diff_p**2, axis=1)
         try:
-            self.problem.solve(solver=self.solver)
+            with warnings.catch_warnings():
+                # OPTIMAL_INACCURATE is accepted: the line search re-checks every candidate.
+                warnings.simplefilter("ignore", UserWarning)
+                self.problem.solve(solver=self.solver)
         except cp.error.SolverError:
             return None
         if self.problem.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or self.Q.value is None:
@@ -135,6 +139,37 @@ def line_search(
     return cands[i], float(f[i])
 
 
+def _per_uav_refinement(
+    start: FloatArray,
+    target: FloatArray,
+    current: FloatArray,
+    f_current: float,
+    step: float,
+    eta: FloatArray,
+    objective_values: Callable[[FloatArray, FloatArray], FloatArray],
+    constraints: SlotConstraints,
+) -> tuple[FloatArray, float]:
+    """One pass over the UAVs: UAV m's position on its own segment start_m -> target_m, the
+    others held at `current`; every candidate is checked against the original constraints.
+
+    The paper's single step omega couples all UAVs: a UAV whose gradient is small moves only as
+    far as the dominant UAV wants, and the relative-decrease stop then ends the search early.
+    """
+    omegas = np.unique(np.append(np.arange(0.0, 1.0, step), 1.0))
+    Q, f = current, f_current
+    for m in range(Q.shape[0]):
+        cands = np.repeat(Q[None], len(omegas), axis=0)
+        cands[:, m] = start[m] + omegas[:, None] * (target[m] - start[m])
+        ok = constraints.feasible(cands, np.broadcast_to(eta, cands.shape[:2]))
+        if not np.any(ok):
+            continue
+        values = np.where(ok, objective_values(cands, eta), np.inf)
+        i = int(np.argmin(values))
+        if values[i] < f:
+            Q, f = cands[i], float(values[i])
+    return Q, f
+
+
 def optimise_positions(
     start_xy: FloatArray,
     eta: FloatArray,
@@ -146,8 +181,13 @@ def optimise_positions(
     epsilon: float,
     step: float,
     max_iterations: int,
+    per_uav_steps: bool = True,
 ) -> DescentResult:
-    """Algorithm 1 from start_xy [M, 2] at fixed shares eta [M]."""
+    """Algorithm 1 from start_xy [M, 2] at fixed shares eta [M].
+
+    per_uav_steps: after the common line search, line-search each UAV's own step along its
+    direction with the others fixed (docs/model.md, "Per-UAV steps"); False is the paper as printed.
+    """
     Q = start_xy
     f = objective_values(Q[None], eta)[0]
     feasible_now = bool(constraints.feasible(Q[None], eta[None])[0])
@@ -168,6 +208,10 @@ def optimise_positions(
         if found is None:
             break
         Q_new, f_new = found
+        if per_uav_steps:
+            Q_new, f_new = _per_uav_refinement(
+                Q, target, Q_new, f_new, step, eta, objective_values, constraints
+            )
         decrease = (f - f_new) / f if feasible_now and np.isfinite(f) else np.inf
         Q, f, feasible_now = Q_new, f_new, True
         if decrease <= epsilon:

@@ -163,6 +163,7 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
                 cons,
                 kit.positions,
                 max_iterations=cfg.max_position_iterations,
+                per_uav_steps=cfg.per_uav_steps,
                 **search,
             )
             Q, n_pos = res.point, n_pos + res.iterations

@@ -1,0 +1,311 @@
+"""PNG figures in the style of the paper's Fig. 2 (trajectories, bandwidth) and Fig. 3 (bound, RMSE).
+
+Everything is drawn on a `matplotlib.figure.Figure` with the Agg canvas: no pyplot, no global
+backend switch, no display, safe to call from any thread. Each function writes one PNG of a fixed
+size (the *_SIZE_IN constants times `dpi`) and returns its path. Inputs are traces as read by
+`isac_mission.experiment.trace.read_trace`; the config keys used are bs_xy, d_th, area and
+uav_start_xy (all optional except bs_xy for the trajectory plot).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Circle, Rectangle
+
+from isac_mission.experiment.trace import Trace
+from isac_mission.types import FloatArray
+
+TRAJECTORY_SIZE_IN: Final[tuple[float, float]] = (9.5, 6.5)
+BANDWIDTH_SIZE_IN: Final[tuple[float, float]] = (7.0, 3.8)
+PERFORMANCE_SIZE_IN: Final[tuple[float, float]] = (11.0, 5.0)
+DEFAULT_DPI: Final[int] = 120
+
+_UAV_COLOURS: Final[tuple[str, ...]] = (
+    "tab:blue",
+    "tab:orange",
+    "tab:green",
+    "tab:purple",
+    "tab:brown",
+    "tab:pink",
+    "tab:olive",
+    "tab:cyan",
+)
+
+
+def _uav_colour(m: int) -> str:
+    return _UAV_COLOURS[m % len(_UAV_COLOURS)]
+
+
+def _new_figure(size_in: tuple[float, float], dpi: int) -> Figure:
+    fig = Figure(figsize=size_in, dpi=dpi, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, path: str | Path, dpi: int) -> Path:
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, format="png", dpi=dpi)
+    return out
+
+
+def _area(config: Mapping[str, Any], points: FloatArray) -> tuple[float, float, float, float]:
+    """(x0, x1, y0, y1) of the scenario area in m: config "area" [w, h] from the origin, else the
+    bounding box of the plotted points."""
+    area = config.get("area")
+    if isinstance(area, Sequence) and len(area) == 2:
+        return 0.0, float(area[0]), 0.0, float(area[1])
+    finite = points[np.all(np.isfinite(points), axis=1)] if points.size else points
+    if finite.size == 0:
+        return 0.0, 1.0, 0.0, 1.0
+    lo, hi = finite.min(axis=0), finite.max(axis=0)
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+
+def _title(trace: Trace, what: str) -> str:
+    method = trace.method or "unknown method"
+    return f"{what}: {method}, {len(trace.slots)} slots"
+
+
+def plot_trajectories(trace: Trace, path: str | Path, *, dpi: int = DEFAULT_DPI) -> Path:
+    """Fig. 2(a)-style map of one run: BSs, control-range circles, UAV and target paths.
+
+    BSs (triangles, config bs_xy [K, 2] m) with circles of radius d_th (config d_th, m) around
+    them, clipped to the area plus a 10 % margin (the legend says when they lie outside it, as in
+    the paper's scenario where d_th is about 24 km); the area's bounds (config area [2] m); each
+    UAV's path from its start (config uav_start_xy, circle) through the slots' uav_xy to its last
+    position (square), one colour per UAV; the target's true path (black) and the EKF estimate
+    (red, dashed). Returns the PNG's path.
+    """
+    cfg = trace.config
+    bs_xy = np.asarray(cfg.get("bs_xy", []), dtype=float).reshape(-1, 2)
+    uav = trace.stack("uav_xy") if trace.slots else np.zeros((0, 0, 2))  # [N, M, 2]
+    start = np.asarray(cfg.get("uav_start_xy", []), dtype=float).reshape(-1, 2)
+    truth = trace.stack("target_true")[:, :2] if trace.slots else np.zeros((0, 2))
+    est = trace.stack("target_est")[:, :2] if trace.slots else np.zeros((0, 2))
+    points = np.vstack([bs_xy, start, uav.reshape(-1, 2), truth, est])
+    x0, x1, y0, y1 = _area(cfg, points)
+    margin = 0.1 * max(x1 - x0, y1 - y0, 1.0)
+    view = (x0 - margin, x1 + margin, y0 - margin, y1 + margin)
+
+    fig = _new_figure(TRAJECTORY_SIZE_IN, dpi)
+    ax = fig.subplots()
+    handles: list[Any] = []
+    if "area" in cfg:
+        ax.add_patch(
+            Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ec="0.4", ls=":", lw=1.0, zorder=1)
+        )
+        handles.append(Line2D([], [], color="0.4", ls=":", label="area"))
+    d_th = cfg.get("d_th")
+    if isinstance(d_th, int | float) and math.isfinite(d_th) and d_th > 0 and bs_xy.size:
+        corners = np.array(
+            [[view[0], view[2]], [view[0], view[3]], [view[1], view[2]], [view[1], view[3]]]
+        )
+        far = float(np.max(np.linalg.norm(corners[:, None, :] - bs_xy[None, :, :], axis=2)))
+        for w in bs_xy:
+            ax.add_patch(
+                Circle(tuple(w), d_th, fill=False, ec="tab:gray", ls="--", lw=0.8, zorder=1)
+            )
+        where = " (circles lie outside the plot)" if d_th > far else ""
+        handles.append(
+            Line2D(
+                [],
+                [],
+                color="tab:gray",
+                ls="--",
+                label=f"control range d_th = {d_th / 1e3:.1f} km{where}",
+            )
+        )
+    if bs_xy.size:
+        ax.plot(bs_xy[:, 0], bs_xy[:, 1], "k^", ms=9, zorder=4)
+        for k, w in enumerate(bs_xy):
+            ax.annotate(f"BS {k}", tuple(w), xytext=(5, 5), textcoords="offset points", fontsize=8)
+        handles.append(Line2D([], [], color="k", marker="^", ls="", ms=9, label="base station"))
+    n_uav = uav.shape[1] if uav.size else start.shape[0]
+    for m in range(n_uav):
+        colour = _uav_colour(m)
+        path_m = uav[:, m, :] if uav.size else np.zeros((0, 2))
+        if m < start.shape[0]:
+            path_m = np.vstack([start[m : m + 1], path_m])
+        ax.plot(path_m[:, 0], path_m[:, 1], "-", color=colour, lw=1.6, zorder=3)
+        if len(path_m):
+            ax.plot(*path_m[0], "o", color=colour, ms=7, mfc="white", mew=2, zorder=5)
+            ax.plot(*path_m[-1], "s", color=colour, ms=6, zorder=5)
+        handles.append(Line2D([], [], color=colour, lw=1.6, label=f"UAV {m}"))
+    handles.append(Line2D([], [], color="0.3", marker="o", mfc="white", ls="", label="start"))
+    handles.append(Line2D([], [], color="0.3", marker="s", ls="", label="end"))
+    if np.isfinite(truth).any():
+        ax.plot(truth[:, 0], truth[:, 1], "-", color="k", lw=1.4, zorder=3)
+        first = truth[np.all(np.isfinite(truth), axis=1)][0]
+        ax.plot(*first, "D", color="k", ms=6, mfc="white", mew=1.5, zorder=5)
+        handles.append(Line2D([], [], color="k", lw=1.4, label="target (true)"))
+        handles.append(
+            Line2D([], [], color="k", marker="D", mfc="white", ls="", label="target at first slot")
+        )
+    if np.isfinite(est).any():
+        ax.plot(est[:, 0], est[:, 1], "--", color="tab:red", lw=1.4, zorder=3)
+        handles.append(
+            Line2D([], [], color="tab:red", ls="--", lw=1.4, label="target (EKF estimate)")
+        )
+    ax.set_xlim(view[0], view[1])
+    ax.set_ylim(view[2], view[3])
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x (east) [m]")
+    ax.set_ylabel("y (north) [m]")
+    ax.set_title(_title(trace, "UAV and target trajectories"))
+    ax.grid(True, alpha=0.3)
+    fig.legend(handles=handles, loc="outside right upper", fontsize=8)
+    return _save(fig, path, dpi)
+
+
+def plot_bandwidth(trace: Trace, path: str | Path, *, dpi: int = DEFAULT_DPI) -> Path:
+    """Fig. 2(b)-style stacked bandwidth shares eta [M] over slots, one colour per UAV.
+
+    Slots whose status is not "ok" are shaded. Returns the PNG's path.
+    """
+    fig = _new_figure(BANDWIDTH_SIZE_IN, dpi)
+    ax = fig.subplots()
+    if trace.slots:
+        slots = np.array([rec.slot for rec in trace.slots], dtype=float)
+        eta = trace.stack("eta")  # [N, M]
+        n_uav = eta.shape[1]
+        ax.stackplot(
+            slots,
+            np.nan_to_num(eta.T),
+            labels=[f"UAV {m}" for m in range(n_uav)],
+            colors=[_uav_colour(m) for m in range(n_uav)],
+            alpha=0.85,
+            step="mid",
+        )
+        bad = [rec.slot for rec in trace.slots if rec.status != "ok"]
+        for i, n in enumerate(bad):
+            ax.axvspan(
+                n - 0.5,
+                n + 0.5,
+                facecolor="none",
+                edgecolor="k",
+                hatch="//",
+                lw=0,
+                zorder=3,
+                label=None if i else 'status not "ok"',
+            )
+        ax.set_xlim(slots.min() - 0.5, slots.max() + 0.5)
+    ax.set_ylim(0.0, 1.0)
+    ax.set_xlabel("slot n (Δt each)")
+    ax.set_ylabel("bandwidth share η [-]")
+    ax.set_title(_title(trace, "Bandwidth allocation"))
+    ax.grid(True, alpha=0.3)
+    if trace.slots:
+        fig.legend(*ax.get_legend_handles_labels(), loc="outside right upper", fontsize=8)
+    return _save(fig, path, dpi)
+
+
+def _information_to_covariance(J: FloatArray) -> FloatArray:
+    """J^-1 [4, 4] after Jacobi (diagonal) scaling; NaN if J is not invertible."""
+    d = np.diag(J)
+    if not (np.all(np.isfinite(J)) and np.all(d > 0)):
+        return np.full((4, 4), np.nan)
+    s = 1.0 / np.sqrt(d)
+    try:
+        inv = np.linalg.inv(J * s[:, None] * s[None, :])
+    except np.linalg.LinAlgError:
+        return np.full((4, 4), np.nan)
+    return np.asarray(inv * s[:, None] * s[None, :])
+
+
+def performance_curves(traces: Sequence[Trace]) -> dict[str, tuple[FloatArray, FloatArray]]:
+    """Per-slot averages over runs, keyed "pcrb_pos", "pcrb_vel", "rmse_pos", "rmse_vel".
+
+    Each value is (slots [S], values [S]): sqrt(mean over runs of tr(J^-1)[:2, :2]) in m and of
+    tr(J^-1)[2:, 2:] in m/s; sqrt(mean over runs of ||p_true - p_est||^2) in m and of the
+    velocity error in m/s. A slot is averaged over the runs that have it (and, for the RMSE,
+    that know target_true); slots no run has are absent.
+    """
+    acc: dict[str, dict[int, list[float]]] = {
+        k: {} for k in ("pcrb_pos", "pcrb_vel", "rmse_pos", "rmse_vel")
+    }
+    for trace in traces:
+        for rec in trace.slots:
+            C = _information_to_covariance(rec.J)
+            acc["pcrb_pos"].setdefault(rec.slot, []).append(float(np.trace(C[:2, :2])))
+            acc["pcrb_vel"].setdefault(rec.slot, []).append(float(np.trace(C[2:, 2:])))
+            if rec.target_true is not None and np.all(np.isfinite(rec.target_true)):
+                err = rec.target_est - rec.target_true
+                acc["rmse_pos"].setdefault(rec.slot, []).append(float(err[:2] @ err[:2]))
+                acc["rmse_vel"].setdefault(rec.slot, []).append(float(err[2:] @ err[2:]))
+    out: dict[str, tuple[FloatArray, FloatArray]] = {}
+    for key, by_slot in acc.items():
+        slots = np.array(sorted(by_slot), dtype=float)
+        vals = np.array([math.sqrt(float(np.mean(by_slot[int(n)]))) for n in slots], dtype=float)
+        out[key] = (slots, vals)
+    return out
+
+
+def plot_performance(
+    traces_by_method: Mapping[str, Sequence[Trace]], path: str | Path, *, dpi: int = DEFAULT_DPI
+) -> Path:
+    """Fig. 3-style comparison of methods over Monte Carlo runs, two panels (log scale).
+
+    (a) sqrt of the PCRB's location part tr(J^-1)[:2, :2] (m, solid) and velocity part
+    tr(J^-1)[2:, 2:] (m/s, dashed), averaged over runs per slot, from each slot's logged J;
+    (b) location RMSE (m, solid) and velocity RMSE (m/s, dashed) of target_est against
+    target_true over runs per slot. One colour per method. Returns the PNG's path.
+    """
+    fig = _new_figure(PERFORMANCE_SIZE_IN, dpi)
+    ax_bound, ax_err = fig.subplots(1, 2)
+    method_handles: list[Any] = []
+    for i, (method, traces) in enumerate(traces_by_method.items()):
+        colour = f"C{i % 10}"
+        curves = performance_curves(traces)
+        for ax, pos, vel in (
+            (ax_bound, "pcrb_pos", "pcrb_vel"),
+            (ax_err, "rmse_pos", "rmse_vel"),
+        ):
+            ax.plot(*curves[pos], "-", color=colour, lw=1.5)
+            ax.plot(*curves[vel], "--", color=colour, lw=1.5)
+        method_handles.append(
+            Line2D([], [], color=colour, lw=1.5, label=f"{method} ({len(traces)} runs)")
+        )
+    style_handles = [
+        Line2D([], [], color="0.3", ls="-", label="location [m]"),
+        Line2D([], [], color="0.3", ls="--", label="velocity [m/s]"),
+    ]
+    for ax, title, ylabel in (
+        (ax_bound, "(a) PCRB", "sqrt(PCRB): location [m], velocity [m/s]"),
+        (ax_err, "(b) Target state error", "RMSE: location [m], velocity [m/s]"),
+    ):
+        ax.set_title(title)
+        ax.set_xlabel("slot n")
+        ax.set_ylabel(ylabel)
+        ys = [np.asarray(line.get_ydata(), dtype=float) for line in ax.get_lines()]
+        if any(np.any(np.isfinite(y) & (y > 0)) for y in ys):
+            ax.set_yscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+    fig.legend(
+        handles=method_handles + style_handles,
+        loc="outside lower center",
+        ncols=min(6, len(method_handles) + 2),
+        fontsize=8,
+    )
+    fig.suptitle("Sensing performance over Monte Carlo runs")
+    return _save(fig, path, dpi)
+
+
+__all__ = [
+    "BANDWIDTH_SIZE_IN",
+    "DEFAULT_DPI",
+    "PERFORMANCE_SIZE_IN",
+    "TRAJECTORY_SIZE_IN",
+    "performance_curves",
+    "plot_bandwidth",
+    "plot_performance",
+    "plot_trajectories",
+]
