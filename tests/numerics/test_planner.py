@@ -18,7 +18,8 @@ from isac_mission.config import Scenario, parse_scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.bandwidth import BandwidthSubproblem, lp_vertex
 from isac_mission.planning.feasibility import SlotConstraints
-from isac_mission.planning.positions import PositionSubproblem
+from isac_mission.model.channel import rate_radius
+from isac_mission.planning.positions import SOLVER_MARGIN_M, PositionSubproblem
 from isac_mission.planning.slot import METHODS, SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, predict_information
 
@@ -42,9 +43,7 @@ def test_dpp_resolve_equals_fresh_problem_solved_by_scs(paper: Scenario) -> None
         got = sub.solve(grad, prev, cons, eta)
         assert got is not None
         # The same problem written out directly, without Parameters, solved by another solver.
-        from isac_mission.model.channel import rate_radius
-        from isac_mission.planning.positions import SOLVER_MARGIN_M as mg
-
+        mg = SOLVER_MARGIN_M
         Q = cp.Variable((3, 2))
         radius = rate_radius(eta, s.r_th, s.dH, s.rho0, s.B) - mg
         near = s.bs_xy[np.argmin(np.linalg.norm(prev[:, None] - s.bs_xy[None], axis=-1), axis=1)]
@@ -162,11 +161,10 @@ def test_infeasible_rate_gives_communication_optimal_fallback_with_reason() -> N
     assert np.all(step <= s.v_max * s.dt + 1e-9)
 
 
-@pytest.mark.parametrize("method", ["proposed", "crb"])
-def test_proposed_objective_not_worse_than_benchmarks_on_the_same_slot(paper: Scenario, method: str) -> None:
+def test_proposed_objective_not_worse_than_benchmarks_on_the_same_slot(paper: Scenario) -> None:
     """On the slot's own objective, the proposed plan is at least as good as ABA's and SD's."""
     s = paper
     kit = _kit(s)
-    inp = SlotInput(s.uav_start_xy, np.full(3, 1 / 3), None, s.x0 + [30, 0, 0, 0], _prior(s))
+    inp = SlotInput(s.uav_start_xy, np.full(3, 1 / 3), None, s.x0 + np.array([30.0, 0.0, 0.0, 0.0]), _prior(s))
     f = {m: plan_slot(inp, kit, m).pcrb_trace for m in ("proposed", "sd", "aba")}
     assert f["proposed"] <= min(f["sd"], f["aba"]) * (1 + 1e-9)
