@@ -57,7 +57,8 @@ def test_closed_loop_efficiency_on_paper_scenario(paper: Scenario, full_size: bo
     runs = 40 if full_size else 12
     kit = SolverKit(paper)
     results = [
-        run_closed_loop(paper, "proposed", draw_run_noise(paper, 5000 + r), kit) for r in range(runs)
+        run_closed_loop(paper, "proposed", draw_run_noise(paper, 5000 + r), kit)
+        for r in range(runs)
     ]
     err = np.array([r.est - r.true for r in results])
     C = np.array([r.pcrb for r in results])

@@ -11,7 +11,9 @@ from isac_mission.model.radar import measure, measurement_jacobian
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, SensingParams, predict_information
 
 
-def _random_case(s: Scenario, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _random_case(
+    s: Scenario, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     x = np.array([rng.uniform(500, 2500), rng.uniform(500, 2500), *rng.normal(0, 20, 2)])
     q = x[None, :2] + rng.uniform(80, 900, (s.M, 1)) * np.stack(
         [np.cos(a := rng.uniform(0, 2 * np.pi, s.M)), np.sin(a)], axis=1
@@ -57,7 +59,10 @@ def test_objective_gradients_match_finite_differences(
             fd_q[m, j] = (obj.value(q + e, eta) - obj.value(q - e, eta)) / 2e-2
     fd_eta = np.array(
         [
-            (obj.value(q, eta + 1e-5 * np.eye(paper.M)[m]) - obj.value(q, eta - 1e-5 * np.eye(paper.M)[m]))
+            (
+                obj.value(q, eta + 1e-5 * np.eye(paper.M)[m])
+                - obj.value(q, eta - 1e-5 * np.eye(paper.M)[m])
+            )
             / 2e-5
             for m in range(paper.M)
         ]

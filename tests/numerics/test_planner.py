@@ -15,10 +15,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from isac_mission.config import Scenario, parse_scenario
+from isac_mission.model.channel import rate_radius
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.bandwidth import BandwidthSubproblem, lp_vertex
 from isac_mission.planning.feasibility import SlotConstraints
-from isac_mission.model.channel import rate_radius
 from isac_mission.planning.positions import SOLVER_MARGIN_M, PositionSubproblem
 from isac_mission.planning.slot import METHODS, SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, predict_information
@@ -97,7 +97,9 @@ def test_single_uav_plan_reaches_grid_optimum() -> None:
         assert plan.pcrb_trace <= best * (1 + 1e-3)
 
 
-def _independent_violations(s: Scenario, inp: SlotInput, xy: np.ndarray, eta: np.ndarray, assoc: np.ndarray) -> list[str]:
+def _independent_violations(
+    s: Scenario, inp: SlotInput, xy: np.ndarray, eta: np.ndarray, assoc: np.ndarray
+) -> list[str]:
     bad = []
     d_bs = np.linalg.norm(xy - s.bs_xy[assoc], axis=1)
     rates = eta * s.B * np.log2(1 + s.rho0 / (d_bs**2 + s.dH**2))
@@ -138,7 +140,10 @@ def test_ok_plans_satisfy_every_original_constraint(
     inp = SlotInput(prev, rng.dirichlet(np.ones(s.M)), None, x_pred, _prior(s))
     plan = plan_slot(inp, _kit(s), method)  # type: ignore[arg-type]
     if plan.report.status == "ok":
-        assert _independent_violations(s, inp, plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav) == []
+        assert (
+            _independent_violations(s, inp, plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav)
+            == []
+        )
     else:
         assert plan.report.reason
 
@@ -165,6 +170,8 @@ def test_proposed_objective_not_worse_than_benchmarks_on_the_same_slot(paper: Sc
     """On the slot's own objective, the proposed plan is at least as good as ABA's and SD's."""
     s = paper
     kit = _kit(s)
-    inp = SlotInput(s.uav_start_xy, np.full(3, 1 / 3), None, s.x0 + np.array([30.0, 0.0, 0.0, 0.0]), _prior(s))
+    inp = SlotInput(
+        s.uav_start_xy, np.full(3, 1 / 3), None, s.x0 + np.array([30.0, 0.0, 0.0, 0.0]), _prior(s)
+    )
     f = {m: plan_slot(inp, kit, m).pcrb_trace for m in ("proposed", "sd", "aba")}
     assert f["proposed"] <= min(f["sd"], f["aba"]) * (1 + 1e-9)
