@@ -1,0 +1,110 @@
+"""`isac-mission sim CONFIG` as its own process: detections on Zenoh, clean exit on SIGINT/SIGTERM."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import signal
+import socket
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from isac_mission.config import load_scenario
+from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
+from isac_mission.service.codec import decode_detection
+
+ROOT = Path(__file__).resolve().parents[2]
+START_TIMEOUT_S = 60.0  # interpreter start + imports on a loaded 2-core machine
+EXIT_TIMEOUT_S = 30.0
+
+
+def free_tcp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+@contextlib.contextmanager
+def udp_sinks(n: int) -> Iterator[int]:
+    """Bind n consecutive UDP ports on 127.0.0.1 for the vehicles to send to; yields the first."""
+    for _ in range(50):
+        base = free_tcp_port()
+        socks: list[socket.socket] = []
+        try:
+            for m in range(n):
+                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                socks.append(s)
+                s.bind(("127.0.0.1", base + m))
+        except OSError:
+            for s in socks:
+                s.close()
+            continue
+        try:
+            yield base
+        finally:
+            for s in socks:
+                s.close()
+        return
+    raise RuntimeError("no block of free UDP ports")
+
+
+@pytest.fixture
+def config_path(tmp_path: Path) -> Path:
+    """config/paper.yaml when the project has it; else the paper's defaults in a temporary file."""
+    paper = ROOT / "config" / "paper.yaml"
+    if paper.is_file():
+        return paper
+    path = tmp_path / "paper.yaml"
+    path.write_text("mission_id: paper\n")
+    return path
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
+    config_path: Path, sig: signal.Signals
+) -> None:
+    scenario = load_scenario(config_path)
+    endpoint = tcp_loopback(free_tcp_port())
+    keys = Keys(scenario.mission_id)
+    with udp_sinks(scenario.M) as mav_base, udp_sinks(scenario.M) as gcs_base:
+        observer = await ZenohBus.open_async(BusSettings.hub(endpoint))
+        try:
+            sub = observer.subscribe(keys.detections_all)
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable,
+                "-m",
+                "isac_mission.service.cli",
+                "sim",
+                str(config_path),
+                "--speed",
+                "10",
+                "--zenoh-connect",
+                endpoint,
+                "--mavlink-base-port",
+                str(mav_base),
+                "--gcs-base-port",
+                str(gcs_base),
+                cwd=ROOT,
+                env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                stdout=asyncio.subprocess.PIPE,
+                stderr=asyncio.subprocess.STDOUT,
+            )
+            try:
+                key, data = await sub.get(START_TIMEOUT_S)
+                det = decode_detection(data, n_uavs=scenario.M)
+                assert key == keys.detections(det.uav)
+                proc.send_signal(sig)
+                out, _ = await asyncio.wait_for(proc.communicate(), EXIT_TIMEOUT_S)
+                assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+                assert b"world stopped" in out
+            finally:
+                if proc.returncode is None:
+                    proc.kill()
+                    await proc.wait()
+        finally:
+            observer.close()

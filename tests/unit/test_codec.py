@@ -1,0 +1,255 @@
+"""isac_mission/service/codec.py: round trips, and every malformed kind refused with its field."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from isac_mission.errors import MessageError
+from isac_mission.service import codec
+from isac_mission.service.codec import (
+    ClockMsg,
+    DetectionMsg,
+    PlanMsg,
+    TruthMsg,
+    collect_detections,
+    decode_any,
+    decode_clock,
+    decode_detection,
+    decode_plan,
+    decode_truth,
+    detection_messages,
+    encode_clock,
+    encode_detection,
+    encode_plan,
+    encode_truth,
+)
+from isac_mission.types import Detections, SlotPlan, SolveReport
+
+
+def _detection(**kw: Any) -> DetectionMsg:
+    base: dict[str, Any] = dict(
+        slot=4,
+        t_s=4.0,
+        uav=1,
+        range_m=812.25,
+        radial_velocity_mps=-3.5,
+        uav_xy_m=np.array([807.0, 1100.0]),
+        bandwidth_share=0.25,
+    )
+    base.update(kw)
+    return DetectionMsg(**base)
+
+
+def _plan(m: int = 3, **kw: Any) -> PlanMsg:
+    shares = np.array([0.5, 0.3, 0.2])[:m] if m == 3 else np.full(m, 1.0 / m)
+    plan = SlotPlan(
+        uav_xy_m=np.arange(2 * m, dtype=float).reshape(m, 2) * 100.0,
+        bs_of_uav=np.arange(m, dtype=np.int64),
+        bandwidth_share=shares,
+        pcrb_trace=12.5,
+        report=SolveReport(status="ok", reason="", solve_s=0.012),
+    )
+    base: dict[str, Any] = dict(slot=5, t_s=4.2, plan=plan)
+    base.update(kw)
+    return PlanMsg(**base)
+
+
+def _obj(data: bytes) -> dict[str, Any]:
+    out: dict[str, Any] = json.loads(data)
+    return out
+
+
+def _bytes(obj: dict[str, Any]) -> bytes:
+    return json.dumps(obj).encode()
+
+
+# ----------------------------------------------------------------------------- round trips
+
+
+def test_detection_round_trip() -> None:
+    msg = _detection()
+    data = encode_detection(msg)
+    obj = _obj(data)
+    assert obj["schema"] == "isac/1" and obj["type"] == "detection"
+    assert obj["slot"] == 4 and obj["t"] == 4.0
+    back = decode_detection(data, n_uavs=3)
+    assert (back.slot, back.t_s, back.uav) == (4, 4.0, 1)
+    assert back.range_m == msg.range_m and back.radial_velocity_mps == msg.radial_velocity_mps
+    np.testing.assert_array_equal(back.uav_xy_m, msg.uav_xy_m)
+    assert back.bandwidth_share == 0.25 and back.detected
+
+
+def test_missed_detection_round_trips_as_null() -> None:
+    data = encode_detection(_detection(range_m=math.nan, radial_velocity_mps=math.nan))
+    assert _obj(data)["range_m"] is None
+    back = decode_detection(data)
+    assert math.isnan(back.range_m) and math.isnan(back.radial_velocity_mps)
+    assert not back.detected
+
+
+def test_clock_round_trip_before_and_after_mission_start() -> None:
+    for msg in (
+        ClockMsg(slot=-1, t_s=0.5, slot_s=1.0, speed=10.0, mission_t0_s=None),
+        ClockMsg(slot=7, t_s=37.25, slot_s=1.0, speed=1.0, mission_t0_s=30.0),
+    ):
+        assert decode_clock(encode_clock(msg)) == msg
+
+
+def test_truth_round_trip() -> None:
+    x = np.array([600.0, 1600.0, 30.0, -0.25])
+    back = decode_truth(encode_truth(TruthMsg(slot=3, t_s=3.0, target_x=x)))
+    assert (back.slot, back.t_s) == (3, 3.0)
+    np.testing.assert_array_equal(back.target_x, x)
+
+
+def test_plan_round_trip() -> None:
+    msg = _plan()
+    back = decode_plan(encode_plan(msg), n_uavs=3, n_bs=5)
+    assert (back.slot, back.t_s) == (5, 4.2)
+    np.testing.assert_array_equal(back.plan.uav_xy_m, msg.plan.uav_xy_m)
+    np.testing.assert_array_equal(back.plan.bs_of_uav, msg.plan.bs_of_uav)
+    np.testing.assert_array_equal(back.plan.bandwidth_share, msg.plan.bandwidth_share)
+    assert back.plan.pcrb_trace == 12.5
+    assert back.plan.report.status == "ok" and back.plan.report.solve_s == 0.012
+
+
+def test_decode_any_dispatches_on_type() -> None:
+    assert isinstance(decode_any(encode_plan(_plan())), PlanMsg)
+    assert isinstance(decode_any(encode_detection(_detection())), DetectionMsg)
+
+
+def test_slot_detections_split_and_reassemble() -> None:
+    d = Detections(
+        slot=2,
+        range_m=np.array([100.0, np.nan, 300.0]),
+        radial_velocity_mps=np.array([1.0, np.nan, -1.0]),
+        uav_xy_m=np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]),
+    )
+    msgs = [
+        decode_detection(encode_detection(m)) for m in detection_messages(d, 2.0, np.full(3, 1 / 3))
+    ]
+    back = collect_detections(2, msgs[::2], 3)  # UAV 1's message did not arrive
+    np.testing.assert_array_equal(back.received, [True, False, True])
+    np.testing.assert_array_equal(back.range_m[[0, 2]], [100.0, 300.0])
+
+
+# ----------------------------------------------------------------------------- malformed
+
+
+def _expect(payload: bytes | str, field: str, decode: Any = decode_detection, **kw: Any) -> str:
+    with pytest.raises(MessageError) as info:
+        decode(payload, **kw)
+    reason = str(info.value)
+    assert reason.startswith(field), f"reason {reason!r} does not name {field!r}"
+    return reason
+
+
+def test_not_json_is_refused() -> None:
+    _expect(b"{not json", "payload: not JSON")
+    _expect(b"\xff\xfe", "payload: not UTF-8")
+    _expect(b"[1, 2]", "payload: expected a JSON object")
+
+
+def test_wrong_schema_or_version_is_refused() -> None:
+    obj = _obj(encode_detection(_detection()))
+    assert "version" in _expect(_bytes({**obj, "schema": "isac/2"}), "schema")
+    _expect(_bytes({**obj, "schema": "other"}), "schema")
+    del obj["schema"]
+    _expect(_bytes(obj), "schema")
+
+
+def test_wrong_type_is_refused() -> None:
+    _expect(encode_truth(TruthMsg(1, 1.0, np.zeros(4))), "type", decode_detection)
+    _expect(b'{"schema": "isac/1", "type": "bogus", "slot": 0, "t": 0}', "type", decode_any)
+
+
+@pytest.mark.parametrize(
+    ("raw", "field"),
+    [
+        ('"range_m": NaN', "payload"),  # NaN literal
+        ('"range_m": Infinity', "payload"),
+        ('"range_m": -Infinity', "payload"),
+        ('"range_m": 1e400', "detection.range_m"),  # overflows to inf
+        ('"range_m": 1e12', "detection.range_m"),  # finite but absurd
+        ('"range_m": ' + "9" * 40, "detection.range_m"),  # huge integer
+        ('"range_m": ' + "9" * 5000, "payload"),  # beyond Python's int parsing limit
+        ('"range_m": true', "detection.range_m"),  # a bool is not a number
+        ('"range_m": "812"', "detection.range_m"),
+        ('"range_m": -1.0', "detection.range_m"),  # ranges are >= 0
+        ('"bandwidth_share": 1.5', "detection.bandwidth_share"),
+        ('"uav": 1.0', "detection.uav"),
+        ('"uav": 7', "detection.uav"),  # n_uavs = 3
+        ('"slot": -1', "detection.slot"),
+        ('"t": NaN', "payload"),
+    ],
+)
+def test_bad_numbers_are_refused(raw: str, field: str) -> None:
+    text = encode_detection(_detection()).decode()
+    key = raw.split(":")[0]
+    obj = _obj(text.encode())
+    start = text.index(key)
+    end = text.index(",", start) if text.find(",", start) != -1 else text.index("}", start)
+    old = f"{key}:{json.dumps(obj[key.strip(chr(34))])}"
+    assert text[start:end] == old
+    bad = text[:start] + raw + text[end:]
+    _expect(bad.encode(), field, n_uavs=3)
+
+
+def test_wrong_sizes_are_refused() -> None:
+    det = _obj(encode_detection(_detection()))
+    _expect(_bytes({**det, "uav_xy_m": [1.0, 2.0, 3.0]}), "detection.uav_xy_m")
+    _expect(_bytes({**det, "uav_xy_m": 5.0}), "detection.uav_xy_m")
+    truth = _obj(encode_truth(TruthMsg(1, 1.0, np.zeros(4))))
+    _expect(_bytes({**truth, "target_x": [0.0] * 3}), "truth.target_x", decode_truth)
+    plan = _obj(encode_plan(_plan()))
+    _expect(_bytes({**plan, "bandwidth_share": [0.5, 0.5]}), "plan.bandwidth_share", decode_plan)
+    _expect(
+        _bytes({**plan, "waypoints_xy_m": [[0.0, 0.0], [1.0, 1.0]]}),
+        "plan.waypoints_xy_m",
+        decode_plan,
+    )
+    _expect(
+        _bytes({**plan, "waypoints_xy_m": [[0.0, 0.0, 0.0]] * 3}),
+        "plan.waypoints_xy_m[0]",
+        decode_plan,
+    )
+    _expect(encode_plan(_plan()), "plan.assoc", decode_plan, n_uavs=4)
+    _expect(_bytes({**plan, "assoc": []}), "plan.assoc", decode_plan)
+
+
+def test_plan_contents_are_checked() -> None:
+    plan = _obj(encode_plan(_plan()))
+    assert "sums to" in _expect(
+        _bytes({**plan, "bandwidth_share": [0.5, 0.5, 0.5]}), "plan.bandwidth_share", decode_plan
+    )
+    _expect(
+        _bytes({**plan, "bandwidth_share": [1.2, -0.1, -0.1]}),
+        "plan.bandwidth_share[0]",
+        decode_plan,
+    )
+    _expect(encode_plan(_plan()), "plan.assoc[2]", decode_plan, n_bs=2)
+    _expect(_bytes({**plan, "status": ""}), "plan.status", decode_plan)
+    _expect(_bytes({**plan, "status": 3}), "plan.status", decode_plan)
+    _expect(_bytes({**plan, "solve_s": -1}), "plan.solve_s", decode_plan)
+    _expect(_bytes({**plan, "objective": -2.0}), "plan.objective", decode_plan)
+    missing = dict(plan)
+    del missing["waypoints_xy_m"]
+    assert "missing" in _expect(_bytes(missing), "plan.waypoints_xy_m", decode_plan)
+
+
+def test_too_long_payload_is_refused() -> None:
+    det = _obj(encode_detection(_detection()))
+    det["padding"] = "x" * codec.MAX_PAYLOAD_BYTES
+    assert "bytes" in _expect(_bytes(det), "payload")
+
+
+def test_encoders_refuse_what_decoders_would_refuse() -> None:
+    with pytest.raises(MessageError, match="bandwidth_share"):
+        encode_detection(_detection(bandwidth_share=2.0))
+    with pytest.raises(MessageError, match="target_x"):
+        encode_truth(TruthMsg(1, 1.0, np.array([0.0, np.inf, 0.0, 0.0])))
