@@ -498,7 +498,193 @@ def decode_plan(
 
 # --------------------------------------------------------------------------- dispatch
 
-AnyMsg = DetectionMsg | ClockMsg | TruthMsg | PlanMsg
+
+# --------------------------------------------------------------------------- telemetry
+
+
+TELEMETRY_MODES: Final = frozenset(
+    {"unknown", "manual", "takeoff", "hold", "offboard", "land", "mission", "rtl", "other"}
+)
+LINK_STATES: Final = frozenset({"ok", "lost"})
+
+
+@dataclass(frozen=True)
+class TelemetryMsg:
+    """One vehicle's state as its MAVLink bridge saw it (`isac/<mission>/telemetry/<m>`).
+
+    position_xy_m [2] and velocity_xy_mps [2] in the scenario plane (x east, y north); altitude_m
+    above the scenario ground; mode is a flight-mode name (TELEMETRY_MODES); link is "ok" or "lost".
+    slot is the last slot the bridge knows of (-1 before the mission).
+    """
+
+    slot: int
+    t_s: float
+    uav: int
+    position_xy_m: FloatArray
+    altitude_m: float
+    velocity_xy_mps: FloatArray
+    mode: str
+    armed: bool
+    landed: bool
+    link: str
+
+
+def _get_bool(obj: Mapping[str, Any], name: str, kind: str) -> bool:
+    value = _require(obj, name, kind)
+    if not isinstance(value, bool):
+        raise MessageError(
+            f"{_where(kind, name)}: expected true or false, got {type(value).__name__}"
+        )
+    return value
+
+
+def _get_choice(obj: Mapping[str, Any], name: str, kind: str, choices: frozenset[str]) -> str:
+    value = get_str(obj, name, kind, max_chars=MAX_STATUS_CHARS)
+    if value not in choices:
+        raise MessageError(f"{_where(kind, name)}: {value!r} is not one of {sorted(choices)}")
+    return value
+
+
+def encode_telemetry(msg: TelemetryMsg) -> bytes:
+    """Payload of `isac/<mission>/telemetry/<m>`."""
+    obj = envelope("telemetry", msg.slot, msg.t_s)
+    obj.update(
+        uav=int(msg.uav),
+        position_xy_m=_floats(msg.position_xy_m, "telemetry.position_xy_m"),
+        altitude_m=float(msg.altitude_m),
+        velocity_xy_mps=_floats(msg.velocity_xy_mps, "telemetry.velocity_xy_mps"),
+        mode=msg.mode,
+        armed=bool(msg.armed),
+        landed=bool(msg.landed),
+        link=msg.link,
+    )
+    data = dumps(obj)
+    decode_telemetry(data)
+    return data
+
+
+def decode_telemetry(
+    payload: bytes | bytearray | memoryview | str, *, n_uavs: int | None = None
+) -> TelemetryMsg:
+    """Validate a telemetry payload (uav in [0, n_uavs) when n_uavs is given)."""
+    kind = "telemetry"
+    obj, slot, t_s = open_envelope(payload, kind, min_slot=-1)
+    hi = MAX_UAVS - 1 if n_uavs is None else n_uavs - 1
+    return TelemetryMsg(
+        slot=slot,
+        t_s=t_s,
+        uav=get_int(obj, "uav", kind, lo=0, hi=hi),
+        position_xy_m=get_vector(obj, "position_xy_m", kind, length=2),
+        altitude_m=get_float(obj, "altitude_m", kind, lo=-1000.0, hi=100_000.0),
+        velocity_xy_mps=get_vector(obj, "velocity_xy_mps", kind, length=2, lo=-1000.0, hi=1000.0),
+        mode=_get_choice(obj, "mode", kind, TELEMETRY_MODES),
+        armed=_get_bool(obj, "armed", kind),
+        landed=_get_bool(obj, "landed", kind),
+        link=_get_choice(obj, "link", kind, LINK_STATES),
+    )
+
+
+# --------------------------------------------------------------------------- track
+
+
+@dataclass(frozen=True)
+class TrackMsg:
+    """The ground's estimate after slot `slot` (`isac/<mission>/track`).
+
+    x [4] EKF state, P [4, 4] its covariance, J [4, 4] the PCRB information, pcrb_trace = tr(J^-1).
+    """
+
+    slot: int
+    t_s: float
+    x: FloatArray
+    P: FloatArray
+    J: FloatArray
+    pcrb_trace: float
+
+
+def encode_track(msg: TrackMsg) -> bytes:
+    """Payload of `isac/<mission>/track`."""
+    obj = envelope("track", msg.slot, msg.t_s)
+    obj.update(
+        x=_floats(msg.x, "track.x"),
+        P=[_floats(r, f"track.P[{i}]") for i, r in enumerate(np.asarray(msg.P))],
+        J=[_floats(r, f"track.J[{i}]") for i, r in enumerate(np.asarray(msg.J))],
+        pcrb_trace=float(msg.pcrb_trace),
+    )
+    data = dumps(obj)
+    decode_track(data)
+    return data
+
+
+def decode_track(payload: bytes | bytearray | memoryview | str) -> TrackMsg:
+    """Validate a track payload."""
+    kind = "track"
+    obj, slot, t_s = open_envelope(payload, kind)
+    return TrackMsg(
+        slot=slot,
+        t_s=t_s,
+        x=get_vector(obj, "x", kind, length=4),
+        P=get_matrix(obj, "P", kind, rows=4, cols=4),
+        J=get_matrix(obj, "J", kind, rows=4, cols=4),
+        pcrb_trace=get_float(obj, "pcrb_trace", kind, lo=0.0),
+    )
+
+
+# --------------------------------------------------------------------------- health
+
+
+MAX_COUNTERS: Final = 200
+
+
+@dataclass(frozen=True)
+class HealthMsg:
+    """Service status (`isac/<mission>/health`): status word, counters by name, last error."""
+
+    slot: int
+    t_s: float
+    status: str
+    counters: dict[str, int]
+    last_error: str
+
+
+def encode_health(msg: HealthMsg) -> bytes:
+    """Payload of `isac/<mission>/health`."""
+    obj = envelope("health", msg.slot, msg.t_s)
+    obj.update(
+        status=msg.status,
+        counters={str(k): int(v) for k, v in msg.counters.items()},
+        last_error=msg.last_error[:MAX_REASON_CHARS],
+    )
+    data = dumps(obj)
+    decode_health(data)
+    return data
+
+
+def decode_health(payload: bytes | bytearray | memoryview | str) -> HealthMsg:
+    """Validate a health payload."""
+    kind = "health"
+    obj, slot, t_s = open_envelope(payload, kind, min_slot=-1)
+    raw = _require(obj, "counters", kind)
+    if not isinstance(raw, dict) or len(raw) > MAX_COUNTERS:
+        raise MessageError(
+            f"{_where(kind, 'counters')}: expected an object of at most {MAX_COUNTERS} counters"
+        )
+    counters = {
+        str(k)[:MAX_STATUS_CHARS]: check_int(
+            v, f"{_where(kind, 'counters')}.{k}", lo=0, hi=MAX_SLOT
+        )
+        for k, v in raw.items()
+    }
+    return HealthMsg(
+        slot=slot,
+        t_s=t_s,
+        status=get_str(obj, "status", kind, max_chars=MAX_STATUS_CHARS),
+        counters=counters,
+        last_error=get_str(obj, "last_error", kind, max_chars=MAX_REASON_CHARS),
+    )
+
+
+AnyMsg = DetectionMsg | ClockMsg | TruthMsg | PlanMsg | TelemetryMsg | TrackMsg | HealthMsg
 
 
 def decode_any(payload: bytes | bytearray | memoryview | str) -> AnyMsg:
@@ -510,6 +696,9 @@ def decode_any(payload: bytes | bytearray | memoryview | str) -> AnyMsg:
         "clock": decode_clock,
         "truth": decode_truth,
         "plan": decode_plan,
+        "telemetry": decode_telemetry,
+        "track": decode_track,
+        "health": decode_health,
     }
     if not isinstance(kind, str) or kind not in decoders:
         raise MessageError(f"type: unknown payload type {kind!r}")
