@@ -488,9 +488,13 @@ class Autopilot:
             ("gcs", s.gcs_bind_port, s.gcs_dest_port),
         ):
             link = _Link(self, name, (LOOPBACK, dest))
-            await loop.create_datagram_endpoint(
-                functools.partial(_same, link), local_addr=(LOOPBACK, bind)
-            )
+            try:
+                await loop.create_datagram_endpoint(
+                    functools.partial(_same, link), local_addr=(LOOPBACK, bind)
+                )
+            except OSError:
+                await self.close()  # do not leave the first link bound
+                raise
             self._links.append(link)
             self._init_streams(link)
         logger.info(

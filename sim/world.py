@@ -20,7 +20,7 @@ them there).
 
 Slot convention: plan n carries the waypoints the vehicles fly to during (n-1, n] and the shares
 eta_n of slot n's detections; the ground publishes plan n+1 after processing slot n. Lockstep:
-after publishing slot n (for n + 1 < N) the clock holds at t0 + n dt until plan n+1 (or a later
+after publishing slot n (for n < N) the clock holds at t0 + n dt until plan n+1 (or a later
 one) has arrived, or `lockstep_timeout_s` wall seconds have passed (counted, logged; the world
 then goes on with the latest shares).
 
@@ -286,15 +286,16 @@ class World:
         x = self.target.state if n == 0 else self.target.advance()
         if self.target.slot != n:  # the target is advanced exactly once per slot
             raise RuntimeError(f"target at slot {self.target.slot}, world at slot {n}")
-        det = emulator.emit(n, t_s, x, self._uav_xy())
+        # Truth first, so that an evaluator has it when the slot's detections complete.
         bus.publish(self.keys.truth, encode_truth(TruthMsg(slot=n, t_s=t_s, target_x=x)))
         self.stats.truth_published += 1
+        det = emulator.emit(n, t_s, x, self._uav_xy())
         self.stats.slots = n + 1
         self._publish_clock(now_s)
         log.debug(
             "slot %d at t = %.2f s: %d/%d detections", n, t_s, det.received.sum(), len(det.received)
         )
-        if self.options.lockstep and n + 1 < self.scenario.N and emulator.latest_plan_slot < n + 1:
+        if self.options.lockstep and n < self.scenario.N and emulator.latest_plan_slot < n + 1:
             self._hold(n, now_s)
 
     # -- lockstep ----------------------------------------------------------------------------

@@ -1,0 +1,350 @@
+"""The ground loop: detections -> EKF -> plan_slot -> plan, over Zenoh only.
+
+It subscribes to `clock`, `detections/*`, `telemetry/*` and `truth` (truth goes into the trace for
+evaluation; the planner never reads it) and publishes `plan`, `track` and `health`. Slot n is
+processed when all M detections of slot n have arrived (a missed detection arrives as null), or
+when the simulation clock passes the slot boundary by `detection_wait_s`, or `detection_wall_wait_s`
+of wall time after the first of them: then the EKF takes what arrived (a partial update, counted).
+Invalid payloads are counted by reason, logged, and dropped; stale and duplicate detections are
+dropped and counted, never used twice. The trace is written and flushed slot by slot.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.errors import MessageError
+from isac_mission.experiment.trace import SlotRecord, TraceWriter, read_trace
+from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.service.bus import Keys, Subscription, ZenohBus
+from isac_mission.service.codec import (
+    DetectionMsg,
+    HealthMsg,
+    PlanMsg,
+    TelemetryMsg,
+    TrackMsg,
+    collect_detections,
+    decode_clock,
+    decode_detection,
+    decode_telemetry,
+    decode_truth,
+    encode_health,
+    encode_plan,
+    encode_track,
+)
+from isac_mission.service.mission import MissionState
+from isac_mission.types import FloatArray, Gaussian
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class GroundSettings:
+    """method: planning strategy; trace_path: JSON Lines trace (None: no trace); resume: continue
+    an existing trace from its last complete slot; detection_wait_s: simulation seconds after a
+    slot boundary before a partial update; detection_wall_wait_s: the same bound in wall seconds,
+    counted from the first detection of the slot (for a held or stalled clock)."""
+
+    method: Method = "proposed"
+    trace_path: Path | None = None
+    resume: bool = False
+    detection_wait_s: float = 0.5
+    detection_wall_wait_s: float = 2.0
+    telemetry_max_age_s: float = 1.0
+
+
+@dataclass
+class SlotEvent:
+    """What the loop reports after each slot (for progress displays and tests)."""
+
+    record: SlotRecord
+    position_error_m: float | None
+    latency_s: float
+    links: dict[int, str]
+
+
+@dataclass
+class GroundReport:
+    """Counters and per-slot figures of one run of the loop."""
+
+    counters: Counter[str] = field(default_factory=Counter)
+    records: list[SlotRecord] = field(default_factory=list)
+    latencies_s: list[float] = field(default_factory=list)
+    last_error: str = ""
+
+
+class GroundLoop:
+    """Runs one mission over Zenoh: plan 1 at mission start, then slot by slot to slot N."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        bus: ZenohBus,
+        settings: GroundSettings,
+        kit: SolverKit | None = None,
+        on_slot: Callable[[SlotEvent], None] | None = None,
+    ) -> None:
+        self.s = scenario
+        self.bus = bus
+        self.keys = Keys(scenario.mission_id)
+        self.settings = settings
+        self.kit = kit if kit is not None else SolverKit(scenario)
+        self.on_slot = on_slot
+        self.report = GroundReport()
+        self.state = MissionState(
+            scenario, self.kit, settings.method, Gaussian(scenario.x0.copy(), scenario.P0.copy())
+        )
+        self.writer: TraceWriter | None = None
+        self.t_s = 0.0
+        self.mission_t0_s: float | None = None
+        self.buffer: dict[int, dict[int, DetectionMsg]] = {}
+        self.first_seen_wall: dict[int, float] = {}
+        self.last_detection_wall = 0.0
+        self.telemetry: dict[int, TelemetryMsg] = {}
+        self.truth: dict[int, FloatArray] = {}
+        self.done = asyncio.Event()
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def _open_trace(self) -> None:
+        path = self.settings.trace_path
+        if path is None:
+            return
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if self.settings.resume and path.exists():
+            trace = read_trace(path)
+            self.writer = TraceWriter.resume(path)
+            if trace.slots:
+                self.state = MissionState.resumed(
+                    self.s, self.kit, self.settings.method, trace.slots[-1]
+                )
+                log.info("resuming after slot %d from %s", self.state.slot, path)
+            return
+        config = self.s.trace_config() | {"seed": self.s.seed, "method": self.settings.method}
+        self.writer = TraceWriter(path, config, fsync=True)
+
+    async def run(self, stop: asyncio.Event) -> GroundReport:
+        """Run until slot N is done or `stop` is set; the trace is closed on the way out."""
+        self._open_trace()
+        # One subscription for everything, so that each publisher's order is kept (the world
+        # publishes a slot's truth before its detections).
+        sub = self.bus.subscribe(self.keys.everything)
+        try:
+            async with asyncio.TaskGroup() as tg:
+                pump = tg.create_task(self._pump(sub))
+                ticker = tg.create_task(self._wall_ticker())
+                waiters = [
+                    asyncio.ensure_future(stop.wait()),
+                    asyncio.ensure_future(self.done.wait()),
+                ]
+                await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
+                for task in (*waiters, pump, ticker):
+                    task.cancel()
+        finally:
+            sub.close()
+            if self.writer is not None:
+                self.writer.close()
+            self._publish_health("done" if self.state.done else "stopped")
+        return self.report
+
+    async def _pump(self, sub: Subscription) -> None:
+        prefix = self.keys.prefix + "/"
+        handlers: dict[str, Callable[[bytes], None]] = {
+            "clock": self._on_clock,
+            "truth": self._on_truth,
+            "detections": self._on_detection,
+            "telemetry": self._on_telemetry,
+        }
+        async for key, payload in sub:
+            kind = key.removeprefix(prefix).split("/", 1)[0]
+            handler = handlers.get(kind)
+            if handler is None:  # plan, track, health: ours or another ground's
+                continue
+            try:
+                handler(payload)
+            except MessageError as err:
+                self._reject(err)
+            self._advance()
+
+    async def _wall_ticker(self) -> None:
+        """Wakes the loop so that a wall-clock detection deadline can pass without traffic."""
+        while True:
+            await asyncio.sleep(0.05)
+            self._advance()
+
+    def _reject(self, err: MessageError) -> None:
+        reason = str(err).split(":", 1)[0]
+        self.report.counters[f"rejected {reason}"] += 1
+        self.report.last_error = str(err)
+        log.warning("dropped message: %s", err)
+
+    # ------------------------------------------------------------------ inputs
+
+    def _on_clock(self, payload: bytes) -> None:
+        msg = decode_clock(payload)
+        self.t_s = max(self.t_s, msg.t_s)
+        if msg.mission_t0_s is not None and self.mission_t0_s is None:
+            self.mission_t0_s = msg.mission_t0_s
+
+    def _on_detection(self, payload: bytes) -> None:
+        msg = decode_detection(payload, n_uavs=self.s.M)
+        if msg.slot == 0:
+            self.report.counters["detections of slot 0 (before plan 1)"] += 1
+            return
+        if msg.slot <= self.state.slot:
+            self.report.counters["detections stale"] += 1
+            return
+        if msg.slot > self.s.N:
+            self.report.counters["detections beyond mission"] += 1
+            return
+        slot_buf = self.buffer.setdefault(msg.slot, {})
+        if msg.uav in slot_buf:
+            self.report.counters["detections duplicate"] += 1
+            return
+        slot_buf[msg.uav] = msg
+        now = time.monotonic()
+        self.first_seen_wall.setdefault(msg.slot, now)
+        self.last_detection_wall = now
+
+    def _on_telemetry(self, payload: bytes) -> None:
+        msg = decode_telemetry(payload, n_uavs=self.s.M)
+        self.telemetry[msg.uav] = msg
+
+    def _on_truth(self, payload: bytes) -> None:
+        msg = decode_truth(payload)
+        self.truth[msg.slot] = msg.target_x
+
+    # ------------------------------------------------------------------ the slot machine
+
+    def _uav_positions(self, det_xy: FloatArray | None = None) -> FloatArray:
+        """Where the UAVs are: fresh telemetry, else the slot's detection positions, else the plan."""
+        xy = np.array(det_xy, dtype=float) if det_xy is not None else np.full((self.s.M, 2), np.nan)
+        for m in range(self.s.M):
+            tel = self.telemetry.get(m)
+            if (
+                tel is not None
+                and tel.link == "ok"
+                and self.t_s - tel.t_s <= self.settings.telemetry_max_age_s
+            ):
+                xy[m] = tel.position_xy_m
+        if np.any(~np.isfinite(xy)):
+            last = self.state.pending.plan.uav_xy_m if self.state.pending else None
+            fallback = (
+                last
+                if last is not None
+                else (
+                    np.asarray(self.report.records[-1].uav_xy)
+                    if self.report.records
+                    else self.s.uav_start_xy
+                )
+            )
+            xy = np.where(np.isfinite(xy), xy, fallback)
+        return xy
+
+    def _advance(self) -> None:
+        """Process every slot that is ready; plan slot 1 once the mission has started."""
+        if self.done.is_set():
+            return
+        if self.state.pending is None and self.state.slot == 0 and self.mission_t0_s is not None:
+            self._plan_and_publish(self._uav_positions(), latency_from=None)
+        while self.state.pending is not None and self._slot_ready(self.state.pending.slot):
+            self._process_slot(self.state.pending.slot)
+        if self.state.done:
+            self.done.set()
+
+    def _slot_ready(self, n: int) -> bool:
+        got = self.buffer.get(n, {})
+        if len(got) == self.s.M:
+            return True
+        if (
+            self.mission_t0_s is not None
+            and self.t_s >= self.mission_t0_s + n * self.s.dt + self.settings.detection_wait_s
+        ):
+            return True
+        first = self.first_seen_wall.get(n)
+        return first is not None and time.monotonic() - first > self.settings.detection_wall_wait_s
+
+    def _process_slot(self, n: int) -> None:
+        msgs = self.buffer.pop(n, {})
+        self.first_seen_wall.pop(n, None)
+        if len(msgs) < self.s.M:
+            self.report.counters["slots with missing detections"] += 1
+            self.report.counters["detections missing"] += self.s.M - len(msgs)
+        det = collect_detections(n, msgs.values(), self.s.M)
+        pending = self.state.pending
+        assert pending is not None
+        eta = pending.plan.bandwidth_share.copy()
+        for m, msg in msgs.items():
+            eta[m] = msg.bandwidth_share
+        record = self.state.process(det, eta, self._uav_positions())
+        truth = self.truth.pop(n, None)
+        if truth is not None:
+            record = SlotRecord.from_dict(record.to_dict() | {"target_true": truth.tolist()})
+        latency_from = self.last_detection_wall if msgs else None
+        self.bus.publish(
+            self.keys.track,
+            encode_track(
+                TrackMsg(
+                    n,
+                    self.t_s,
+                    self.state.belief.x,
+                    self.state.belief.P,
+                    self.state.bound.J,
+                    self.state.bound.trace,
+                )
+            ),
+        )
+        latency = 0.0
+        if not self.state.done:
+            latency = self._plan_and_publish(self._uav_positions(det.uav_xy_m), latency_from)
+        if self.writer is not None:
+            record = SlotRecord.from_dict(record.to_dict() | {"latency_ms": latency * 1e3})
+            self.writer.write_slot(record)
+        self.report.records.append(record)
+        self.report.counters["slots"] += 1
+        if record.status != "ok":
+            self.report.counters[f"slots {record.status}"] += 1
+        self._publish_health("running")
+        if self.on_slot is not None:
+            err = (
+                None if truth is None else float(np.linalg.norm(record.target_est[:2] - truth[:2]))
+            )
+            links = {m: t.link for m, t in self.telemetry.items()}
+            self.on_slot(SlotEvent(record, err, latency, links))
+
+    def _plan_and_publish(self, uav_xy: FloatArray, latency_from: float | None) -> float:
+        pending = self.state.plan_next(uav_xy)
+        self.bus.publish(self.keys.plan, encode_plan(PlanMsg(pending.slot, self.t_s, pending.plan)))
+        if pending.plan.report.status != "ok":
+            log.warning("slot %d: %s", pending.slot, pending.plan.report.reason)
+        if latency_from is None:
+            return 0.0
+        latency = time.monotonic() - latency_from
+        self.report.latencies_s.append(latency)
+        return latency
+
+    def _publish_health(self, status: str) -> None:
+        try:
+            self.bus.publish(
+                self.keys.health,
+                encode_health(
+                    HealthMsg(
+                        max(self.state.slot, 0),
+                        self.t_s,
+                        status,
+                        dict(self.report.counters),
+                        self.report.last_error,
+                    )
+                ),
+            )
+        except Exception as err:  # the bus may already be closing at shutdown
+            log.debug("health not published: %s", err)

@@ -1,0 +1,121 @@
+"""The ground loop's state, without I/O: belief, bound, and the plan for the next slot.
+
+Slot convention (as sim/world.py and codec.py): plan n carries the waypoints flown during
+(n-1, n] and the shares used for slot n's detections; after the detections of slot n are folded in,
+the ground plans slot n+1. `MissionState` is the same sequence `experiment/closed_loop.py` runs
+offline, split at the points where the live service waits for the network.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.experiment.trace import SlotRecord
+from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.tracking.ekf import ekf_predict, ekf_update
+from isac_mission.tracking.pcrb import Bound, bound_step, predict_information, scaled_inverse
+from isac_mission.types import Detections, FloatArray, Gaussian, IntArray, SlotPlan
+
+
+@dataclass(frozen=True)
+class PendingSlot:
+    """What was decided for slot n before its measurements: prediction and plan."""
+
+    slot: int
+    prediction: Gaussian
+    plan: SlotPlan
+
+
+class MissionState:
+    """Belief and bound after the last processed slot, and the pending plan of the next one."""
+
+    def __init__(self, s: Scenario, kit: SolverKit, method: Method, initial: Gaussian) -> None:
+        self.scenario = s
+        self.kit = kit
+        self.method: Method = method
+        self.F = transition_matrix(s.dt)
+        self.W = process_noise(s.dt, s.kappa)
+        self.belief = initial
+        self.bound = Bound.from_covariance(initial.P.copy())
+        self.slot = 0
+        self.eta: FloatArray = np.full(s.M, 1.0 / s.M)
+        self.assoc: IntArray | None = None
+        self.pending: PendingSlot | None = None
+
+    @classmethod
+    def resumed(cls, s: Scenario, kit: SolverKit, method: Method, last: SlotRecord) -> MissionState:
+        """Continue after a trace's last complete slot (its P, J, estimate, shares, association)."""
+        state = cls(s, kit, method, Gaussian(np.asarray(last.target_est), np.asarray(last.P)))
+        state.bound = Bound.from_information(np.asarray(last.J))
+        state.slot = last.slot
+        state.eta = np.asarray(last.eta, dtype=float)
+        state.assoc = np.asarray(last.assoc, dtype=np.int64)
+        return state
+
+    @property
+    def done(self) -> bool:
+        return self.slot >= self.scenario.N
+
+    def plan_next(self, uav_xy: FloatArray) -> PendingSlot:
+        """Predict slot n+1 and plan it from the UAVs' current positions uav_xy [M, 2]."""
+        prediction = ekf_predict(self.belief, self.F, self.W)
+        J_pred = predict_information(self.bound, self.F, self.W)
+        prior = J_pred if self.scenario.bound_prior == "pcrb" else scaled_inverse(prediction.P)
+        plan = plan_slot(
+            SlotInput(np.asarray(uav_xy, dtype=float), self.eta, self.assoc, prediction.x, prior),
+            self.kit,
+            self.method,
+        )
+        self.pending = PendingSlot(self.slot + 1, prediction, plan)
+        return self.pending
+
+    def process(self, det: Detections, eta_used: FloatArray, fallback_xy: FloatArray) -> SlotRecord:
+        """Fold in slot n's detections (NaN = missing: a partial update) and advance the bound.
+
+        eta_used [M]: the shares the measurements were taken with; fallback_xy [M, 2]: where a UAV
+        was when its detection (which carries the position) did not arrive.
+        """
+        pending = self.pending
+        if pending is None or det.slot != pending.slot:
+            raise ValueError(f"slot {det.slot} is not the planned slot {self.slot + 1}")
+        sens = self.kit.sensing
+        uav_xy = np.where(np.isfinite(det.uav_xy_m), det.uav_xy_m, fallback_xy)
+        pred = pending.prediction
+        z = np.concatenate([det.range_m, det.radial_velocity_mps])
+        r_diag = sens.variances(np.linalg.norm(pred.x[None, :2] - uav_xy, axis=1), eta_used)
+        r_used = np.where(np.isfinite(z), r_diag, np.nan)
+        self.belief = ekf_update(pred, z, uav_xy, r_used)
+        self.bound = bound_step(self.bound, self.F, self.W, pred.x, uav_xy, r_used)
+        self.slot = det.slot
+        plan = pending.plan
+        self.eta, self.assoc = plan.bandwidth_share, plan.bs_of_uav
+        self.pending = None
+        rep = plan.report
+        return SlotRecord(
+            slot=det.slot,
+            method=self.method,
+            status=rep.status,
+            uav_xy=uav_xy,
+            eta=np.asarray(eta_used, dtype=float),
+            assoc=plan.bs_of_uav,
+            target_true=None,
+            target_est=self.belief.x,
+            target_pred=pred.x,
+            r_diag=r_used,
+            pcrb_trace=self.bound.trace,
+            solve_ms=rep.solve_s * 1e3,
+            P=self.belief.P,
+            J=self.bound.J,
+            plan_xy=plan.uav_xy_m,
+            plan_pcrb_trace=plan.pcrb_trace,
+            reason=rep.reason or None,
+            extra={
+                "pcrb_pos": self.bound.position_trace,
+                "pcrb_vel": self.bound.velocity_trace,
+                "received": int(np.count_nonzero(det.received)),
+            },
+        )
