@@ -202,6 +202,9 @@ async def test_lockstep_holds_the_clock_until_the_next_plan_arrives() -> None:
         rig.observer.publish(rig.keys.plan, json.dumps(bad).encode())
         # ... the valid plan for slot 1 does, and slot 1 uses its shares.
         rig.observer.publish(rig.keys.plan, _plan(1, [0.7, 0.3], s))
+        # A slot's truth is published before its detections.
+        truth1 = await rig.until(TruthMsg, 1)
+        assert truth1.slot == 1
         dets = []
         while len(dets) < 2:
             msg = await rig.until(DetectionMsg, 1)
@@ -211,8 +214,6 @@ async def test_lockstep_holds_the_clock_until_the_next_plan_arrives() -> None:
         assert rig.world.stats.plans_rejected == 1
         assert "plan.bandwidth_share" in rig.world.emulator.last_error  # type: ignore[union-attr]
         # and the clock holds again at slot 1 until plan 2
-        truth1 = await rig.until(TruthMsg, 1)
-        assert truth1.slot == 1
         assert rig.world.clock.held and rig.world.clock.now_s == pytest.approx(s.dt)
 
 
