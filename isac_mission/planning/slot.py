@@ -92,6 +92,20 @@ def _plan(
     )
 
 
+def evade_target(
+    planned_xy: FloatArray, prev_xy: FloatArray, target_xy: FloatArray, d_safe: float, step: float
+) -> FloatArray:
+    """Best-effort waypoints [M, 2]: a UAV whose planned waypoint is closer than D_s to the
+    predicted target moves straight away from it by `step` instead (14j before communication)."""
+    out = np.array(planned_xy, dtype=float)
+    for m in np.flatnonzero(np.linalg.norm(out - target_xy, axis=1) < d_safe):
+        away = prev_xy[m] - target_xy
+        norm = float(np.linalg.norm(away))
+        direction = away / norm if norm > 1e-9 else np.array([1.0, 0.0])
+        out[m] = prev_xy[m] + direction * step * (1 - 1e-12)
+    return out
+
+
 def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> SlotPlan:
     """Plan one slot with the given strategy. An infeasible slot returns a best-effort plan (the
     communication-optimal one, or staying put for sd) with report.status == "infeasible"."""
@@ -117,13 +131,9 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         return time.perf_counter() - t0
 
     def fallback(reason: str) -> SlotPlan:
-        return _plan(
-            comm.uav_xy,
-            assoc,
-            comm.eta,
-            objective,
-            SolveReport("infeasible", reason, solve_s=elapsed()),
-        )
+        xy = evade_target(comm.uav_xy, inp.prev_xy, inp.x_pred[:2], s.d_safe, step)
+        report = SolveReport("infeasible", reason, solve_s=elapsed())
+        return _plan(xy, assoc, comm.eta, objective, report)
 
     if comm.worst_rate_bps < s.r_th:
         return fallback(

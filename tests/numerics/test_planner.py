@@ -175,3 +175,18 @@ def test_proposed_objective_not_worse_than_benchmarks_on_the_same_slot(paper: Sc
     )
     f = {m: plan_slot(inp, kit, m).pcrb_trace for m in ("proposed", "sd", "aba")}
     assert f["proposed"] <= min(f["sd"], f["aba"]) * (1 + 1e-9)
+
+
+def test_target_closing_in_gives_evasive_fallback(paper: Scenario) -> None:
+    """A target predicted 5 m from UAV 0: no plan keeps D_s (14j), so the slot is infeasible and
+    UAV 0 moves straight away from the target at full speed instead of toward its BS."""
+    s = paper
+    target = s.uav_start_xy[0] + np.array([5.0, 0.0])
+    inp = SlotInput(
+        s.uav_start_xy, np.full(3, 1 / 3), None, np.array([*target, -30.0, 0.0]), _prior(s)
+    )
+    plan = plan_slot(inp, _kit(s), "proposed")
+    assert plan.report.status == "infeasible"
+    assert "14j" in plan.report.reason
+    moved = plan.uav_xy_m[0] - s.uav_start_xy[0]
+    np.testing.assert_allclose(moved, [-s.v_max * s.dt, 0.0], atol=1e-6)
