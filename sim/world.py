@@ -79,6 +79,8 @@ class WorldOptions:
     allowed for an "offboard" start.
     target_waypoints_xy_m / target_speed_mps: a scripted target path instead of the CV model
     (speed default: the speed of x0). reflect_target: keep the CV target inside the area.
+    initial_error: start the CV target at x0 + e, e ~ N(0, P0), so that the tracker's prior
+    (mean x0, covariance P0) is honest; False starts it exactly at x0.
     geo_origin: geodetic position of the scenario origin (GPS of the simulated vehicles).
     """
 
@@ -96,6 +98,7 @@ class WorldOptions:
     target_waypoints_xy_m: tuple[tuple[float, float], ...] | None = None
     target_speed_mps: float | None = None
     reflect_target: bool = True
+    initial_error: bool = True
     geo_origin: GeoPoint = PX4_SITL_ORIGIN
 
     def __post_init__(self) -> None:
@@ -142,7 +145,12 @@ def make_target(scenario: Scenario, options: WorldOptions, rng: np.random.Genera
         return ScriptedTarget(
             options.target_waypoints_xy_m, speed, scenario.dt, bounds_m=scenario.area
         )
-    return CvTarget(scenario.x0, scenario.dt, scenario.kappa, rng, bounds_m=bounds)
+    x0 = scenario.x0
+    if options.initial_error:
+        # The configured x0 is the cue the tracker starts from; the truth differs from it by a
+        # draw from P0, as in `simulate` (docs/model.md, "EKF start and P0").
+        x0 = x0 + rng.multivariate_normal(np.zeros(4), scenario.P0)
+    return CvTarget(x0, scenario.dt, scenario.kappa, rng, bounds_m=bounds)
 
 
 def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> AutopilotSettings:

@@ -1,0 +1,213 @@
+"""The live system: `run` (world + bridges + ground loop in one process) and `serve` (bridges +
+ground loop, for vehicles and sensing that live elsewhere).
+
+Everything talks over real loopback UDP MAVLink and a real Zenoh session. Mission start follows
+DESIGN.md: the bridges arm the vehicles, take off to H, fly to the start points and enter offboard;
+the world starts slot 0 when all of them are there (`start="offboard"`); the ground loop then plans
+slot 1, and so on to slot N. At the end, or on a stop request, the vehicles land.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.errors import IsacError
+from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.service.bridge import BridgeFleet, ClockSimTime
+from isac_mission.service.bus import DEFAULT_ENDPOINT, BusSettings, ZenohBus
+from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings, SlotEvent
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LiveOptions:
+    """speed: simulation seconds per wall second; lockstep: the world waits for each slot's plan;
+    method: planning strategy; seed: world noise seed (None: the scenario's); out_dir: trace and
+    plots; zenoh_endpoint: where the ground loop listens (the world and observers connect);
+    mavlink_base_port / gcs_base_port: vehicle m's offboard / ground-station ports (base + m);
+    resume: continue an existing trace (serve)."""
+
+    speed: float = 1.0
+    lockstep: bool = False
+    method: Method = "proposed"
+    seed: int | None = None
+    out_dir: Path = Path("out/run")
+    zenoh_endpoint: str = DEFAULT_ENDPOINT
+    zenoh_connect: tuple[str, ...] = ()
+    mavlink_base_port: int = 14540
+    gcs_base_port: int = 14550
+    resume: bool = False
+
+    @property
+    def trace_path(self) -> Path:
+        return self.out_dir / f"trace_{self.method}.jsonl"
+
+
+@dataclass
+class LiveResult:
+    """What a live mission produced."""
+
+    report: GroundReport
+    trace_path: Path
+    phases: dict[str, float] = field(default_factory=dict)
+    fleet_counters: dict[str, int] = field(default_factory=dict)
+
+
+async def _fly_mission(
+    s: Scenario,
+    opts: LiveOptions,
+    bus: ZenohBus,
+    stop: asyncio.Event,
+    on_slot: Callable[[SlotEvent], None] | None,
+    on_status: Callable[[str], None] | None,
+) -> LiveResult:
+    """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere."""
+    say = on_status or (lambda _msg: None)
+    kit = SolverKit(s)
+    kit.warm_up()
+    time_source = ClockSimTime()
+    fleet = BridgeFleet.from_scenario(s, time_source, bus, base_port=opts.mavlink_base_port)
+    ground = GroundLoop(
+        s,
+        bus,
+        GroundSettings(method=opts.method, trace_path=opts.trace_path, resume=opts.resume),
+        kit,
+        on_slot,
+    )
+    result = LiveResult(GroundReport(), opts.trace_path)
+    async with fleet:
+        # The ground loop and the plan follower listen from the start: the world announces slot 0
+        # as soon as every vehicle is in place, and in lockstep it then waits for plan 1.
+        follower = asyncio.create_task(fleet.follow_plans())
+        ground_task = asyncio.create_task(ground.run(stop))
+        try:
+            say("waiting for the clock and the vehicles")
+            await _until_stopped(time_source.wait_ready(timeout_s=60.0), stop)
+            say("arming, taking off and flying to the start points")
+            await _until_stopped(fleet.prepare_all(), stop)
+            say("mission running")
+            result.report = await ground_task
+        finally:
+            stop.set()
+            for task in (follower, ground_task):
+                if not task.done():
+                    task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+            say("landing")
+            try:
+                await asyncio.wait_for(fleet.land_all(), timeout=120.0)
+            except (IsacError, TimeoutError) as err:
+                log.error("landing: %s", err)
+                result.report.last_error = f"landing: {err}"
+            c = fleet.counters
+            result.fleet_counters = {
+                "plans applied": c.plans_applied,
+                "plans invalid": c.plans_invalid,
+            }
+    return result
+
+
+async def _until_stopped(aw: object, stop: asyncio.Event) -> None:
+    """Await `aw` unless `stop` is set first (then cancel it)."""
+    task = asyncio.ensure_future(aw)  # type: ignore[call-overload]
+    stopper = asyncio.ensure_future(stop.wait())
+    done, _ = await asyncio.wait({task, stopper}, return_when=asyncio.FIRST_COMPLETED)
+    stopper.cancel()
+    if task in done:
+        task.result()
+        return
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError, IsacError):
+        await task
+
+
+async def run_embedded(
+    s: Scenario,
+    opts: LiveOptions,
+    stop: asyncio.Event,
+    on_slot: Callable[[SlotEvent], None] | None = None,
+    on_status: Callable[[str], None] | None = None,
+) -> LiveResult:
+    """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh."""
+    from sim.world import WorldOptions, run_world
+
+    world_stop = asyncio.Event()
+    world_opts = WorldOptions(
+        speed=opts.speed,
+        lockstep=opts.lockstep,
+        seed=opts.seed,
+        bus=BusSettings(connect=(opts.zenoh_endpoint,)),
+        mavlink_base_port=opts.mavlink_base_port,
+        gcs_base_port=opts.gcs_base_port,
+        start="offboard",
+    )
+    with ZenohBus.open(BusSettings.hub(opts.zenoh_endpoint)) as bus:
+        world = asyncio.create_task(run_world(s, world_opts, world_stop))
+        try:
+            return await _fly_mission(s, opts, bus, stop, on_slot, on_status)
+        finally:
+            world_stop.set()
+            await asyncio.wait_for(world, timeout=30.0)
+
+
+async def run_serve(
+    s: Scenario,
+    opts: LiveOptions,
+    stop: asyncio.Event,
+    on_slot: Callable[[SlotEvent], None] | None = None,
+    on_status: Callable[[str], None] | None = None,
+) -> LiveResult:
+    """Bridges and ground loop only: the world (or vehicles and sensing) runs elsewhere."""
+    settings = replace(BusSettings.hub(opts.zenoh_endpoint), connect=opts.zenoh_connect)
+    with ZenohBus.open(settings) as bus:
+        return await _fly_mission(s, opts, bus, stop, on_slot, on_status)
+
+
+@dataclass(frozen=True)
+class LiveSummary:
+    """End-of-run figures (m, m/s, m^2, ms)."""
+
+    slots: int
+    loc_rmse: float
+    vel_rmse: float
+    pcrb_mean: float
+    solve_median_ms: float
+    solve_p95_ms: float
+    latency_median_ms: float
+    latency_p99_ms: float
+    infeasible: int
+
+
+def summarize_live(result: LiveResult) -> LiveSummary:
+    """RMSE against the world's truth, mean bound, planning and detection-to-plan times."""
+    recs = result.report.records
+    with_truth = [r for r in recs if r.target_true is not None]
+    err = np.array([np.asarray(r.target_est) - np.asarray(r.target_true) for r in with_truth])
+    solve = np.array([r.solve_ms for r in recs]) if recs else np.array([math.nan])
+    lat = (
+        np.array(result.report.latencies_s) * 1e3
+        if result.report.latencies_s
+        else np.array([math.nan])
+    )
+    return LiveSummary(
+        slots=len(recs),
+        loc_rmse=float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))) if len(err) else math.nan,
+        vel_rmse=float(np.sqrt(np.mean(np.sum(err[:, 2:] ** 2, axis=1)))) if len(err) else math.nan,
+        pcrb_mean=float(np.mean([r.pcrb_trace for r in recs])) if recs else math.nan,
+        solve_median_ms=float(np.median(solve)),
+        solve_p95_ms=float(np.percentile(solve, 95)),
+        latency_median_ms=float(np.median(lat)),
+        latency_p99_ms=float(np.percentile(lat, 99)),
+        infeasible=sum(r.status != "ok" for r in recs),
+    )
