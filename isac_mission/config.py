@@ -96,6 +96,12 @@ class UavConfig(_Section):
     )
     max_speed_mps: float = Field(25.0, gt=0, description="V_max.")
     safe_distance_m: float = Field(30.0, ge=0, description="D_s.")
+    max_accel_mps2: float = Field(
+        10.0,
+        gt=0,
+        description="Horizontal acceleration limit of the simulated vehicles (not in the paper's "
+        "model, which has none; docs/model.md, 'Live service').",
+    )
 
 
 class TargetConfig(_Section):
@@ -157,6 +163,12 @@ class PlannerConfig(_Section):
         True,
         description="Line-search each UAV's own step after Algorithm 1's common one (docs/model.md).",
     )
+    accel_limit_mps2: float | None = Field(
+        None,
+        gt=0,
+        description="If set, each waypoint stays within a dt^2 / 4 of the vehicle's ballistic "
+        "point q + v dt (reachable on a smooth leg); null = the paper's kinematics (docs/model.md).",
+    )
     solver: str = Field("CLARABEL", description="cvxpy solver for the SOCP subproblems.")
     feasibility_tol_m: float = Field(
         1e-6, gt=0, description="Slack allowed when re-checking 14a-14j on a returned plan."
@@ -212,6 +224,7 @@ class Scenario:
     uav_start_xy: FloatArray
     v_max: float
     d_safe: float
+    a_max: float
     x0: FloatArray
     kappa: float
     rcs_m2: float
@@ -256,6 +269,7 @@ class Scenario:
             "kappa": self.kappa,
             "v_max": self.v_max,
             "d_safe": self.d_safe,
+            "a_max": self.a_max,
             "gamma_th": self.gamma_th,
             "r_th": self.r_th,
             "n_a": self.n_a,
@@ -353,6 +367,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
         uav_start_xy=np.asarray(uav.start_xy_m, dtype=float),
         v_max=uav.max_speed_mps,
         d_safe=uav.safe_distance_m,
+        a_max=uav.max_accel_mps2,
         x0=np.asarray(tgt.initial_state, dtype=float),
         kappa=tgt.process_noise_intensity,
         rcs_m2=db_to_linear(tgt.rcs_dbsm),

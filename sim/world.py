@@ -164,7 +164,9 @@ def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> Aut
         local_origin_xy_m=(0.0, 0.0),
         spawn_xy_m=(float(start[0]), float(start[1])),
         takeoff_alt_m=scenario.H,
-        limits=VehicleLimits(max_horizontal_speed_mps=scenario.v_max),
+        limits=VehicleLimits(
+            max_horizontal_speed_mps=scenario.v_max, max_horizontal_accel_mps2=scenario.a_max
+        ),
         area_min_xy_m=(0.0, 0.0),
         area_max_xy_m=(float(scenario.area[0]), float(scenario.area[1])),
         max_altitude_m=max(500.0, 2.0 * scenario.H),

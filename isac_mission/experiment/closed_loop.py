@@ -112,6 +112,7 @@ def run_closed_loop(
     belief = Gaussian(x=s.x0 + noise.initial_error, P=s.P0.copy())
     bound = Bound.from_covariance(s.P0.copy())
     uav_xy, eta, assoc = s.uav_start_xy.copy(), np.full(s.M, 1.0 / s.M), None
+    velocity = np.zeros((s.M, 2))
     rows: dict[str, list[object]] = {
         k: [] for k in ("est", "pcrb", "solve_s", "status", "uav_xy", "eta", "assoc")
     }
@@ -119,7 +120,9 @@ def run_closed_loop(
         pred = ekf_predict(belief, F, W)
         J_pred = predict_information(bound, F, W)
         prior = J_pred if s.bound_prior == "pcrb" else scaled_inverse(pred.P)
-        plan = plan_slot(SlotInput(uav_xy, eta, assoc, pred.x, prior), kit, method)
+        plan = plan_slot(SlotInput(uav_xy, eta, assoc, pred.x, prior, velocity), kit, method)
+        # The kinematic model flies each leg at constant velocity.
+        velocity = (plan.uav_xy_m - uav_xy) / s.dt
         uav_xy, eta, assoc = plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav
         # Measurements at the planned positions: noise from the true geometry; the filter and the
         # bound use the variances at the predicted state (the target's truth is not theirs).

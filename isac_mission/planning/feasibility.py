@@ -20,7 +20,8 @@ class SlotConstraints:
     """The data the constraints of one slot depend on.
 
     prev_xy [M, 2]: q_{n-1}; serving_bs_xy [M, 2]: w_{k_m} of the chosen association;
-    bs_xy [K, 2]; target_xy [2]: predicted target position (14j).
+    bs_xy [K, 2]; target_xy [2]: predicted target position (14j); ballistic_xy [M, 2] and
+    accel_radius_m: when set, the vehicle-dynamics limit ||q - ballistic|| <= radius.
     """
 
     prev_xy: FloatArray
@@ -28,6 +29,8 @@ class SlotConstraints:
     bs_xy: FloatArray
     target_xy: FloatArray
     scenario: Scenario
+    ballistic_xy: FloatArray | None = None
+    accel_radius_m: float = np.inf
 
     def full_rates(self, uav_xy: FloatArray) -> FloatArray:
         """R~ [..., M] of each UAV on its serving BS, bit/s."""
@@ -49,6 +52,9 @@ class SlotConstraints:
             "14h max speed": np.any(step > s.v_max * s.dt + tol_m, axis=1),
             "14j target distance": np.any(to_target < s.d_safe - tol_m, axis=1),
         }
+        if self.ballistic_xy is not None:
+            off = np.linalg.norm(q - self.ballistic_xy[None], axis=-1)
+            out["vehicle acceleration"] = np.any(off > self.accel_radius_m + tol_m, axis=1)
         if s.M > 1:
             iu = np.triu_indices(s.M, 1)
             gaps = np.linalg.norm(q[:, :, None, :] - q[:, None, :, :], axis=-1)[:, iu[0], iu[1]]

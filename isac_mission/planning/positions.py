@@ -42,12 +42,15 @@ class PositionSubproblem:
         self.control_bs = cp.Parameter((M, 2))
         self.target_normal = cp.Parameter((M, 2))
         self.target_rhs = cp.Parameter(M)
+        self.ballistic = cp.Parameter((M, 2))
+        self.accel_radius = cp.Parameter(M, nonneg=True)
         # Coordinates are centred on the UAVs' previous positions for solver conditioning.
         cons = [
             cp.norm(self.Q - self.serving, 2, axis=1) <= self.radius,
             cp.norm(self.Q - self.control_bs, 2, axis=1) <= max(s.d_th - SOLVER_MARGIN_M, 0.0),
             cp.norm(self.Q - self.prev, 2, axis=1) <= s.v_max * s.dt - SOLVER_MARGIN_M,
             cp.sum(cp.multiply(self.target_normal, self.Q), axis=1) >= self.target_rhs,
+            cp.norm(self.Q - self.ballistic, 2, axis=1) <= self.accel_radius,
         ]
         self.pairs = np.array(np.triu_indices(M, 1)).T  # [P, 2]
         if len(self.pairs):
@@ -83,6 +86,14 @@ class PositionSubproblem:
             np.linalg.norm(origin.prev_xy[:, None, :] - origin.bs_xy[None], axis=-1), axis=1
         )
         self.control_bs.value = origin.bs_xy[nearest] - c
+        if origin.ballistic_xy is None:  # inactive: the 14h disk already bounds the step
+            self.ballistic.value = origin.prev_xy - c
+            self.accel_radius.value = np.full(s.M, s.v_max * s.dt)
+        else:
+            self.ballistic.value = origin.ballistic_xy - c
+            self.accel_radius.value = np.full(
+                s.M, max(origin.accel_radius_m - SOLVER_MARGIN_M, 0.0)
+            )
         lin = lin_xy - c
         tgt = origin.target_xy - c
         ds2 = (s.d_safe + SOLVER_MARGIN_M) ** 2

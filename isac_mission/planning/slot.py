@@ -38,7 +38,8 @@ class SlotInput:
 
     prev_xy [M, 2]: where the UAVs are (q_{n-1}); prev_eta [M]: last slot's shares;
     prev_assoc [M] or None: last slot's BS per UAV; x_pred [4]: predicted target state;
-    J_pred [4, 4]: prior information of the bound at this slot.
+    J_pred [4, 4]: prior information of the bound at this slot; prev_velocity [M, 2] or None:
+    the vehicles' velocities now (used when planner.accel_limit_mps2 is set).
     """
 
     prev_xy: FloatArray
@@ -46,6 +47,7 @@ class SlotInput:
     prev_assoc: IntArray | None
     x_pred: FloatArray
     J_pred: FloatArray
+    prev_velocity: FloatArray | None = None
 
 
 class SolverKit:
@@ -119,7 +121,25 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
             inp.prev_xy, s.bs_xy, capacity=s.n_a, dH=s.dH, rho0=s.rho0, B=s.B, lp=kit.association
         )
     serving = s.bs_xy[assoc]
-    cons = SlotConstraints(inp.prev_xy, serving, s.bs_xy, inp.x_pred[:2], s)
+    ballistic = None
+    if cfg.accel_limit_mps2 is not None and inp.prev_velocity is not None:
+        # Where the vehicles coast to, pulled inside the 14h disk: a vehicle a little faster than
+        # the planner's V_max has to slow down anyway.
+        coast = inp.prev_velocity * s.dt
+        norm = np.linalg.norm(coast, axis=1, keepdims=True)
+        coast = coast * np.minimum(1.0, s.v_max * s.dt * (1 - 1e-9) / np.maximum(norm, 1e-12))
+        ballistic = inp.prev_xy + coast
+    cons = SlotConstraints(
+        inp.prev_xy,
+        serving,
+        s.bs_xy,
+        inp.x_pred[:2],
+        s,
+        ballistic_xy=ballistic,
+        accel_radius_m=(cfg.accel_limit_mps2 or 0.0) * s.dt**2 / 4
+        if ballistic is not None
+        else np.inf,
+    )
     moves = method not in ("sd",)
     step = s.v_max * s.dt if moves else 0.0
     comm = communication_optimal(inp.prev_xy, serving, max_step_m=step, dH=s.dH, rho0=s.rho0, B=s.B)
@@ -131,7 +151,10 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         return time.perf_counter() - t0
 
     def fallback(reason: str) -> SlotPlan:
-        xy = evade_target(comm.uav_xy, inp.prev_xy, inp.x_pred[:2], s.d_safe, step)
+        # Best effort: the link-optimal waypoints, or where the vehicles coast to when the
+        # planner respects their dynamics; either way away from the target first.
+        best = comm.uav_xy if ballistic is None else ballistic
+        xy = evade_target(best, inp.prev_xy, inp.x_pred[:2], s.d_safe, step)
         report = SolveReport("infeasible", reason, solve_s=elapsed())
         return _plan(xy, assoc, comm.eta, objective, report)
 
@@ -151,7 +174,8 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
             SolveReport(status, ", ".join(violated), solve_s=elapsed()),
         )
 
-    Q = inp.prev_xy
+    # Start where the vehicles can be: with a dynamics limit, where they coast to.
+    Q = inp.prev_xy if ballistic is None or not moves else ballistic
     if method == "aba":
         eta = np.full(s.M, 1.0 / s.M)
     else:

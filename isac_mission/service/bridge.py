@@ -356,6 +356,73 @@ class CarrotLeg:
         return self.start_xy_m + u * s, u * self.speed_mps
 
 
+@dataclass(frozen=True)
+class HermiteLeg:
+    """A setpoint on the cubic from (start_xy_m, start_v_mps) at `start_s` to (goal_xy_m,
+    goal_v_mps) at `end_s`, then resting at the goal (scenario plane, m, m/s, s).
+
+    Position and velocity are continuous across legs, so a vehicle with finite acceleration can
+    follow it; a constant-speed carrot jumps in velocity at every slot boundary, and a vehicle
+    limited to a few m/s^2 then trails the plan by metres.
+    """
+
+    start_xy_m: FloatArray
+    start_v_mps: FloatArray
+    goal_xy_m: FloatArray
+    goal_v_mps: FloatArray
+    start_s: float
+    end_s: float
+
+    def sample(self, t_s: float) -> tuple[FloatArray, FloatArray]:
+        """Setpoint position [2], m, and velocity [2], m/s, at time `t_s`."""
+        T = self.end_s - self.start_s
+        if T <= 0.0 or t_s >= self.end_s:
+            return self.goal_xy_m.copy(), np.zeros(2)
+        s = max(0.0, t_s - self.start_s) / T
+        p0, p1 = self.start_xy_m, self.goal_xy_m
+        m0, m1 = self.start_v_mps * T, self.goal_v_mps * T
+        h00, h10, h01, h11 = (
+            2 * s**3 - 3 * s**2 + 1,
+            s**3 - 2 * s**2 + s,
+            -2 * s**3 + 3 * s**2,
+            s**3 - s**2,
+        )
+        d00, d10, d01, d11 = (
+            6 * s**2 - 6 * s,
+            3 * s**2 - 4 * s + 1,
+            -6 * s**2 + 6 * s,
+            3 * s**2 - 2 * s,
+        )
+        xy = h00 * p0 + h10 * m0 + h01 * p1 + h11 * m1
+        v = (d00 * p0 + d10 * m0 + d01 * p1 + d11 * m1) / T
+        return np.asarray(xy), np.asarray(v)
+
+
+def hermite_leg(
+    from_xy_m: FloatArray,
+    from_v_mps: FloatArray,
+    goal_xy_m: FloatArray,
+    now_s: float,
+    arrive_by_s: float,
+    max_speed_mps: float,
+) -> HermiteLeg:
+    """The smooth leg to `goal_xy_m` by `arrive_by_s`, ending at the leg's mean velocity (the
+    best guess of the next leg's), capped at `max_speed_mps`."""
+    T = arrive_by_s - now_s
+    mean_v = (np.asarray(goal_xy_m) - np.asarray(from_xy_m)) / T
+    speed = float(np.hypot(*mean_v))
+    if speed > max_speed_mps:
+        mean_v = mean_v * (max_speed_mps / speed)
+    return HermiteLeg(
+        start_xy_m=np.asarray(from_xy_m, dtype=float),
+        start_v_mps=np.asarray(from_v_mps, dtype=float),
+        goal_xy_m=np.asarray(goal_xy_m, dtype=float),
+        goal_v_mps=mean_v,
+        start_s=float(now_s),
+        end_s=float(arrive_by_s),
+    )
+
+
 def plan_leg(
     from_xy_m: FloatArray | Sequence[float],
     goal_xy_m: FloatArray | Sequence[float],
@@ -398,6 +465,8 @@ class BridgeSettings:
             held for one period (half a period late on average) and reaches the vehicle after
             the link's latency, so the vehicle would otherwise trail the plan by v x delay.
         velocity_feed_forward: Send the carrot's velocity (type_mask 0xDC0) or position only.
+        smooth_legs: Fly planned legs (with an arrival time) on a cubic that keeps position and
+            velocity continuous (HermiteLeg) instead of a constant-speed carrot.
         yaw_rad: Heading to hold (0 = north); None = yaw ignored (the vehicle keeps its own).
         telemetry_rate_hz: Telemetry publication rate (simulation Hz).
         heartbeat_rate_hz: GCS HEARTBEAT rate (simulation Hz).
@@ -422,6 +491,7 @@ class BridgeSettings:
     setpoint_rate_hz: float = 20.0
     setpoint_lead_s: float = 0.05
     velocity_feed_forward: bool = True
+    smooth_legs: bool = True
     yaw_rad: float | None = None
     telemetry_rate_hz: float = 10.0
     heartbeat_rate_hz: float = 1.0
@@ -546,7 +616,7 @@ class VehicleBridge:
         """The latest plan slot fed to this bridge (-1: none)."""
         self._origin = np.array(settings.origin_xy_m, dtype=float)
         self._altitude_m: float | None = None
-        self._leg: CarrotLeg | None = None
+        self._leg: CarrotLeg | HermiteLeg | None = None
         self._goal: _Goal | None = None
         self._streaming = False
         self._stream_since_s = 0.0
@@ -804,10 +874,18 @@ class VehicleBridge:
 
     def _set_goal(self, xy_m: FloatArray, arrive_by_s: float | None, max_speed_mps: float) -> None:
         now = self._carrot_time_s()
-        here = self._leg.sample(now)[0] if self._leg is not None else self.vehicle_xy()
+        here_v = np.zeros(2)
+        here: FloatArray | None = None
+        if self._leg is not None:
+            here, here_v = self._leg.sample(now)
+        else:
+            here = self.vehicle_xy()
         if here is None:
             here = xy_m
-        self._leg = plan_leg(here, xy_m, now, arrive_by_s, max_speed_mps)
+        if self.settings.smooth_legs and arrive_by_s is not None and arrive_by_s - now > 0.05:
+            self._leg = hermite_leg(here, here_v, xy_m, now, arrive_by_s, max_speed_mps)
+        else:
+            self._leg = plan_leg(here, xy_m, now, arrive_by_s, max_speed_mps)
         self._goal = _Goal(xy_m.copy(), arrive_by_s, max_speed_mps)
 
     def _reanchor(self, status: VehicleStatus) -> None:

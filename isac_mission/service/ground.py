@@ -52,7 +52,9 @@ class GroundSettings:
     """method: planning strategy; trace_path: JSON Lines trace (None: no trace); resume: continue
     an existing trace from its last complete slot; detection_wait_s: simulation seconds after a
     slot boundary before a partial update; detection_wall_wait_s: the same bound in wall seconds,
-    counted from the first detection of the slot (for a held or stalled clock)."""
+    counted from the first detection of the slot (for a held or stalled clock);
+    telemetry_max_age_s: older telemetry is not used as a UAV position; trace_config: entries
+    that override or extend the trace's config line."""
 
     method: Method = "proposed"
     trace_path: Path | None = None
@@ -60,6 +62,7 @@ class GroundSettings:
     detection_wait_s: float = 0.5
     detection_wall_wait_s: float = 2.0
     telemetry_max_age_s: float = 1.0
+    trace_config: dict[str, object] = field(default_factory=dict)
 
 
 @dataclass
@@ -129,7 +132,11 @@ class GroundLoop:
                 )
                 log.info("resuming after slot %d from %s", self.state.slot, path)
             return
-        config = self.s.trace_config() | {"seed": self.s.seed, "method": self.settings.method}
+        config = (
+            self.s.trace_config()
+            | {"seed": self.s.seed, "method": self.settings.method}
+            | self.settings.trace_config
+        )
         self.writer = TraceWriter(path, config, fsync=True)
 
     async def run(self, stop: asyncio.Event) -> GroundReport:
@@ -321,8 +328,16 @@ class GroundLoop:
             links = {m: t.link for m, t in self.telemetry.items()}
             self.on_slot(SlotEvent(record, err, latency, links))
 
+    def _uav_velocities(self) -> FloatArray:
+        """[M, 2] velocities from fresh telemetry (zero where there is none)."""
+        v = np.zeros((self.s.M, 2))
+        for m, tel in self.telemetry.items():
+            if tel.link == "ok" and self.t_s - tel.t_s <= self.settings.telemetry_max_age_s:
+                v[m] = tel.velocity_xy_mps
+        return v
+
     def _plan_and_publish(self, uav_xy: FloatArray, latency_from: float | None) -> float:
-        pending = self.state.plan_next(uav_xy)
+        pending = self.state.plan_next(uav_xy, self._uav_velocities())
         self.bus.publish(self.keys.plan, encode_plan(PlanMsg(pending.slot, self.t_s, pending.plan)))
         if pending.plan.report.status != "ok":
             log.warning("slot %d: %s", pending.slot, pending.plan.report.reason)

@@ -35,7 +35,13 @@ class LiveOptions:
     method: planning strategy; seed: world noise seed (None: the scenario's); out_dir: trace and
     plots; zenoh_endpoint: where the ground loop listens (the world and observers connect);
     mavlink_base_port / gcs_base_port: vehicle m's offboard / ground-station ports (base + m);
-    resume: continue an existing trace (serve)."""
+    resume: continue an existing trace (serve); plan_speed_fraction: the planner's speed budget
+    as a fraction of V_max, the headroom a vehicle with finite acceleration needs to be at each
+    waypoint by the slot's end; plan_rate_factor, plan_safety_margin_m: the planner asks for
+    R_th x factor and D_s + margin, so that a vehicle a few metres off its waypoint still meets
+    14a, 14i and 14j; plan_accel_fraction: the planner keeps each waypoint reachable with this
+    fraction of the vehicles' acceleration limit a_max (0: off, the paper's kinematics)
+    (docs/model.md, "Live service")."""
 
     speed: float = 1.0
     lockstep: bool = False
@@ -47,6 +53,10 @@ class LiveOptions:
     mavlink_base_port: int = 14540
     gcs_base_port: int = 14550
     resume: bool = False
+    plan_speed_fraction: float = 0.9
+    plan_rate_factor: float = 1.05
+    plan_safety_margin_m: float = 10.0
+    plan_accel_fraction: float = 0.8
 
     @property
     def trace_path(self) -> Path:
@@ -73,14 +83,37 @@ async def _fly_mission(
 ) -> LiveResult:
     """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere."""
     say = on_status or (lambda _msg: None)
-    kit = SolverKit(s)
+    planning = s.with_changes(
+        v_max=s.v_max * opts.plan_speed_fraction,
+        r_th=s.r_th * opts.plan_rate_factor,
+        d_safe=s.d_safe + opts.plan_safety_margin_m,
+        planner=s.planner.model_copy(
+            update={"accel_limit_mps2": s.a_max * opts.plan_accel_fraction}
+            if opts.plan_accel_fraction > 0
+            else {}
+        ),
+    )
+    kit = SolverKit(planning)
     kit.warm_up()
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(s, time_source, bus, base_port=opts.mavlink_base_port)
     ground = GroundLoop(
-        s,
+        planning,
         bus,
-        GroundSettings(method=opts.method, trace_path=opts.trace_path, resume=opts.resume),
+        GroundSettings(
+            method=opts.method,
+            trace_path=opts.trace_path,
+            resume=opts.resume,
+            # The trace states the vehicles' real limit; the planner's budget goes beside it.
+            trace_config={
+                "v_max": s.v_max,
+                "r_th": s.r_th,
+                "d_safe": s.d_safe,
+                "plan_v_max": planning.v_max,
+                "plan_r_th": planning.r_th,
+                "plan_d_safe": planning.d_safe,
+            },
+        ),
         kit,
         on_slot,
     )
@@ -106,7 +139,9 @@ async def _fly_mission(
                     await task
             say("landing")
             try:
-                await asyncio.wait_for(fleet.land_all(), timeout=120.0)
+                # Descent at about 1 m/s of simulation time, plus margin, in wall seconds.
+                land_budget_s = 60.0 + 3.0 * s.H / max(opts.speed, 1e-3)
+                await asyncio.wait_for(fleet.land_all(), timeout=land_budget_s)
             except (IsacError, TimeoutError) as err:
                 log.error("landing: %s", err)
                 result.report.last_error = f"landing: {err}"

@@ -60,13 +60,16 @@ class MissionState:
     def done(self) -> bool:
         return self.slot >= self.scenario.N
 
-    def plan_next(self, uav_xy: FloatArray) -> PendingSlot:
-        """Predict slot n+1 and plan it from the UAVs' current positions uav_xy [M, 2]."""
+    def plan_next(self, uav_xy: FloatArray, uav_v: FloatArray | None = None) -> PendingSlot:
+        """Predict slot n+1 and plan it from the UAVs' current positions uav_xy [M, 2] (and
+        velocities uav_v [M, 2], for a dynamics-aware planner)."""
         prediction = ekf_predict(self.belief, self.F, self.W)
         J_pred = predict_information(self.bound, self.F, self.W)
         prior = J_pred if self.scenario.bound_prior == "pcrb" else scaled_inverse(prediction.P)
         plan = plan_slot(
-            SlotInput(np.asarray(uav_xy, dtype=float), self.eta, self.assoc, prediction.x, prior),
+            SlotInput(
+                np.asarray(uav_xy, dtype=float), self.eta, self.assoc, prediction.x, prior, uav_v
+            ),
             self.kit,
             self.method,
         )

@@ -190,3 +190,28 @@ def test_target_closing_in_gives_evasive_fallback(paper: Scenario) -> None:
     assert "14j" in plan.report.reason
     moved = plan.uav_xy_m[0] - s.uav_start_xy[0]
     np.testing.assert_allclose(moved, [-s.v_max * s.dt, 0.0], atol=1e-6)
+
+
+def test_dynamics_aware_plan_stays_reachable_from_the_coasting_point(paper: Scenario) -> None:
+    """With planner.accel_limit_mps2 = a, each waypoint is within a dt^2 / 4 of q + v dt (the
+    reach of a smooth leg), and still satisfies 14a-14j; without it the same slot moves freely."""
+    a = 8.0
+    s = paper.with_changes(planner=paper.planner.model_copy(update={"accel_limit_mps2": a}))
+    v = np.array([[20.0, 0.0], [0.0, 15.0], [-10.0, -10.0]])
+    inp = SlotInput(
+        s.uav_start_xy,
+        np.full(3, 1 / 3),
+        None,
+        s.x0 + np.array([30.0, 0.0, 0.0, 0.0]),
+        _prior(s),
+        v,
+    )
+    plan = plan_slot(inp, SolverKit(s), "proposed")
+    assert plan.report.status == "ok", plan.report.reason
+    off = np.linalg.norm(plan.uav_xy_m - (s.uav_start_xy + v * s.dt), axis=1)
+    assert np.all(off <= a * s.dt**2 / 4 + 1e-9)
+    assert (
+        _independent_violations(s, inp, plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav) == []
+    )
+    free = plan_slot(inp, _kit(paper), "proposed")
+    assert np.max(np.linalg.norm(free.uav_xy_m - (s.uav_start_xy + v * s.dt), axis=1)) > a / 4

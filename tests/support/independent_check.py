@@ -180,7 +180,8 @@ def _check_slot(
         k_m = bs_of[m]
         if k_m is None or not share_ok[m]:
             continue
-        rate = uplink_rate_bps(float(eta[m]), _dist(q[m], lim.bs_xy[k_m]), cfg)
+        # The position tolerance applies here too: the rate tol_m metres closer to the BS.
+        rate = uplink_rate_bps(float(eta[m]), max(_dist(q[m], lim.bs_xy[k_m]) - tol_m, 0.0), cfg)
         if not rate >= lim.r_th * (1.0 - rate_rtol):
             flag("14a", (m,), rate, lim.r_th, f"rate to BS {k_m} below R_th (bit/s)")
     # 14b: control range of the nearest BS
