@@ -73,6 +73,22 @@ class LiveResult:
     fleet_counters: dict[str, int] = field(default_factory=dict)
 
 
+def planning_scenario(s: Scenario, opts: LiveOptions) -> Scenario:
+    """The scenario the live planner plans with: V_max, R_th and D_s with the live margins, and
+    the vehicles' acceleration limit (docs/model.md, "Live service"). `simulate` on this scenario
+    is the offline twin of a live run."""
+    return s.with_changes(
+        v_max=s.v_max * opts.plan_speed_fraction,
+        r_th=s.r_th * opts.plan_rate_factor,
+        d_safe=s.d_safe + opts.plan_safety_margin_m,
+        planner=s.planner.model_copy(
+            update={"accel_limit_mps2": s.a_max * opts.plan_accel_fraction}
+            if opts.plan_accel_fraction > 0
+            else {}
+        ),
+    )
+
+
 async def _fly_mission(
     s: Scenario,
     opts: LiveOptions,
@@ -83,16 +99,7 @@ async def _fly_mission(
 ) -> LiveResult:
     """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere."""
     say = on_status or (lambda _msg: None)
-    planning = s.with_changes(
-        v_max=s.v_max * opts.plan_speed_fraction,
-        r_th=s.r_th * opts.plan_rate_factor,
-        d_safe=s.d_safe + opts.plan_safety_margin_m,
-        planner=s.planner.model_copy(
-            update={"accel_limit_mps2": s.a_max * opts.plan_accel_fraction}
-            if opts.plan_accel_fraction > 0
-            else {}
-        ),
-    )
+    planning = planning_scenario(s, opts)
     kit = SolverKit(planning)
     kit.warm_up()
     time_source = ClockSimTime()
@@ -149,6 +156,7 @@ async def _fly_mission(
             result.fleet_counters = {
                 "plans applied": c.plans_applied,
                 "plans invalid": c.plans_invalid,
+                "vehicles landed": sum(b.phase == "landed" for b in fleet.bridges),
             }
     return result
 

@@ -380,7 +380,8 @@ class MavlinkLink(asyncio.DatagramProtocol):
         system_id: The vehicle's system id (m + 1); None: the first system heard.
         vehicle_component: Component whose HEARTBEAT and state we follow (1: the autopilot).
         clock: Time source for heartbeat ages and sample times, s (default: monotonic wall).
-        lost_after_s: The link is lost after this long without a HEARTBEAT (clock seconds).
+        lost_after_s: The link is lost after this long without a HEARTBEAT (clock seconds)...
+        lost_min_wall_s: ... and at least this long in wall seconds.
         own_system_id / own_component_id: Our MAVLink address (a GCS by default).
         name: For log messages.
 
@@ -395,6 +396,7 @@ class MavlinkLink(asyncio.DatagramProtocol):
         vehicle_component: int = AUTOPILOT_COMPONENT_ID,
         clock: Callable[[], float] = time.monotonic,
         lost_after_s: float = 3.0,
+        lost_min_wall_s: float = 1.0,
         own_system_id: int = GCS_SYSTEM_ID,
         own_component_id: int = GCS_COMPONENT_ID,
         name: str = "",
@@ -406,6 +408,7 @@ class MavlinkLink(asyncio.DatagramProtocol):
         self.port = port
         self.name = name or f"mavlink:{port}"
         self.lost_after_s = float(lost_after_s)
+        self.lost_min_wall_s = float(lost_min_wall_s)
         self._clock = clock
         self._expected_system = system_id
         self._vehicle_component = vehicle_component
@@ -429,6 +432,7 @@ class MavlinkLink(asyncio.DatagramProtocol):
         self._noted: set[str] = set()
 
         self._heartbeat_s: float | None = None
+        self._heartbeat_wall_s = 0.0
         self._custom_mode = 0
         self._mode = "unknown"
         self._armed = False
@@ -620,6 +624,7 @@ class MavlinkLink(asyncio.DatagramProtocol):
             return
         was_lost = self.lost
         self._heartbeat_s = self._clock()
+        self._heartbeat_wall_s = time.monotonic()
         self._custom_mode = int(msg.custom_mode)
         base_mode = int(msg.base_mode)
         self._armed = bool(base_mode & mavlink2.MAV_MODE_FLAG_SAFETY_ARMED)
@@ -679,9 +684,16 @@ class MavlinkLink(asyncio.DatagramProtocol):
 
     @property
     def lost(self) -> bool:
-        """No HEARTBEAT for `lost_after_s` clock seconds (or never heard one)."""
+        """No HEARTBEAT for `lost_after_s` clock seconds and for `lost_min_wall_s` wall seconds
+        (or never heard one). The wall-clock floor keeps a simulation run many times faster
+        than real time from declaring a link lost over a few hundred milliseconds of CPU load."""
         hb = self._heartbeat_s
-        return hb is None or self._clock() - hb > self.lost_after_s
+        if hb is None:
+            return True
+        return (
+            self._clock() - hb > self.lost_after_s
+            and time.monotonic() - self._heartbeat_wall_s > self.lost_min_wall_s
+        )
 
     @property
     def target(self) -> Target:

@@ -1,0 +1,258 @@
+"""The live system end to end: real Zenoh sessions, real MAVLink over loopback UDP, the simulated
+PX4-like vehicles, and the real `mavsdk` package as a ground-station observer."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from isac_mission.config import Scenario
+from isac_mission.experiment.montecarlo import run_monte_carlo
+from isac_mission.experiment.trace import read_trace
+from isac_mission.service.bus import tcp_loopback
+from isac_mission.service.live import LiveOptions, planning_scenario, run_embedded, summarize_live
+from tests.support.independent_check import check_constraints, compare_pcrb
+from tests.support.ports import free_port_block
+
+ROOT = Path(__file__).resolve().parents[2]
+LIVE_TOL_M = 1.0
+"""Tolerance of the constraint re-check on telemetry positions (the issue allows at most 1 m)."""
+
+
+def _ports(m: int) -> tuple[str, int, int]:
+    return (
+        tcp_loopback(free_port_block(1, socket.SOCK_STREAM)),
+        free_port_block(m),
+        free_port_block(m),
+    )
+
+
+def _cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "isac_mission.service.cli", *args]
+
+
+def test_run_cli_flies_all_60_slots_within_the_constraints(tmp_path: Path) -> None:
+    endpoint, mav, gcs = _ports(3)
+    out = tmp_path / "run"
+    proc = subprocess.run(
+        _cli(
+            "run",
+            "config/paper.yaml",
+            "--speed",
+            "10",
+            "--out",
+            str(out),
+            "--zenoh-listen",
+            endpoint,
+            "--mavlink-base-port",
+            str(mav),
+            "--gcs-base-port",
+            str(gcs),
+        ),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+        env=os.environ | {"COLUMNS": "160"},
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "live mission summary" in proc.stdout and "60/60" in proc.stdout
+    trace = read_trace(out / "trace_proposed.jsonl")
+    assert [r.slot for r in trace.slots] == list(range(1, 61))
+    assert check_constraints(trace, tol_m=LIVE_TOL_M) == []
+    assert compare_pcrb(trace) == []
+    for png in ("fig2a_trajectories.png", "fig2b_bandwidth.png", "fig3_performance.png"):
+        assert (out / png).stat().st_size > 10_000
+
+
+async def test_live_location_rmse_is_close_to_simulate_over_five_seeds(
+    paper: Scenario, tmp_path: Path
+) -> None:
+    """Five live missions (lockstep, fast) against `simulate`'s proposed method on the same seeds."""
+    seeds = range(1, 6)
+    live_sq: list[float] = []
+    for seed in seeds:
+        endpoint, mav, gcs = _ports(paper.M)
+        opts = LiveOptions(
+            speed=25.0,
+            lockstep=True,
+            seed=seed,
+            out_dir=tmp_path / f"s{seed}",
+            zenoh_endpoint=endpoint,
+            mavlink_base_port=mav,
+            gcs_base_port=gcs,
+        )
+        result = await asyncio.wait_for(run_embedded(paper, opts, asyncio.Event()), timeout=300)
+        summary = summarize_live(result)
+        assert summary.slots == paper.N
+        live_sq.append(summary.loc_rmse**2)
+    live = float(np.sqrt(np.mean(live_sq)))
+
+    def offline_rmse(s: Scenario) -> float:
+        runs = run_monte_carlo(s, ["proposed"], len(seeds), seed=1)["proposed"]
+        err = np.array([r.est - r.true for r in runs])
+        return float(np.sqrt(np.mean(np.sum(err[..., :2] ** 2, axis=-1))))
+
+    # The offline twin plans as the live service does (margins, vehicle acceleration).
+    twin = offline_rmse(planning_scenario(paper, LiveOptions()))
+    paper_model = offline_rmse(paper)
+    print(
+        f"location RMSE over seeds 1..5: live {live:.3f} m, simulate (live planner) "
+        f"{twin:.3f} m, simulate (paper model) {paper_model:.3f} m"
+    )
+    assert abs(live - twin) <= 0.3 * twin
+
+
+def test_serve_and_sim_as_two_processes_complete_a_mission(tmp_path: Path) -> None:
+    cfg = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
+    cfg["timing"]["duration_s"] = 15
+    config = tmp_path / "short.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    endpoint, mav, gcs = _ports(3)
+    out = tmp_path / "serve"
+    serve = subprocess.Popen(
+        _cli(
+            "serve",
+            str(config),
+            "--out",
+            str(out),
+            "--zenoh-listen",
+            endpoint,
+            "--mavlink-base-port",
+            str(mav),
+        ),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=os.environ | {"COLUMNS": "160"},
+    )
+    sim = subprocess.Popen(
+        _cli(
+            "sim",
+            str(config),
+            "--speed",
+            "10",
+            "--start",
+            "offboard",
+            "--zenoh-connect",
+            endpoint,
+            "--mavlink-base-port",
+            str(mav),
+            "--gcs-base-port",
+            str(gcs),
+        ),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        serve_out, serve_err = serve.communicate(timeout=300)
+        assert serve.returncode == 0, serve_err[-3000:]
+        sim.send_signal(signal.SIGINT)
+        _, sim_err = sim.communicate(timeout=60)
+        assert sim.returncode == 0, sim_err[-3000:]
+    finally:
+        for p in (serve, sim):
+            if p.poll() is None:
+                p.kill()
+    assert "15/15" in serve_out
+    assert re.search(r"vehicles landed\s*│\s*3\s*│", serve_out), serve_out[-2000:]
+    trace = read_trace(out / "trace_proposed.jsonl")
+    assert [r.slot for r in trace.slots] == list(range(1, 16))
+    assert check_constraints(trace, tol_m=LIVE_TOL_M) == []
+
+
+async def test_ground_station_observer_sees_offboard_flight_along_the_plan(tmp_path: Path) -> None:
+    """A MAVSDK program on vehicle 0's ground-station link watches it fly the planned waypoints
+    in OFFBOARD while the service (`isac-mission run`, its own process) flies the mission.
+
+    The service runs as its own process; this process is the ground station."""
+    mavsdk = pytest.importorskip("mavsdk.asyncio")
+    from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
+
+    cfg = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
+    cfg["timing"]["duration_s"] = 12
+    config = tmp_path / "short.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    endpoint, mav, gcs = _ports(3)
+    out = tmp_path / "run"
+    config_gs = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
+    observer = mavsdk.Mavsdk(config_gs)
+    await observer.add_any_connection(f"udpin://127.0.0.1:{gcs}")
+    service = subprocess.Popen(
+        _cli(
+            "run",
+            str(config),
+            "--speed",
+            "5",
+            "--out",
+            str(out),
+            "--zenoh-listen",
+            endpoint,
+            "--mavlink-base-port",
+            str(mav),
+            "--gcs-base-port",
+            str(gcs),
+        ),
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    seen_modes: set[object] = set()
+    positions: list[tuple[float, float]] = []
+    try:
+        async with asyncio.timeout(240):
+            system = None
+            while system is None:
+                for candidate in await observer.get_systems():
+                    if await candidate.has_autopilot():
+                        system = candidate
+                await asyncio.sleep(0.05)
+            telemetry = TelemetryAsync(system)
+            state: dict[str, object] = {"mode": None}
+
+            async def follow_modes() -> None:
+                async for mode in telemetry.subscribe_flight_mode():
+                    state["mode"] = mode
+                    seen_modes.add(mode)
+
+            async def follow_positions() -> None:
+                async for p in telemetry.subscribe_position_velocity_ned():
+                    if state["mode"] == FlightMode.OFFBOARD:
+                        positions.append((p.position.east_m, p.position.north_m))
+
+            readers = [asyncio.create_task(follow_modes()), asyncio.create_task(follow_positions())]
+            while service.poll() is None:
+                await asyncio.sleep(0.2)
+            for task in readers:
+                task.cancel()
+        assert service.wait(timeout=60) == 0, (
+            service.stderr.read()[-3000:] if service.stderr else ""
+        )
+    finally:
+        if service.poll() is None:
+            service.kill()
+    assert FlightMode.OFFBOARD in seen_modes
+    assert len(positions) > 20
+    # Each planned waypoint of vehicle 0 was passed close by, as the ground station saw it
+    # (scenario x = east, y = north; the simulated vehicles' local origin is the scenario's).
+    seen = np.array(positions)
+    trace = read_trace(out / "trace_proposed.jsonl")
+    assert len(trace.slots) == 12
+    for record in trace.slots:
+        wp = np.asarray(record.plan_xy)[0]
+        assert np.min(np.linalg.norm(seen - wp, axis=1)) < 8.0, f"slot {record.slot}"
