@@ -396,7 +396,7 @@ class MavlinkLink(asyncio.DatagramProtocol):
         vehicle_component: int = AUTOPILOT_COMPONENT_ID,
         clock: Callable[[], float] = time.monotonic,
         lost_after_s: float = 3.0,
-        lost_min_wall_s: float = 1.0,
+        lost_min_wall_s: float = 2.0,
         own_system_id: int = GCS_SYSTEM_ID,
         own_component_id: int = GCS_COMPONENT_ID,
         name: str = "",

@@ -240,7 +240,9 @@ async def test_telemetry_on_zenoh_matches_the_vehicle_in_the_scenario_frame(
     origin = (100.0, 50.0)  # the vehicle's local NED origin in the scenario plane
     spawn = (130.0, 90.0)  # local NED: north 40, east 30
     r = rig([spawn], local_origin_xy_m=origin)
-    async with r.bridge(origin_xy_m=origin) as bridge, hub.subscribe(KEYS.telemetry(0)) as sub:
+    # The constant-speed carrot (not the smooth legs), so that the cruise velocity is known.
+    bridge_cm = r.bridge(origin_xy_m=origin, smooth_legs=False)
+    async with bridge_cm as bridge, hub.subscribe(KEYS.telemetry(0)) as sub:
         await asyncio.wait_for(bridge.prepare(spawn, ALTITUDE_M), TIMEOUT_S)
 
         # Hovering: position, altitude and state agree with the vehicle's own.

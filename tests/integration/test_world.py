@@ -131,7 +131,8 @@ async def running_world(s: Scenario, **opts: object) -> AsyncIterator[Rig]:
 
 async def test_world_publishes_clock_truth_and_detections_from_the_vehicles_positions() -> None:
     s = scenario(3)
-    async with running_world(s) as rig:
+    # initial_error=False: the target starts exactly at x0, as the assertions below expect.
+    async with running_world(s, initial_error=False) as rig:
         got: dict[type, list[AnyMsg]] = {ClockMsg: [], TruthMsg: [], DetectionMsg: []}
         while len(got[TruthMsg]) < 3 or len(got[DetectionMsg]) < 9:
             msg = await rig.next_msg()

@@ -98,7 +98,10 @@ class RecordingTransport(asyncio.DatagramTransport):
 
 
 def make_link(clock: FakeClock | None = None) -> tuple[MavlinkLink, RecordingTransport]:
-    link = MavlinkLink(0, system_id=3, clock=clock or FakeClock(), lost_after_s=3.0)
+    # lost_min_wall_s=0: judge link loss on the fake clock alone.
+    link = MavlinkLink(
+        0, system_id=3, clock=clock or FakeClock(), lost_after_s=3.0, lost_min_wall_s=0.0
+    )
     transport = RecordingTransport()
     link.connection_made(transport)
     return link, transport

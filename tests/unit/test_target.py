@@ -111,3 +111,21 @@ def test_scripted_target_loops_back_to_its_first_waypoint() -> None:
     t = ScriptedTarget([[0.0, 0.0], [30.0, 0.0]], speed_mps=10.0, dt_s=1.0, loop=True)
     np.testing.assert_allclose(t.state_at(4.0), [20, 0, -10, 0])
     np.testing.assert_allclose(t.state_at(6.0)[:2], [0, 0], atol=1e-9)
+
+
+def test_world_target_starts_at_a_seeded_draw_from_p0_around_the_cue() -> None:
+    """The configured x0 is the tracker's cue; the true start is x0 + e, e ~ N(0, P0), by seed."""
+    from isac_mission.config import parse_scenario
+    from sim.world import WorldOptions, make_target
+
+    s = parse_scenario({})
+    starts = np.array(
+        [make_target(s, WorldOptions(), np.random.default_rng(k)).state for k in range(400)]
+    )
+    again = make_target(s, WorldOptions(), np.random.default_rng(0)).state
+    np.testing.assert_array_equal(again, starts[0])
+    err = starts - s.x0
+    # Sample covariance of 400 draws within a few standard errors of P0's diagonal.
+    np.testing.assert_allclose(err.var(axis=0), np.diag(s.P0), rtol=0.25)
+    exact = make_target(s, WorldOptions(initial_error=False), np.random.default_rng(0)).state
+    np.testing.assert_array_equal(exact, s.x0)
