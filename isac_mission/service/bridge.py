@@ -573,6 +573,27 @@ class _Goal:
     max_speed_mps: float
 
 
+async def _open_bus_and_clock(
+    bus: ZenohBus | None, bus_settings: BusSettings | None, time: SimTime, keys: Keys
+) -> tuple[ZenohBus, bool]:
+    """The given bus, or a new one; starts a ClockSimTime's subscription if it is not running.
+    Returns (bus, whether this call started the clock)."""
+    if bus is None:
+        bus = await ZenohBus.open_async(bus_settings)
+    if isinstance(time, ClockSimTime) and not time.running:
+        time.start(bus, keys)
+        return bus, True
+    return bus, False
+
+
+async def _close_bus_and_clock(own_bus: ZenohBus | None, started_clock: SimTime | None) -> None:
+    """Undo `_open_bus_and_clock`: stop the clock it started, close the bus it opened."""
+    if isinstance(started_clock, ClockSimTime):
+        await started_clock.stop()
+    if own_bus is not None:
+        own_bus.close()
+
+
 class VehicleBridge:
     """One vehicle's MAVLink bridge (see the module docstring).
 
@@ -641,11 +662,10 @@ class VehicleBridge:
         if self._tasks:
             return
         try:
-            if self._bus is None:
-                self._bus = await ZenohBus.open_async(self._bus_settings)
-            if isinstance(self.time, ClockSimTime) and not self.time.running:
-                self.time.start(self._bus, self.keys)
-                self._started_clock = True
+            self._bus, started = await _open_bus_and_clock(
+                self._bus, self._bus_settings, self.time, self.keys
+            )
+            self._started_clock = self._started_clock or started
             await self.link.open()
         except BaseException:
             await self.stop()
@@ -669,11 +689,11 @@ class VehicleBridge:
             with contextlib.suppress(asyncio.CancelledError):
                 await task
         self.link.close()
-        if self._started_clock and isinstance(self.time, ClockSimTime):
-            await self.time.stop()
-            self._started_clock = False
-        if self._own_bus and self._bus is not None:
-            self._bus.close()
+        await _close_bus_and_clock(
+            self._bus if self._own_bus else None, self.time if self._started_clock else None
+        )
+        self._started_clock = False
+        if self._own_bus:
             self._bus = None
 
     async def __aenter__(self) -> VehicleBridge:
@@ -1176,11 +1196,10 @@ class BridgeFleet:
         if self.bridges:
             return
         try:
-            if self._bus is None:
-                self._bus = await ZenohBus.open_async(self._bus_settings)
-            if isinstance(self.time, ClockSimTime) and not self.time.running:
-                self.time.start(self._bus, self.keys)
-                self._started_clock = True
+            self._bus, started = await _open_bus_and_clock(
+                self._bus, self._bus_settings, self.time, self.keys
+            )
+            self._started_clock = self._started_clock or started
             for s in self._settings:
                 bridge = VehicleBridge(s, self.time, self.keys, self._bus)
                 self.bridges.append(bridge)
@@ -1194,11 +1213,11 @@ class BridgeFleet:
         bridges, self.bridges = self.bridges, []
         for bridge in bridges:
             await bridge.stop()
-        if self._started_clock and isinstance(self.time, ClockSimTime):
-            await self.time.stop()
-            self._started_clock = False
-        if self._own_bus and self._bus is not None:
-            self._bus.close()
+        await _close_bus_and_clock(
+            self._bus if self._own_bus else None, self.time if self._started_clock else None
+        )
+        self._started_clock = False
+        if self._own_bus:
             self._bus = None
 
     async def __aenter__(self) -> BridgeFleet:
