@@ -256,3 +256,81 @@ async def test_ground_station_observer_sees_offboard_flight_along_the_plan(tmp_p
     for record in trace.slots:
         wp = np.asarray(record.plan_xy)[0]
         assert np.min(np.linalg.norm(seen - wp, axis=1)) < 8.0, f"slot {record.slot}"
+
+
+def _start_run(tmp_path: Path, out: Path) -> subprocess.Popen[str]:
+    endpoint, mav, gcs = _ports(3)
+    return subprocess.Popen(
+        _cli(
+            "run",
+            "config/paper.yaml",
+            "--speed",
+            "5",
+            "--out",
+            str(out),
+            "--zenoh-listen",
+            endpoint,
+            "--mavlink-base-port",
+            str(mav),
+            "--gcs-base-port",
+            str(gcs),
+        ),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _wait_for_slots(
+    trace_path: Path, n: int, proc: subprocess.Popen[str], timeout_s: float
+) -> None:
+    """Wait (polling the file, with a generous bound) until the trace holds n complete slots."""
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        if trace_path.exists() and len(read_trace(trace_path).slots) >= n:
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"fewer than {n} slots in {trace_path} after {timeout_s} s")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_mid_mission_lands_flushes_and_exits_zero(
+    tmp_path: Path, sig: signal.Signals
+) -> None:
+    out = tmp_path / "run"
+    proc = _start_run(tmp_path, out)
+    trace_path = out / "trace_proposed.jsonl"
+    try:
+        _wait_for_slots(trace_path, 3, proc, timeout_s=180)
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr[-3000:]
+    assert re.search(r"vehicles landed\s*│\s*3\s*│", stdout), stdout[-2000:]
+    trace = read_trace(trace_path)
+    assert not trace.truncated
+    assert len(trace.slots) >= 3
+    assert [r.slot for r in trace.slots] == list(range(1, len(trace.slots) + 1))
+
+
+def test_killed_run_leaves_every_completed_slot_readable(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    proc = _start_run(tmp_path, out)
+    trace_path = out / "trace_proposed.jsonl"
+    try:
+        _wait_for_slots(trace_path, 4, proc, timeout_s=180)
+        proc.kill()
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    trace = read_trace(trace_path)
+    assert len(trace.slots) >= 4
+    assert [r.slot for r in trace.slots] == list(range(1, len(trace.slots) + 1))
+    assert compare_pcrb(trace) == []
