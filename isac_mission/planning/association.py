@@ -28,7 +28,9 @@ def association_costs(
 class AssociationLP:
     """(P1-F.1) relaxed to 0 <= a <= 1, built once for (M, K) with the costs as a DPP Parameter."""
 
-    def __init__(self, n_uavs: int, n_bs: int, capacity: int, solver: str = "HIGHS") -> None:
+    def __init__(
+        self, n_uavs: int, n_bs: int, capacity: int, solver: str = "HIGHS", shortcut: bool = True
+    ) -> None:
         self.costs = cp.Parameter((n_uavs, n_bs), nonneg=True)
         self.a = cp.Variable((n_uavs, n_bs))
         cons = [
@@ -41,6 +43,8 @@ class AssociationLP:
         assert self.problem.is_dpp()
         self.capacity = capacity
         self.solver = solver
+        # `associate` skips the LP when its optimum is known in closed form (see unique_optimum).
+        self.shortcut = shortcut
 
     def solve(self, costs: FloatArray) -> FloatArray | None:
         """The relaxed solution [M, K], or None if the solver failed."""
@@ -52,6 +56,25 @@ class AssociationLP:
         if self.problem.status != cp.OPTIMAL or self.a.value is None:
             return None
         return np.asarray(self.a.value, dtype=float)
+
+
+def unique_optimum(costs: FloatArray, capacity: int) -> IntArray | None:
+    """The LP's optimum [M] without solving it, when it is obvious and unique; else None.
+
+    If every UAV has a strict cheapest BS (by a relative 1e-9) and those choices respect the
+    capacity, that assignment is feasible and every other feasible (even fractional) point costs
+    strictly more, so it is the LP's unique optimum and the rounding keeps it.
+    """
+    if costs.shape[1] == 1:
+        chosen = np.zeros(costs.shape[0], dtype=np.int64)
+    else:
+        two = np.partition(costs, 1, axis=1)[:, :2]
+        if np.any(two[:, 1] <= two[:, 0] * (1 + 1e-9)):
+            return None
+        chosen = np.asarray(np.argmin(costs, axis=1), dtype=np.int64)
+    if np.bincount(chosen, minlength=costs.shape[1]).max() > capacity:
+        return None
+    return chosen
 
 
 def optimal_assignment(costs: FloatArray, capacity: int) -> IntArray:
@@ -83,6 +106,10 @@ def associate(
 ) -> IntArray:
     """The communication-optimal association [M] from the UAVs' previous positions [M, 2]."""
     costs = association_costs(uav_xy, bs_xy, dH=dH, rho0=rho0, B=B)
+    if lp.shortcut:
+        obvious = unique_optimum(costs, capacity)
+        if obvious is not None:
+            return obvious
     relaxed = lp.solve(costs)
     if relaxed is None:
         return optimal_assignment(costs, capacity)

@@ -21,7 +21,11 @@ SHARE_MARGIN = 1e-9
 
 
 class BandwidthSubproblem:
-    """(P1.2.1) for M UAVs; `solve` returns eta* [M] or None if sum(eta_min) > 1."""
+    """(P1.2.1) for M UAVs; `solve` returns eta* [M] or None if sum(eta_min) > 1.
+
+    solver: a cvxpy LP solver, or "closed-form" for the vertex `lp_vertex` (the LP's solution,
+    without cvxpy's per-solve overhead; the planner's default, `SolverKit`).
+    """
 
     def __init__(self, n_uavs: int, solver: str = "HIGHS") -> None:
         self.eta = cp.Variable(n_uavs)
@@ -37,6 +41,9 @@ class BandwidthSubproblem:
         floor = eta_min * (1 + SHARE_MARGIN)
         if floor.sum() > 1.0:
             return None
+        if self.solver == "closed-form":
+            eta = lp_vertex(grad, eta_min)
+            return np.asarray(eta / eta.sum())
         scale = np.max(np.abs(grad))
         self.direction.value = grad / scale if scale > 0 else grad
         self.floor.value = floor

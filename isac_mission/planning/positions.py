@@ -13,13 +13,18 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import clarabel
 import cvxpy as cp
 import numpy as np
+from scipy import sparse
 
 from isac_mission.config import Scenario
 from isac_mission.model.channel import rate_radius
 from isac_mission.planning.feasibility import SlotConstraints
-from isac_mission.types import BoolArray, FloatArray
+from isac_mission.types import BoolArray, FloatArray, IntArray
+
+# f of a plan [M, 2] with one UAV m moved to candidates [L, 2]: (current, eta, m, cands) -> [L].
+MovingOne = Callable[[FloatArray, FloatArray, int, FloatArray], FloatArray]
 
 # Constraints of the convex subproblem are tightened by this much (m) so that a solver answer
 # within its own tolerance still satisfies the original constraints exactly.
@@ -29,11 +34,15 @@ SOLVER_MARGIN_M = 1e-3
 class PositionSubproblem:
     """(P1.1.2) for M UAVs as a DPP problem; `solve` returns Q* [M, 2] or None if infeasible."""
 
-    def __init__(self, scenario: Scenario, solver: str) -> None:
+    def __init__(self, scenario: Scenario, solver: str, direct: bool = True) -> None:
+        """solver: a cvxpy SOCP solver name. direct: with CLARABEL, call clarabel directly on
+        the same problem written in its conic form (`_solve_clarabel`), skipping cvxpy's
+        per-solve parameter mapping (several ms); other solvers always go through cvxpy."""
         s = scenario
         M = s.M
         self.scenario = s
         self.solver = solver
+        self.direct = direct and solver.upper() == "CLARABEL"
         self.Q = cp.Variable((M, 2))
         self.direction = cp.Parameter((M, 2))
         self.prev = cp.Parameter((M, 2))
@@ -64,6 +73,48 @@ class PositionSubproblem:
         objective = cp.Minimize(cp.sum(cp.multiply(self.direction, self.Q)))
         self.problem = cp.Problem(objective, cons)
         assert self.problem.is_dpp()
+        self._build_conic_structure()
+
+    def _build_conic_structure(self) -> None:
+        """The fixed sparsity pattern of `_solve_clarabel`'s A, built once.
+
+        Entries are listed in a fixed order (rows, cols); `_perm` maps that order to the CSC
+        order, so a solve only fills A.data. Rows: 14j (eq. 23) 0..M-1, 14i (eq. 22) M..M+P-1,
+        then four 3-d cones per UAV (19a serving disk, eq. 21 control disk, 14h, dynamics disk).
+        """
+        M = self.scenario.M
+        P = len(self.pairs)
+        uav = np.arange(M)
+        rows: list[IntArray] = [uav, uav]
+        cols: list[IntArray] = [2 * uav, 2 * uav + 1]
+        n_lin = M
+        if P:
+            pr = M + np.arange(P)
+            i, j = self.pairs[:, 0], self.pairs[:, 1]
+            rows += [pr, pr, pr, pr]
+            cols += [2 * i, 2 * i + 1, 2 * j, 2 * j + 1]
+            n_lin += P
+        for n in range(4):
+            base = n_lin + 3 * (n * M + uav)  # first row of each UAV's cone
+            rows += [base + 1, base + 2]
+            cols += [2 * uav, 2 * uav + 1]
+        r, c = np.concatenate(rows), np.concatenate(cols)
+        tagged = sparse.csc_matrix(
+            (np.arange(1.0, len(r) + 1), (r, c)), shape=(n_lin + 12 * M, 2 * M)
+        )
+        self._perm = np.asarray(tagged.data - 1, dtype=np.int64)
+        self._A = tagged
+        self._disk_data = np.full(8 * M, -1.0)
+        self._P = sparse.csc_matrix((2 * M, 2 * M))
+        self._cones = [clarabel.NonnegativeConeT(n_lin)] + [clarabel.SecondOrderConeT(3)] * (4 * M)
+        self._settings = clarabel.DefaultSettings()
+        self._settings.verbose = False
+        # A tighter duality gap than clarabel's default (1e-8): a linear objective on disks is
+        # flat along the boundary, so a 1e-8 gap leaves the point millimetres from the optimum.
+        # Feasibility stays at 1e-8: tighter, clarabel stalls at M = 24 (AlmostSolved after
+        # 100-200 iterations). docs/performance.md has the measurements.
+        self._settings.tol_gap_abs = 1e-11
+        self._settings.tol_gap_rel = 1e-11
 
     def solve(
         self,
@@ -76,36 +127,37 @@ class PositionSubproblem:
         s = self.scenario
         c = origin.prev_xy.mean(axis=0)  # shift for conditioning
         scale = np.max(np.abs(grad))
-        self.direction.value = grad / scale if scale > 0 else grad
-        self.prev.value = origin.prev_xy - c
-        self.serving.value = origin.serving_bs_xy - c
-        self.radius.value = np.maximum(
-            rate_radius(eta, s.r_th, s.dH, s.rho0, s.B) - SOLVER_MARGIN_M, 0.0
-        )
+        v: dict[str, FloatArray] = {}
+        v["direction"] = grad / scale if scale > 0 else grad
+        v["prev"] = origin.prev_xy - c
+        v["serving"] = origin.serving_bs_xy - c
+        v["radius"] = np.maximum(rate_radius(eta, s.r_th, s.dH, s.rho0, s.B) - SOLVER_MARGIN_M, 0.0)
         nearest = np.argmin(
             np.linalg.norm(origin.prev_xy[:, None, :] - origin.bs_xy[None], axis=-1), axis=1
         )
-        self.control_bs.value = origin.bs_xy[nearest] - c
+        v["control_bs"] = origin.bs_xy[nearest] - c
         if origin.ballistic_xy is None:  # inactive: the 14h disk already bounds the step
-            self.ballistic.value = origin.prev_xy - c
-            self.accel_radius.value = np.full(s.M, s.v_max * s.dt)
+            v["ballistic"] = origin.prev_xy - c
+            v["accel_radius"] = np.full(s.M, s.v_max * s.dt)
         else:
-            self.ballistic.value = origin.ballistic_xy - c
-            self.accel_radius.value = np.full(
-                s.M, max(origin.accel_radius_m - SOLVER_MARGIN_M, 0.0)
-            )
+            v["ballistic"] = origin.ballistic_xy - c
+            v["accel_radius"] = np.full(s.M, max(origin.accel_radius_m - SOLVER_MARGIN_M, 0.0))
         lin = lin_xy - c
         tgt = origin.target_xy - c
         ds2 = (s.d_safe + SOLVER_MARGIN_M) ** 2
         diff_t = lin - tgt[None]
         # ||q^r - u||^2 + 2 (q^r - u)^T (q - q^r) >= D_s^2  (eq. 23)
-        self.target_normal.value = 2.0 * diff_t
-        self.target_rhs.value = ds2 - np.sum(diff_t**2, axis=1) + 2.0 * np.sum(diff_t * lin, axis=1)
+        v["target_normal"] = 2.0 * diff_t
+        v["target_rhs"] = ds2 - np.sum(diff_t**2, axis=1) + 2.0 * np.sum(diff_t * lin, axis=1)
         if len(self.pairs):
             diff_p = lin[self.pairs[:, 0]] - lin[self.pairs[:, 1]]
             # 2 (q_i^r - q_j^r)^T (q_i - q_j) - ||q_i^r - q_j^r||^2 >= D_s^2  (eq. 22)
-            self.pair_normal.value = 2.0 * diff_p
-            self.pair_rhs.value = ds2 + np.sum(diff_p**2, axis=1)
+            v["pair_normal"] = 2.0 * diff_p
+            v["pair_rhs"] = ds2 + np.sum(diff_p**2, axis=1)
+        if self.direct:
+            return self._solve_clarabel(v, c)
+        for name, value in v.items():
+            getattr(self, name).value = value
         try:
             with warnings.catch_warnings():
                 # OPTIMAL_INACCURATE is accepted: the line search re-checks every candidate.
@@ -116,6 +168,50 @@ class PositionSubproblem:
         if self.problem.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or self.Q.value is None:
             return None
         return np.asarray(np.asarray(self.Q.value, dtype=float) + c)
+
+    def _solve_clarabel(self, v: dict[str, FloatArray], shift: FloatArray) -> FloatArray | None:
+        """The same problem, with the Parameter values v (by attribute name), in clarabel's conic
+        form min q^T x s.t. A x + s = b, s in (nonnegative orthant) x (3-d second-order cones)^4M.
+
+        x = vec(Q) row by row; a linear row n^T Q_m >= r is s = n^T Q_m - r >= 0; a disk
+        ||Q_m - c|| <= rad is s = (rad, Q_m - c) in the SOC. Accepted statuses match cvxpy's
+        OPTIMAL / OPTIMAL_INACCURATE (Solved / AlmostSolved).
+        """
+        s = self.scenario
+        M = s.M
+        normal_t = v["target_normal"]
+        data = [-normal_t[:, 0], -normal_t[:, 1]]
+        b_parts = [-v["target_rhs"]]
+        if len(self.pairs):
+            normal = v["pair_normal"]
+            data += [-normal[:, 0], -normal[:, 1], normal[:, 0], normal[:, 1]]
+            b_parts.append(-v["pair_rhs"])
+        disks = [
+            (v["serving"], v["radius"]),
+            (v["control_bs"], np.full(M, max(s.d_th - SOLVER_MARGIN_M, 0.0))),
+            (v["prev"], np.full(M, s.v_max * s.dt - SOLVER_MARGIN_M)),
+            (v["ballistic"], v["accel_radius"]),
+        ]
+        for centre, rad in disks:
+            b_parts.append(np.column_stack([rad, -centre[:, 0], -centre[:, 1]]).ravel())
+        A = self._A
+        A.data = np.concatenate([*data, self._disk_data])[self._perm]
+        cones, settings = self._cones, self._settings
+        try:
+            solver = clarabel.DefaultSolver(
+                self._P,
+                v["direction"].ravel(),
+                A,
+                np.concatenate(b_parts),
+                cones,
+                settings,
+            )
+            sol = solver.solve()
+        except Exception:  # clarabel raises plain exceptions on bad data
+            return None
+        if str(sol.status) not in ("Solved", "AlmostSolved"):
+            return None
+        return np.asarray(np.asarray(sol.x, dtype=float).reshape(M, 2) + shift)
 
 
 @dataclass(frozen=True)
@@ -159,22 +255,37 @@ def _per_uav_refinement(
     eta: FloatArray,
     objective_values: Callable[[FloatArray, FloatArray], FloatArray],
     constraints: SlotConstraints,
+    values_moving_one: MovingOne | None = None,
 ) -> tuple[FloatArray, float]:
     """One pass over the UAVs: UAV m's position on its own segment start_m -> target_m, the
     others held at `current`; every candidate is checked against the original constraints.
 
     The paper's single step omega couples all UAVs: a UAV whose gradient is small moves only as
     far as the dominant UAV wants, and the relative-decrease stop then ends the search early.
+
+    `current` is feasible (the common line search's answer), so a candidate that moves UAV m only
+    is checked on the constraints involving m (`SlotConstraints.feasible_moving_one`, the same
+    answer) when values_moving_one(current, eta, m, cands_m) -> [L] is given, which evaluates f
+    with the other UAVs' information summed once instead of the full batch.
     """
     omegas = np.unique(np.append(np.arange(0.0, 1.0, step), 1.0))
     Q, f = current, f_current
     for m in range(Q.shape[0]):
+        moved = start[m] + omegas[:, None] * (target[m] - start[m])
         cands = np.repeat(Q[None], len(omegas), axis=0)
-        cands[:, m] = start[m] + omegas[:, None] * (target[m] - start[m])
-        ok = constraints.feasible(cands, np.broadcast_to(eta, cands.shape[:2]))
+        cands[:, m] = moved
+        if values_moving_one is None:  # the reference path: every constraint of every UAV
+            ok = constraints.feasible(cands, np.broadcast_to(eta, cands.shape[:2]))
+        else:
+            ok = constraints.feasible_moving_one(Q, eta, m, moved)
         if not np.any(ok):
             continue
-        values = np.where(ok, objective_values(cands, eta), np.inf)
+        f_cands = (
+            objective_values(cands, eta)
+            if values_moving_one is None
+            else values_moving_one(Q, eta, m, moved)
+        )
+        values = np.where(ok, f_cands, np.inf)
         i = int(np.argmin(values))
         if values[i] < f:
             Q, f = cands[i], float(values[i])
@@ -193,6 +304,7 @@ def optimise_positions(
     step: float,
     max_iterations: int,
     per_uav_steps: bool = True,
+    values_moving_one: MovingOne | None = None,
 ) -> DescentResult:
     """Algorithm 1 from start_xy [M, 2] at fixed shares eta [M].
 
@@ -221,7 +333,7 @@ def optimise_positions(
         Q_new, f_new = found
         if per_uav_steps:
             Q_new, f_new = _per_uav_refinement(
-                Q, target, Q_new, f_new, step, eta, objective_values, constraints
+                Q, target, Q_new, f_new, step, eta, objective_values, constraints, values_moving_one
             )
         decrease = (f - f_new) / f if feasible_now and np.isfinite(f) else np.inf
         Q, f, feasible_now = Q_new, f_new, True

@@ -53,13 +53,18 @@ class SlotInput:
 class SolverKit:
     """The convex problems of one scenario, built once (DPP) and re-solved every slot."""
 
-    def __init__(self, scenario: Scenario) -> None:
+    def __init__(self, scenario: Scenario, fast: bool = True) -> None:
+        """fast=False is the reference path (the planner before docs/performance.md): (P1.1.2)
+        through cvxpy instead of a direct Clarabel call, (P1.2.1) by the cvxpy LP instead of its
+        closed-form vertex, the association LP every slot, and the per-UAV line search on full
+        batches. Both paths solve the same problems; they differ by solver tolerance."""
         s = scenario
         self.scenario = s
+        self.fast = fast
         self.sensing = SensingParams.from_scenario(s)
-        self.positions = PositionSubproblem(s, s.planner.solver)
-        self.shares = BandwidthSubproblem(s.M)
-        self.association = AssociationLP(s.M, s.K, s.n_a)
+        self.positions = PositionSubproblem(s, s.planner.solver, direct=fast)
+        self.shares = BandwidthSubproblem(s.M, "closed-form" if fast else "HIGHS")
+        self.association = AssociationLP(s.M, s.K, s.n_a, shortcut=fast)
 
     def warm_up(self) -> None:
         """Solve every problem once so that the first real slot does not pay for compilation."""
@@ -198,6 +203,7 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
                 kit.positions,
                 max_iterations=cfg.max_position_iterations,
                 per_uav_steps=cfg.per_uav_steps,
+                values_moving_one=objective.values_moving_one if kit.fast else None,
                 **search,
             )
             Q, n_pos = res.point, n_pos + res.iterations

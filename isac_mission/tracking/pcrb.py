@@ -91,6 +91,18 @@ class Bound:
         return float(np.trace(self.C[2:, 2:]))
 
 
+def _trace_inverse(J: FloatArray) -> FloatArray:
+    """tr(J^-1) [L] for a batch J [L, 4, 4] (Jacobi-scaled); +inf where J is singular."""
+    s = 1.0 / np.sqrt(np.einsum("lii->li", J))
+    scaled = J * s[:, :, None] * s[:, None, :]
+    out = np.full(J.shape[0], np.inf)
+    ok = np.linalg.det(scaled) > 1e-300
+    if np.any(ok):
+        inv = np.linalg.inv(scaled[ok])
+        out[ok] = np.einsum("lii,li->l", inv, s[ok] ** 2)
+    return out
+
+
 def predict_information(prev: Bound, F: FloatArray, W: FloatArray) -> FloatArray:
     """J_pred [4, 4] = (F J_{n-1}^-1 F^T + W)^-1: the prior information at slot n."""
     return scaled_inverse(F @ prev.C @ F.T + W)
@@ -169,6 +181,29 @@ class PlanningObjective:
 
     def values(self, uav_xy: FloatArray, eta: FloatArray) -> FloatArray:
         """f for a batch: positions [L, M, 2] and shares [L, M] (or [M]) -> [L]."""
+        J = self._batch_information(uav_xy, eta)
+        if not self.measurement_only:
+            J = J + self.J_pred[None]
+        return _trace_inverse(J)
+
+    def values_moving_one(
+        self, current_xy: FloatArray, eta: FloatArray, m: int, candidates_m: FloatArray
+    ) -> FloatArray:
+        """f [L] of the plans `current_xy` [M, 2] with UAV m moved to candidates_m [L, 2], shares
+        eta [M]: the other UAVs' information is summed once (J is additive over UAVs), so a batch
+        costs one UAV's terms instead of M (equal to `values` up to summation round-off)."""
+        rest = np.delete(np.arange(current_xy.shape[0]), m)
+        # One call for both: rows 0..M-2 are the other UAVs' terms, the rest the candidates'.
+        xy = np.concatenate([current_xy[rest], np.asarray(candidates_m)])[:, None, :]
+        shares = np.concatenate([eta[rest], np.full(len(candidates_m), eta[m])])[:, None]
+        terms = self._batch_information(xy, shares)
+        J_rest = terms[: len(rest)].sum(axis=0)
+        if not self.measurement_only:
+            J_rest = J_rest + self.J_pred
+        return _trace_inverse(J_rest[None] + terms[len(rest) :])
+
+    def _batch_information(self, uav_xy: FloatArray, eta: FloatArray) -> FloatArray:
+        """J_M [L, 4, 4] (measurements only) for positions [L, M, 2] and shares [L, M] or [M]."""
         x = self.x_pred
         r = x[None, None, :2] - uav_xy
         d = np.linalg.norm(r, axis=2)
@@ -178,24 +213,15 @@ class PlanningObjective:
         eta_b = np.broadcast_to(eta, d.shape)
         a = self.sensing.range_information(d, eta_b)
         b = self.sensing.velocity_information(d)
-        L = d.shape[0]
-        J = np.zeros((L, 4, 4))
-        J[:, :2, :2] = np.einsum("lm,lmi,lmj->lij", a, u, u) + np.einsum(
-            "lm,lmi,lmj->lij", b, kp, kp
+        # Rows of H per UAV: g = (u, 0) and k = (kp, u); J = G^T diag(a) G + K^T diag(b) K.
+        L, M = d.shape
+        G = np.zeros((L, M, 4))
+        G[..., :2] = u
+        K = np.concatenate([kp, u], axis=2)
+        J = np.matmul(np.swapaxes(G * a[..., None], 1, 2), G) + np.matmul(
+            np.swapaxes(K * b[..., None], 1, 2), K
         )
-        J[:, :2, 2:] = np.einsum("lm,lmi,lmj->lij", b, kp, u)
-        J[:, 2:, :2] = np.transpose(J[:, :2, 2:], (0, 2, 1))
-        J[:, 2:, 2:] = np.einsum("lm,lmi,lmj->lij", b, u, u)
-        if not self.measurement_only:
-            J = J + self.J_pred[None]
-        s = 1.0 / np.sqrt(np.einsum("lii->li", J))
-        scaled = J * s[:, :, None] * s[:, None, :]
-        out = np.full(L, np.inf)
-        ok = np.linalg.det(scaled) > 1e-300
-        if np.any(ok):
-            inv = np.linalg.inv(scaled[ok])
-            out[ok] = np.einsum("lii,li->l", inv, s[ok] ** 2)
-        return out
+        return np.asarray(J)
 
     def value_and_gradients(
         self, uav_xy: FloatArray, eta: FloatArray
