@@ -143,6 +143,12 @@ class TrackerConfig(_Section):
     initial_velocity_std_mps: float = Field(
         2.0, gt=0, description="Std of the tracker's initial velocity error (P0)."
     )
+    update_iterations: int = Field(
+        1,
+        ge=1,
+        le=50,
+        description="1: the EKF of the paper; > 1: iterated EKF (relinearised updates, docs/model.md).",
+    )
     bound_prior: Literal["pcrb", "ekf"] = Field(
         "pcrb",
         description="Prior information of the planner's bound: its own recursion, or the EKF's P.",
@@ -235,6 +241,7 @@ class Scenario:
     missed_detection_prob: float
     P0: FloatArray
     bound_prior: str
+    ekf_iterations: int
     planner: PlannerConfig = field(default_factory=PlannerConfig)
 
     @property
@@ -283,6 +290,7 @@ class Scenario:
             "sensing_model": self.sensing_model,
             "missed_detection_prob": self.missed_detection_prob,
             "bound_prior": self.bound_prior,
+            "ekf_iterations": self.ekf_iterations,
             "planner": self.planner.model_dump(),
         }
 
@@ -378,6 +386,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
         missed_detection_prob=sens.missed_detection_prob,
         P0=np.diag([sp**2, sp**2, sv**2, sv**2]),
         bound_prior=spec.tracker.bound_prior,
+        ekf_iterations=spec.tracker.update_iterations,
         planner=spec.planner,
     )
     problems = _cross_field_problems(scenario, n_slots)

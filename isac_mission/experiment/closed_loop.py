@@ -135,7 +135,7 @@ def run_closed_loop(
         lost = np.concatenate([missed, missed])
         z[lost] = np.nan
         r_used = np.where(lost, np.nan, r_diag)
-        belief = ekf_update(pred, z, uav_xy, r_used)
+        belief = ekf_update(pred, z, uav_xy, r_used, s.ekf_iterations)
         bound = bound_step(bound, F, W, pred.x, uav_xy, r_used)
         for key, value in (
             ("est", belief.x),

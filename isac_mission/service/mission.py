@@ -91,7 +91,7 @@ class MissionState:
         z = np.concatenate([det.range_m, det.radial_velocity_mps])
         r_diag = sens.variances(np.linalg.norm(pred.x[None, :2] - uav_xy, axis=1), eta_used)
         r_used = np.where(np.isfinite(z), r_diag, np.nan)
-        self.belief = ekf_update(pred, z, uav_xy, r_used)
+        self.belief = ekf_update(pred, z, uav_xy, r_used, self.scenario.ekf_iterations)
         self.bound = bound_step(self.bound, self.F, self.W, pred.x, uav_xy, r_used)
         self.slot = det.slot
         plan = pending.plan

@@ -38,11 +38,29 @@ def ekf_predict(belief: Gaussian, F: FloatArray, W: FloatArray) -> Gaussian:
 
 
 def ekf_update(
-    prediction: Gaussian, z: FloatArray, uav_xy: FloatArray, r_diag: FloatArray
+    prediction: Gaussian,
+    z: FloatArray,
+    uav_xy: FloatArray,
+    r_diag: FloatArray,
+    iterations: int = 1,
 ) -> Gaussian:
     """EKF update with measurements z [2M] (ranges then radial velocities; NaN = missing) taken
-    from uav_xy [M, 2], with noise variances r_diag [2M] (non-finite = missing)."""
-    x0 = prediction.x
+    from uav_xy [M, 2], with noise variances r_diag [2M] (non-finite = missing).
+
+    iterations > 1 is the iterated EKF: the update is recomputed from the same prediction with h
+    linearised at the previous iteration's estimate (Gauss-Newton on the MAP problem). It matters
+    where the noise is far below the linearisation error (the literal eq. 8 model)."""
+    post = _linearised_update(prediction, z, uav_xy, r_diag, prediction.x)
+    for _ in range(iterations - 1):
+        post = _linearised_update(prediction, z, uav_xy, r_diag, post.x)
+    return post
+
+
+def _linearised_update(
+    prediction: Gaussian, z: FloatArray, uav_xy: FloatArray, r_diag: FloatArray, x_lin: FloatArray
+) -> Gaussian:
+    """The Kalman update of `prediction` with h linearised at x_lin [4]."""
+    x0 = x_lin
     H_all = measurement_jacobian(x0, uav_xy)
     h_all = measure(x0, uav_xy)
     kf = _filter(prediction, np.eye(4), np.zeros((4, 4)))
@@ -55,7 +73,7 @@ def ekf_update(
             return H_i
 
         def hx(x: FloatArray, H_i: FloatArray = H_i, h_i: float = h_i) -> FloatArray:
-            # h linearised at the prediction x0, so the sequence equals the batch EKF update.
+            # h linearised at x_lin, so the sequence equals the batch (I)EKF update.
             return np.atleast_1d(h_i + H_i @ (np.asarray(x).reshape(4) - x0))
 
         kf.update(np.array([z[i]]), jac, hx, R=np.array([[r_diag[i]]]))

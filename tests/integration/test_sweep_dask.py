@@ -1,0 +1,135 @@
+"""Sweep on a local Dask cluster of 2 worker processes: the same numbers as the serial run, and
+every socket of the cluster on 127.0.0.1."""
+
+from __future__ import annotations
+
+import urllib.error
+import urllib.request
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import psutil
+import pytest
+import yaml
+
+from isac_mission.experiment.sweep import (
+    TaskRow,
+    aggregate,
+    expand_grid,
+    make_tasks,
+    parse_grid,
+    run_serial,
+)
+from isac_mission.experiment.sweep_dask import cluster_addresses, dask_client, run_dask
+
+ROOT = Path(__file__).resolve().parents[2]
+# Wall-clock solve times differ between runs; everything else must be identical.
+TIMING_FIELDS = {"solve_median_ms"}
+
+
+def _numbers(row: Any) -> dict[str, Any]:
+    return {k: v for k, v in asdict(row).items() if k not in TIMING_FIELDS}
+
+
+def _listening_hosts() -> set[str]:
+    """IP addresses of every listening / unconnected inet socket of this process and children."""
+    me = psutil.Process()
+    hosts: set[str] = set()
+    for proc in [me, *me.children(recursive=True)]:
+        for conn in proc.net_connections(kind="inet"):
+            if conn.status == psutil.CONN_LISTEN or not conn.raddr:
+                hosts.add(conn.laddr.ip)
+    return hosts
+
+
+def _http_status(url: str) -> int:
+    try:
+        with urllib.request.urlopen(url, timeout=10) as resp:
+            return int(resp.status)
+    except urllib.error.HTTPError as err:
+        return int(err.code)
+
+
+@pytest.mark.timeout(300)
+def test_dask_sweep_equals_serial_and_binds_loopback() -> None:
+    base = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
+    grid = parse_grid(
+        {
+            "uavs.max_speed_mps": [15, 25],
+            "methods": ["proposed", "sd"],
+            "runs": 2,
+            "slots": 8,
+        }
+    )
+    points = expand_grid(base, grid)
+    tasks = make_tasks(points, grid, seed=3)
+    assert len(tasks) == 8
+
+    serial = run_serial(tasks)
+    done: list[TaskRow] = []
+    with dask_client(None, workers=2) as client:
+        info = client.scheduler_info()
+        assert len(info["workers"]) == 2
+        assert all(w["nthreads"] == 1 for w in info["workers"].values())
+        addresses = cluster_addresses(client)
+        hosts = _listening_hosts()
+        status_code = _http_status(f"http://127.0.0.1:{info['services']['dashboard']}/status")
+        distributed_rows = run_dask(client, tasks, done.append)
+        # The work really ran in the worker processes (their pids are not ours).
+        worker_pids = set(client.run(lambda: __import__("os").getpid()).values())
+    assert len(worker_pids) == 2 and psutil.Process().pid not in worker_pids
+
+    assert len(addresses) == 3
+    assert all(a.startswith("tcp://127.0.0.1:") for a in addresses), addresses
+    assert hosts == {"127.0.0.1"}, hosts
+    assert status_code == 404  # no Bokeh dashboard behind the scheduler's loopback HTTP port
+
+    assert len(done) == len(tasks)
+    assert [(r.point, r.method, r.run) for r in distributed_rows] == [
+        (t.point, t.method, t.run) for t in tasks
+    ]
+    for a, b in zip(serial, distributed_rows, strict=True):
+        assert _numbers(a) == _numbers(b)
+    # Aggregates are then equal too, and the sweep actually distinguishes its points and methods.
+    agg_serial = [_numbers(s) for s in aggregate(serial, points)]
+    agg_dask = [_numbers(s) for s in aggregate(distributed_rows, points)]
+    assert agg_serial == agg_dask
+    assert len({s["loc_rmse"] for s in agg_serial}) > 1
+    assert {r.seed for r in serial} == {3, 4}
+
+
+def test_cli_sweep_serial_writes_csv_and_plots(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from isac_mission.service.cli import app
+
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("radio.rate_min_bps: [1.0e7, 2.0e7]\nmethods: [sd]\nruns: 2\nslots: 3\n")
+    out = tmp_path / "out"
+    args = ["sweep", str(ROOT / "config" / "paper.yaml"), "--grid", str(grid), "--out", str(out)]
+    result = CliRunner().invoke(app, [*args, "--serial"])
+    assert result.exit_code == 0, result.output
+    assert "2 grid points x 1 methods x 2 runs = 4 missions" in result.output
+    lines = (out / "sweep.csv").read_text().splitlines()
+    assert lines[0].startswith("radio.rate_min_bps,point,method,runs,loc_rmse,loc_rmse_lo")
+    assert len(lines) == 3
+    assert len((out / "runs.csv").read_text().splitlines()) == 5
+    assert (out / "rmse_vs_radio_rate_min_bps.png").stat().st_size > 0
+
+
+def test_cli_sweep_rejects_a_bad_point_before_any_work(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from isac_mission.service.cli import app
+
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("uavs.max_speed_mps: [25, 0]\nslots: 3\n")
+    out = tmp_path / "out"
+    result = CliRunner().invoke(
+        app,
+        ["sweep", str(ROOT / "config" / "paper.yaml"), "--grid", str(grid), "--out", str(out)],
+    )
+    assert result.exit_code == 2
+    assert "grid point 1 (uavs.max_speed_mps=0)" in result.output
+    assert not out.exists()
