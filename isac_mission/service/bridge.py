@@ -55,6 +55,7 @@ import contextlib
 import logging
 import math
 import time
+from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, Protocol
@@ -634,6 +635,10 @@ class VehicleBridge:
         self.phase = "idle"
         """idle, preparing, ready (flying the mission in offboard), hold, landing, landed."""
         self.plan_slot = -1
+        self.setpoint_wall_s: deque[float] = deque(maxlen=200_000)
+        """Wall times (time.monotonic) of the stream's periodic setpoints, for jitter figures."""
+        self.first_setpoint_wall_s: dict[int, float] = {}
+        """Plan slot -> wall time of the first setpoint sent for it (latency figures)."""
         """The latest plan slot fed to this bridge (-1: none)."""
         self._origin = np.array(settings.origin_xy_m, dtype=float)
         self._altitude_m: float | None = None
@@ -845,6 +850,8 @@ class VehicleBridge:
         set while prepare() runs ends its flight to the start point (the mission has begun)."""
         self._waypoints_set += 1
         self._set_goal(_xy(xy_m), arrive_by_s, self.settings.v_max_mps)
+        # The new leg goes out at once, not at the next tick of the stream (up to a period later).
+        self._send_setpoint(periodic=False)
 
     async def hold(self) -> None:
         """Switch the vehicle to HOLD (PX4 AUTO.LOITER) and stop streaming setpoints."""
@@ -926,7 +933,9 @@ class VehicleBridge:
     def _stop_stream(self) -> None:
         self._streaming = False
 
-    def _send_setpoint(self) -> None:
+    def _send_setpoint(self, periodic: bool = True) -> None:
+        """Send the current setpoint; `periodic` marks the stream's own ticks (whose wall times
+        are kept for the jitter figures) as opposed to the immediate send of a new plan."""
         if not self._streaming or self._leg is None or self._altitude_m is None:
             return
         if self.link.vehicle_address is None:
@@ -942,6 +951,11 @@ class VehicleBridge:
         )
         if self.link.send(msg):
             self.counters.setpoints_sent += 1
+            wall = time.monotonic()
+            if periodic:
+                self.setpoint_wall_s.append(wall)
+            if self.plan_slot >= 0 and self.plan_slot not in self.first_setpoint_wall_s:
+                self.first_setpoint_wall_s[self.plan_slot] = wall
 
     # -- internals: periodic loops -----------------------------------------------------------
 

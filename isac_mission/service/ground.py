@@ -82,6 +82,8 @@ class GroundReport:
     counters: Counter[str] = field(default_factory=Counter)
     records: list[SlotRecord] = field(default_factory=list)
     latencies_s: list[float] = field(default_factory=list)
+    last_detection_wall_s: dict[int, float] = field(default_factory=dict)
+    """Slot -> wall time (time.monotonic) its last detection arrived."""
     last_error: str = ""
 
 
@@ -297,6 +299,8 @@ class GroundLoop:
         if truth is not None:
             record = SlotRecord.from_dict(record.to_dict() | {"target_true": truth.tolist()})
         latency_from = self.last_detection_wall if msgs else None
+        if latency_from is not None:
+            self.report.last_detection_wall_s[n] = latency_from
         self.bus.publish(
             self.keys.track,
             encode_track(

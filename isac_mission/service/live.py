@@ -71,6 +71,10 @@ class LiveResult:
     trace_path: Path
     phases: dict[str, float] = field(default_factory=dict)
     fleet_counters: dict[str, int] = field(default_factory=dict)
+    detection_to_setpoint_s: list[float] = field(default_factory=list)
+    """Per slot n: wall time from slot n's last detection to the first setpoint of plan n+1."""
+    setpoint_periods_s: dict[int, list[float]] = field(default_factory=dict)
+    """Per vehicle: wall intervals between the stream's periodic setpoints during the mission."""
 
 
 def planning_scenario(s: Scenario, opts: LiveOptions) -> Scenario:
@@ -152,6 +156,7 @@ async def _fly_mission(
             except (IsacError, TimeoutError) as err:
                 log.error("landing: %s", err)
                 result.report.last_error = f"landing: {err}"
+            _timing_figures(result, fleet, opts.speed)
             c = fleet.counters
             result.fleet_counters = {
                 "plans applied": c.plans_applied,
@@ -159,6 +164,21 @@ async def _fly_mission(
                 "vehicles landed": sum(b.phase == "landed" for b in fleet.bridges),
             }
     return result
+
+
+def _timing_figures(result: LiveResult, fleet: BridgeFleet, speed: float) -> None:
+    """Detection-to-setpoint latency and setpoint periods, from the bridges' wall timestamps."""
+    last_det = result.report.last_detection_wall_s
+    firsts = [b.first_setpoint_wall_s for b in fleet.bridges]
+    for n, t_det in sorted(last_det.items()):
+        sent = [f[n + 1] for f in firsts if n + 1 in f]
+        if sent:
+            result.detection_to_setpoint_s.append(min(sent) - t_det)
+    if last_det:
+        t0, t1 = min(last_det.values()), max(last_det.values())
+        for b in fleet.bridges:
+            times = [w for w in b.setpoint_wall_s if t0 <= w <= t1]
+            result.setpoint_periods_s[b.index] = list(np.diff(times))
 
 
 async def _until_stopped(aw: object, stop: asyncio.Event) -> None:
