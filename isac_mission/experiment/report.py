@@ -101,6 +101,17 @@ def reduction_table(rows: list[dict[str, float | str | None]]) -> Table:
     return t
 
 
+def mission_progress(console: Console) -> Progress:
+    """The progress bar of Monte Carlo commands (missions done / total, elapsed time)."""
+    return Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+    )
+
+
 def simulate_report(
     s: Scenario,
     methods: Sequence[Method],
@@ -119,14 +130,7 @@ def simulate_report(
         f"{runs} runs x {len(methods)} methods, seeds {seed}..{seed + runs - 1}, "
         f"sensing model {s.sensing_model}"
     )
-    with Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=False,
-    ) as bar:
+    with mission_progress(console) as bar:
         task = bar.add_task("missions", total=runs * len(methods))
         results = run_monte_carlo(
             s,

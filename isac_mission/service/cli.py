@@ -130,15 +130,8 @@ def sweep(
     plots: Annotated[bool, typer.Option(help="Write RMSE-vs-parameter PNGs.")] = True,
 ) -> None:
     """Monte Carlo over a parameter grid, on Dask (grid point x method x run, seed = seed + run)."""
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-    )
-
     from isac_mission.experiment import sweep as sw
+    from isac_mission.experiment.report import mission_progress
 
     try:
         plan = sw.plan_sweep(config, grid, seed)
@@ -159,13 +152,7 @@ def sweep(
         highlight=False,
     )
     quiet_highs_banner()
-    with Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-    ) as bar:
+    with mission_progress(console) as bar:
         task = bar.add_task("missions", total=len(plan.tasks))
 
         def done(_row: sw.TaskRow) -> None:

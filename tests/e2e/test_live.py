@@ -187,31 +187,12 @@ async def test_ground_station_observer_sees_offboard_flight_along_the_plan(tmp_p
     cfg["timing"]["duration_s"] = 12
     config = tmp_path / "short.yaml"
     config.write_text(yaml.safe_dump(cfg))
-    endpoint, mav, gcs = _ports(3)
+    gcs = free_port_block(3)
     out = tmp_path / "run"
     config_gs = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
     observer = mavsdk.Mavsdk(config_gs)
     await observer.add_any_connection(f"udpin://127.0.0.1:{gcs}")
-    service = subprocess.Popen(
-        _cli(
-            "run",
-            str(config),
-            "--speed",
-            "5",
-            "--out",
-            str(out),
-            "--zenoh-listen",
-            endpoint,
-            "--mavlink-base-port",
-            str(mav),
-            "--gcs-base-port",
-            str(gcs),
-        ),
-        cwd=ROOT,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    service = _start_run(out, str(config), gcs=gcs, stdout=subprocess.DEVNULL)
     seen_modes: set[object] = set()
     positions: list[tuple[float, float]] = []
     try:
@@ -258,12 +239,18 @@ async def test_ground_station_observer_sees_offboard_flight_along_the_plan(tmp_p
         assert np.min(np.linalg.norm(seen - wp, axis=1)) < 8.0, f"slot {record.slot}"
 
 
-def _start_run(tmp_path: Path, out: Path) -> subprocess.Popen[str]:
-    endpoint, mav, gcs = _ports(3)
+def _start_run(
+    out: Path,
+    config: str = "config/paper.yaml",
+    gcs: int | None = None,
+    stdout: int = subprocess.PIPE,
+) -> subprocess.Popen[str]:
+    """`isac-mission run CONFIG --speed 5` on free loopback ports (gcs: a given GCS base port)."""
+    endpoint, mav, free_gcs = _ports(3)
     return subprocess.Popen(
         _cli(
             "run",
-            "config/paper.yaml",
+            config,
             "--speed",
             "5",
             "--out",
@@ -273,10 +260,10 @@ def _start_run(tmp_path: Path, out: Path) -> subprocess.Popen[str]:
             "--mavlink-base-port",
             str(mav),
             "--gcs-base-port",
-            str(gcs),
+            str(free_gcs if gcs is None else gcs),
         ),
         cwd=ROOT,
-        stdout=subprocess.PIPE,
+        stdout=stdout,
         stderr=subprocess.PIPE,
         text=True,
     )
@@ -302,7 +289,7 @@ def test_signal_mid_mission_lands_flushes_and_exits_zero(
     tmp_path: Path, sig: signal.Signals
 ) -> None:
     out = tmp_path / "run"
-    proc = _start_run(tmp_path, out)
+    proc = _start_run(out)
     trace_path = out / "trace_proposed.jsonl"
     try:
         _wait_for_slots(trace_path, 3, proc, timeout_s=180)
@@ -321,7 +308,7 @@ def test_signal_mid_mission_lands_flushes_and_exits_zero(
 
 def test_killed_run_leaves_every_completed_slot_readable(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    proc = _start_run(tmp_path, out)
+    proc = _start_run(out)
     trace_path = out / "trace_proposed.jsonl"
     try:
         _wait_for_slots(trace_path, 4, proc, timeout_s=180)
