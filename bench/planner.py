@@ -37,18 +37,15 @@ import subprocess
 import sys
 import time
 import tracemalloc
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-import isac_mission.experiment.closed_loop as closed_loop
 from isac_mission.config import Scenario, parse_scenario
-from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
+from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs, run_closed_loop
 from isac_mission.planning.positions import PositionSubproblem
 from isac_mission.planning.slot import METHODS, Method, SlotInput, SolverKit, plan_slot
-from isac_mission.types import SlotPlan
 
 SIZES = ((3, 5), (6, 8), (12, 12), (24, 20))
 MEMORY_SLOTS = 3
@@ -101,18 +98,7 @@ def recorded_run(
 ) -> tuple[np.ndarray, float, list[SlotInput]]:
     """Closed loop of one run: per-slot planning times [N], the fraction of slots with status
     ok, and the slot inputs seen."""
-    inputs: list[SlotInput] = []
-    original: Callable[[SlotInput, SolverKit, Method], SlotPlan] = plan_slot
-
-    def recording(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> SlotPlan:
-        inputs.append(inp)
-        return original(inp, kit, method)
-
-    setattr(closed_loop, "plan_slot", recording)  # noqa: B010 (the loop's own reference)
-    try:
-        result = run_closed_loop(s, method, draw_run_noise(s, 100), kit)
-    finally:
-        setattr(closed_loop, "plan_slot", original)  # noqa: B010
+    result, inputs = record_slot_inputs(s, method, draw_run_noise(s, 100), kit)
     return result.solve_s, float(np.mean([v == "ok" for v in result.status])), inputs
 
 

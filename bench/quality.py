@@ -31,17 +31,15 @@ from __future__ import annotations
 import argparse
 import time
 import warnings
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize
 
-import isac_mission.experiment.closed_loop as closed_loop
 from isac_mission.config import Scenario, load_scenario
-from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
+from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
 from isac_mission.planning.feasibility import SlotConstraints
-from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import PlanningObjective
 from isac_mission.types import FloatArray, SlotPlan
 
@@ -62,19 +60,7 @@ class SlotProblem:
 
 def recorded_inputs(s: Scenario, kit: SolverKit, seed: int) -> list[SlotInput]:
     """The proposed method's slot inputs over one closed-loop run (noise seed `seed`)."""
-    inputs: list[SlotInput] = []
-    original: Callable[[SlotInput, SolverKit, Method], SlotPlan] = plan_slot
-
-    def recording(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> SlotPlan:
-        inputs.append(inp)
-        return original(inp, kit, method)
-
-    setattr(closed_loop, "plan_slot", recording)  # noqa: B010 (the loop's own reference)
-    try:
-        run_closed_loop(s, "proposed", draw_run_noise(s, seed), kit)
-    finally:
-        setattr(closed_loop, "plan_slot", original)  # noqa: B010
-    return inputs
+    return record_slot_inputs(s, "proposed", draw_run_noise(s, seed), kit)[1]
 
 
 def slot_problem(s: Scenario, kit: SolverKit, inp: SlotInput) -> SlotProblem:

@@ -63,12 +63,14 @@ def true_trajectory(s: Scenario, noise: RunNoise) -> FloatArray:
 class SlotOutcome:
     """Everything one slot produced (the trace's contract fields, DESIGN.md).
 
-    uav_xy [M, 2] where measurements were taken; r_diag [2M] variances used (NaN = missing);
+    slot_input: what the planner was given; uav_xy [M, 2] where measurements were taken; r_diag
+    [2M] variances used (NaN = missing);
     target_* [4]; P, J [4, 4].
     """
 
     slot: int
     method: str
+    slot_input: SlotInput
     plan: SlotPlan
     uav_xy: FloatArray
     target_true: FloatArray
@@ -120,7 +122,8 @@ def run_closed_loop(
         pred = ekf_predict(belief, F, W)
         J_pred = predict_information(bound, F, W)
         prior = J_pred if s.bound_prior == "pcrb" else scaled_inverse(pred.P)
-        plan = plan_slot(SlotInput(uav_xy, eta, assoc, pred.x, prior, velocity), kit, method)
+        slot_input = SlotInput(uav_xy, eta, assoc, pred.x, prior, velocity)
+        plan = plan_slot(slot_input, kit, method)
         # The kinematic model flies each leg at constant velocity.
         velocity = (plan.uav_xy_m - uav_xy) / s.dt
         uav_xy, eta, assoc = plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav
@@ -152,6 +155,7 @@ def run_closed_loop(
                 SlotOutcome(
                     slot=n,
                     method=method,
+                    slot_input=slot_input,
                     plan=plan,
                     uav_xy=uav_xy,
                     target_true=truth[n],
@@ -174,3 +178,12 @@ def run_closed_loop(
         eta=np.array(rows["eta"]),
         assoc=np.array(rows["assoc"], dtype=np.int64),
     )
+
+
+def record_slot_inputs(
+    s: Scenario, method: Method, noise: RunNoise, kit: SolverKit
+) -> tuple[RunResult, list[SlotInput]]:
+    """One run, and the planner's input of every slot (to replay or time the planner alone)."""
+    inputs: list[SlotInput] = []
+    result = run_closed_loop(s, method, noise, kit, lambda o: inputs.append(o.slot_input))
+    return result, inputs
