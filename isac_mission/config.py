@@ -181,6 +181,25 @@ class PlannerConfig(_Section):
     )
 
 
+class MavlinkSigningConfig(_Section):
+    """MAVLink 2 message signing between the vehicles and the service (docs/reliability.md)."""
+
+    enabled: bool = Field(False, description="Sign outgoing and reject unsigned or badly signed.")
+
+
+class ZenohSecurityConfig(_Section):
+    """Zenoh authentication, access control and TLS (docs/reliability.md, README)."""
+
+    enabled: bool = Field(False, description="Turn on user/password auth, ACL and TLS.")
+
+
+class SecurityConfig(_Section):
+    """Who may command the vehicles and publish on the bus. Off by default (loopback only)."""
+
+    mavlink_signing: MavlinkSigningConfig = MavlinkSigningConfig()
+    zenoh: ZenohSecurityConfig = ZenohSecurityConfig()
+
+
 class ScenarioFile(_Section):
     """The YAML file as written (dB units). See config/paper.yaml for every key."""
 
@@ -195,6 +214,7 @@ class ScenarioFile(_Section):
     sensing: SensingConfig = SensingConfig()
     tracker: TrackerConfig = TrackerConfig()
     planner: PlannerConfig = PlannerConfig()
+    security: SecurityConfig = SecurityConfig()
 
 
 @dataclass(frozen=True)
@@ -243,6 +263,7 @@ class Scenario:
     bound_prior: str
     ekf_iterations: int
     planner: PlannerConfig = field(default_factory=PlannerConfig)
+    security: SecurityConfig = field(default_factory=SecurityConfig)
 
     @property
     def radar_gain(self) -> float:
@@ -388,6 +409,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
         bound_prior=spec.tracker.bound_prior,
         ekf_iterations=spec.tracker.update_iterations,
         planner=spec.planner,
+        security=spec.security,
     )
     problems = _cross_field_problems(scenario, n_slots)
     if problems:
