@@ -36,6 +36,11 @@ the area or below the minimum altitude (clamped), bad parameter values, and hand
 Benign drops (messages for another system or component, message types this vehicle does not
 handle) are counted in `ignored`. Nothing a client sends stops the vehicle from flying.
 
+MAVLink 2 signing (`AutopilotSettings.signing`, a key): both links sign everything they send and
+drop every packet without a valid signature, counted in `rejected` as `unsigned`,
+`bad_signature` or `replayed` (see isac_mission/service/mavlink.py); the vehicle neither obeys
+nor answers such a packet, and its sender does not become a peer. Off by default, as in PX4 SITL.
+
 Frames: local NED (north, east, down) around the scenario-plane point `local_origin_xy_m` on the
 ground (scenario plane: x east, y north, so north = y - y0, east = x - x0, down = -altitude).
 `geo_origin` is the geodetic position of the scenario origin (0, 0) on the ground; GPS positions
@@ -62,7 +67,17 @@ from typing import Any, Literal, cast
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
+from isac_mission.config import MavlinkSigningKey
 from isac_mission.errors import ConfigError
+from isac_mission.service.mavlink import (
+    enable_signing,
+    new_encoder,
+    new_parser,
+    pack,
+    packet_origin,
+    refresh_signing_clock,
+    signature_failure,
+)
 from isac_mission.types import FloatArray
 from sim.vehicle import Setpoint, VehicleLimits, VehicleState, stopping_point, wrap_pi
 from sim.vehicle import step as vehicle_step
@@ -177,6 +192,7 @@ class AutopilotSettings:
         area_max_xy_m: Scenario-plane upper corner of the allowed area.
         min_altitude_m: Lowest altitude a position setpoint may ask for (higher ones clamped up).
         max_altitude_m: Highest altitude a position setpoint may ask for.
+        signing: MAVLink 2 signing key of both links; None = no signing (accept unsigned).
     """
 
     index: int = 0
@@ -207,6 +223,7 @@ class AutopilotSettings:
     area_max_xy_m: tuple[float, float] = (10_000.0, 10_000.0)
     min_altitude_m: float = 2.0
     max_altitude_m: float = 500.0
+    signing: MavlinkSigningKey | None = None
 
     def __post_init__(self) -> None:
         problems: list[str] = []
@@ -323,7 +340,10 @@ class _Link(asyncio.DatagramProtocol):
         self.default_peer = default_peer
         self.peers: dict[Address, None] = {default_peer: None}
         self.transport: asyncio.DatagramTransport | None = None
-        self.encoder = mavlink2.MAVLink(None, srcSystem=owner.system_id, srcComponent=COMPONENT_ID)
+        self.encoder = new_encoder(owner.system_id, COMPONENT_ID)
+        """Packs (and signs) what the link sends; its signing state is shared by the parsers."""
+        if owner.settings.signing is not None:
+            enable_signing(self.encoder, owner.settings.signing)
         self.intervals_s: dict[int, float] = {}
         self.next_due_s: dict[int, float] = {}
         self.last_heartbeat_wall_s = -math.inf
@@ -344,8 +364,9 @@ class _Link(asyncio.DatagramProtocol):
         """Send one message to `to`, or to every peer of the link."""
         if self.transport is None or self.transport.is_closing():
             return
-        buf = msg.pack(self.encoder)
-        self.encoder.seq = (self.encoder.seq + 1) % 256
+        if self.owner.radio_silent:
+            return
+        buf = pack(msg, self.encoder)
         for addr in [to] if to is not None else list(self.peers):
             self.transport.sendto(buf, addr)
         if msg.get_msgId() == mavlink2.MAVLINK_MSG_ID_HEARTBEAT:
@@ -387,6 +408,7 @@ class Autopilot:
         )
         self._limits = settings.limits
         self._now_s = 0.0
+        self._silence_from_s = self._silence_until_s = math.inf
         self._mode = FlightMode.HOLD
         self._armed = False
         self._landed = True
@@ -464,6 +486,11 @@ class Autopilot:
         return self._landed
 
     @property
+    def signatures_ok(self) -> int:
+        """Packets (both links) whose signature was checked and accepted; 0 without signing."""
+        return sum(int(link.encoder.signing.goodsig_count) for link in self._links)
+
+    @property
     def offboard_address(self) -> Address:
         """Local (host, port) of the offboard link; valid after `open()`."""
         return self._local_address(0)
@@ -505,6 +532,14 @@ class Autopilot:
             *self.gcs_address,
             s.gcs_dest_port,
         )
+        if s.signing is not None:
+            logger.info(
+                "vehicle %d: MAVLink signing on (key %s from %s, link id %d)",
+                self._sysid,
+                s.signing.fingerprint,
+                s.signing.source,
+                s.signing.link_id,
+            )
         if s.heartbeat_keepalive_wall_s is not None:
             self._keepalive = asyncio.create_task(
                 self._keepalive_loop(s.heartbeat_keepalive_wall_s),
@@ -728,11 +763,36 @@ class Autopilot:
         if n <= 5 or n % 100 == 0:
             logger.warning("vehicle %d: rejected (%s, #%d): %s", self._sysid, reason, n, detail)
 
+    @property
+    def radio_silent(self) -> bool:
+        """True inside a `silence_radio` window: nothing is sent and everything heard is lost."""
+        return self._silence_from_s <= self._now_s < self._silence_until_s
+
+    def silence_radio(self, from_s: float, duration_s: float) -> None:
+        """Fault injection: the vehicle's MAVLink radio (both links) is dead from simulation time
+        `from_s` for `duration_s` seconds. The vehicle flies on under its own failsafes
+        (offboard loss after COM_OF_LOSS_T, lost GCS after COM_DL_LOSS_T)."""
+        if not (math.isfinite(from_s) and math.isfinite(duration_s) and duration_s >= 0):
+            raise ValueError(
+                f"radio silence needs finite from_s and duration_s >= 0, got {from_s}, {duration_s}"
+            )
+        self._silence_from_s, self._silence_until_s = from_s, from_s + duration_s
+        logger.warning(
+            "vehicle %d: radio silence from t = %.2f s for %.2f s",
+            self._sysid,
+            from_s,
+            duration_s,
+        )
+
     def _on_datagram(self, link: _Link, data: bytes, addr: Address) -> None:
+        if self.radio_silent:
+            self.rejected["radio silence"] += 1
+            return
         # A fresh parser per datagram: UDP keeps packets whole, so nothing carries over and a
         # truncated or corrupt packet cannot swallow the next datagram.
-        parser = mavlink2.MAVLink(None, srcSystem=self._sysid, srcComponent=COMPONENT_ID)
-        parser.robust_parsing = True
+        # The parsers of a link share its signing state (key, streams' newest timestamps).
+        parser = new_parser(link.encoder)
+        refresh_signing_clock(parser)
         try:
             msgs = parser.parse_buffer(data) or []
         except Exception as exc:  # pymavlink raises on some malformed input even when robust
@@ -747,7 +807,10 @@ class Autopilot:
         mtype = msg.get_type()
         if mtype == "BAD_DATA":
             reason = str(msg.reason)
-            if "CRC" in reason:
+            refused = signature_failure(msg, link.encoder)
+            if refused is not None:
+                self._reject(refused, f"{packet_origin(bytes(msg.data))} from {addr}")
+            elif "CRC" in reason:
                 self._reject("bad_crc", f"{reason} from {addr}")
             elif "prefix" in reason.lower():
                 self._reject("garbage", f"{len(msg.data)} bytes from {addr}")

@@ -65,6 +65,30 @@ StartMode = Literal["immediate", "offboard"]
 
 
 @dataclass(frozen=True)
+class LinkOutage:
+    """Vehicle `vehicle`'s MAVLink radio is dead for `duration_s` simulation seconds from
+    `start_s` after mission start (slot 0)."""
+
+    vehicle: int
+    start_s: float
+    duration_s: float
+
+    @classmethod
+    def parse(cls, text: str) -> LinkOutage:
+        """`M:START:DURATION`, e.g. `1:20:5` (vehicle 1, 20 s into the mission, for 5 s)."""
+        parts = text.split(":")
+        try:
+            m, start, duration = int(parts[0]), float(parts[1]), float(parts[2])
+            if len(parts) != 3 or m < 0 or start < 0 or duration <= 0:
+                raise ValueError
+        except (ValueError, IndexError):
+            raise ValueError(
+                f"link outage {text!r}: expected VEHICLE:START_S:DURATION_S, e.g. 1:20:5"
+            ) from None
+        return cls(m, start, duration)
+
+
+@dataclass(frozen=True)
 class WorldOptions:
     """How to run the world. Times are simulation seconds unless marked wall.
 
@@ -82,6 +106,7 @@ class WorldOptions:
     initial_error: start the CV target at x0 + e, e ~ N(0, P0), so that the tracker's prior
     (mean x0, covariance P0) is honest; False starts it exactly at x0.
     geo_origin: geodetic position of the scenario origin (GPS of the simulated vehicles).
+    link_outages: scheduled MAVLink radio failures (fault injection, docs/reliability.md).
     """
 
     speed: float = 1.0
@@ -100,6 +125,7 @@ class WorldOptions:
     reflect_target: bool = True
     initial_error: bool = True
     geo_origin: GeoPoint = PX4_SITL_ORIGIN
+    link_outages: tuple[LinkOutage, ...] = ()
 
     def __post_init__(self) -> None:
         if math.isnan(self.speed) or self.speed <= 0:
@@ -154,7 +180,8 @@ def make_target(scenario: Scenario, options: WorldOptions, rng: np.random.Genera
 
 
 def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> AutopilotSettings:
-    """Vehicle m's settings: start point, flight altitude H, V_max, geofence = the area."""
+    """Vehicle m's settings: start point, flight altitude H, V_max, geofence = the area, and
+    the scenario's MAVLink signing key (None: signing off)."""
     start = scenario.uav_start_xy[m]
     return AutopilotSettings(
         index=m,
@@ -170,6 +197,7 @@ def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> Aut
         area_min_xy_m=(0.0, 0.0),
         area_max_xy_m=(float(scenario.area[0]), float(scenario.area[1])),
         max_altitude_m=max(500.0, 2.0 * scenario.H),
+        signing=scenario.mavlink_signing_key,
     )
 
 
@@ -198,6 +226,10 @@ class World:
         self.bus: ZenohBus | None = None
         self.emulator: SensingEmulator | None = None
         self.mission_t0_s: float | None = 0.0 if options.start == "immediate" else None
+        self._outages_scheduled = False
+        for outage in options.link_outages:
+            if not 0 <= outage.vehicle < scenario.M:
+                raise ValueError(f"link outage: no vehicle {outage.vehicle} (M = {scenario.M})")
         self._next_slot = 0
         self._next_clock_s = 0.0
         self._held_slot: int | None = None
@@ -259,6 +291,12 @@ class World:
         if self.mission_t0_s is None and self._ready_to_start():
             self.mission_t0_s = now_s
             log.info("mission start at t = %.2f s: all vehicles in offboard at altitude", now_s)
+        if self.mission_t0_s is not None and not self._outages_scheduled:
+            self._outages_scheduled = True
+            for outage in self.options.link_outages:
+                self.vehicles[outage.vehicle].silence_radio(
+                    self.mission_t0_s + outage.start_s, outage.duration_s
+                )
         self._run_due_slots(now_s)
         if now_s + _EPS_S >= self._next_clock_s:
             self._publish_clock(now_s)

@@ -22,7 +22,9 @@ class SlotConstraints:
 
     prev_xy [M, 2]: q_{n-1}; serving_bs_xy [M, 2]: w_{k_m} of the chosen association;
     bs_xy [K, 2]; target_xy [2]: predicted target position (14j); ballistic_xy [M, 2] and
-    accel_radius_m: when set, the vehicle-dynamics limit ||q - ballistic|| <= radius.
+    accel_radius_m: when set, the vehicle-dynamics limit ||q - ballistic|| <= radius;
+    keep_out_xy [L, 2]: vehicles outside this plan (e.g. one whose link is lost and that holds
+    where it is), from which every planned UAV keeps D_s as from another UAV (14i).
     """
 
     prev_xy: FloatArray
@@ -32,6 +34,7 @@ class SlotConstraints:
     scenario: Scenario
     ballistic_xy: FloatArray | None = None
     accel_radius_m: float = np.inf
+    keep_out_xy: FloatArray | None = None
 
     def full_rates(self, uav_xy: FloatArray) -> FloatArray:
         """R~ [..., M] of each UAV on its serving BS, bit/s."""
@@ -58,6 +61,9 @@ class SlotConstraints:
             i, j = _pairs(s.M)
             gaps = np.sqrt(_sq_norm(q[:, i] - q[:, j]))
             out["14i UAV separation"] = np.any(gaps < s.d_safe - tol_m, axis=1)
+        if self.keep_out_xy is not None and len(self.keep_out_xy):
+            gaps = np.sqrt(_sq_norm(q[:, :, None, :] - self.keep_out_xy[None, None]))
+            out["14i separation from unplanned UAVs"] = np.any(gaps < s.d_safe - tol_m, axis=(1, 2))
         return out
 
     def rate_violations(self, uav_xy: FloatArray, eta: FloatArray) -> BoolArray:
@@ -92,6 +98,9 @@ class SlotConstraints:
         if s.M > 1:
             others = np.delete(current_xy, m, axis=0)
             gaps = np.sqrt(_sq_norm(q[:, None, :] - others[None]))
+            bad |= np.any(gaps < s.d_safe, axis=1)
+        if self.keep_out_xy is not None and len(self.keep_out_xy):
+            gaps = np.sqrt(_sq_norm(q[:, None, :] - self.keep_out_xy[None]))
             bad |= np.any(gaps < s.d_safe, axis=1)
         return np.asarray(~bad)
 

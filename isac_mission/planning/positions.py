@@ -34,13 +34,19 @@ SOLVER_MARGIN_M = 1e-3
 class PositionSubproblem:
     """(P1.1.2) for M UAVs as a DPP problem; `solve` returns Q* [M, 2] or None if infeasible."""
 
-    def __init__(self, scenario: Scenario, solver: str, direct: bool = True) -> None:
+    def __init__(
+        self, scenario: Scenario, solver: str, direct: bool = True, n_keep_out: int = 0
+    ) -> None:
         """solver: a cvxpy SOCP solver name. direct: with CLARABEL, call clarabel directly on
         the same problem written in its conic form (`_solve_clarabel`), skipping cvxpy's
-        per-solve parameter mapping (several ms); other solvers always go through cvxpy."""
+        per-solve parameter mapping (several ms); other solvers always go through cvxpy.
+        n_keep_out: fixed points (vehicles outside this plan) every UAV keeps D_s from, as it
+        keeps D_s from the target (eq. 23 per point)."""
         s = scenario
         M = s.M
         self.scenario = s
+        self.n_keep_out = n_keep_out
+        n_points = 1 + n_keep_out  # the target, then the keep-out points
         self.solver = solver
         self.direct = direct and solver.upper() == "CLARABEL"
         self.Q = cp.Variable((M, 2))
@@ -49,8 +55,10 @@ class PositionSubproblem:
         self.serving = cp.Parameter((M, 2))
         self.radius = cp.Parameter(M, nonneg=True)
         self.control_bs = cp.Parameter((M, 2))
-        self.target_normal = cp.Parameter((M, 2))
-        self.target_rhs = cp.Parameter(M)
+        # Row p M + m: UAV m against point p (p = 0 the target).
+        self.target_normal = cp.Parameter((n_points * M, 2))
+        self.target_rhs = cp.Parameter(n_points * M)
+        select = np.tile(np.eye(M), (n_points, 1))
         self.ballistic = cp.Parameter((M, 2))
         self.accel_radius = cp.Parameter(M, nonneg=True)
         # Coordinates are centred on the UAVs' previous positions for solver conditioning.
@@ -58,7 +66,7 @@ class PositionSubproblem:
             cp.norm(self.Q - self.serving, 2, axis=1) <= self.radius,
             cp.norm(self.Q - self.control_bs, 2, axis=1) <= max(s.d_th - SOLVER_MARGIN_M, 0.0),
             cp.norm(self.Q - self.prev, 2, axis=1) <= s.v_max * s.dt - SOLVER_MARGIN_M,
-            cp.sum(cp.multiply(self.target_normal, self.Q), axis=1) >= self.target_rhs,
+            cp.sum(cp.multiply(self.target_normal, select @ self.Q), axis=1) >= self.target_rhs,
             cp.norm(self.Q - self.ballistic, 2, axis=1) <= self.accel_radius,
         ]
         self.pairs = np.array(np.triu_indices(M, 1)).T  # [P, 2]
@@ -79,17 +87,20 @@ class PositionSubproblem:
         """The fixed sparsity pattern of `_solve_clarabel`'s A, built once.
 
         Entries are listed in a fixed order (rows, cols); `_perm` maps that order to the CSC
-        order, so a solve only fills A.data. Rows: 14j (eq. 23) 0..M-1, 14i (eq. 22) M..M+P-1,
-        then four 3-d cones per UAV (19a serving disk, eq. 21 control disk, 14h, dynamics disk).
+        order, so a solve only fills A.data. Rows: 14j (eq. 23) 0..M-1 and the keep-out points
+        (the same form) M..(1+L)M-1, 14i (eq. 22) the next P, then four 3-d cones per UAV (19a
+        serving disk, eq. 21 control disk, 14h, dynamics disk).
         """
         M = self.scenario.M
         P = len(self.pairs)
         uav = np.arange(M)
-        rows: list[IntArray] = [uav, uav]
-        cols: list[IntArray] = [2 * uav, 2 * uav + 1]
-        n_lin = M
+        point_rows = np.arange((1 + self.n_keep_out) * M)
+        point_uav = np.tile(uav, 1 + self.n_keep_out)
+        rows: list[IntArray] = [point_rows, point_rows]
+        cols: list[IntArray] = [2 * point_uav, 2 * point_uav + 1]
+        n_lin = len(point_rows)
         if P:
-            pr = M + np.arange(P)
+            pr = n_lin + np.arange(P)
             i, j = self.pairs[:, 0], self.pairs[:, 1]
             rows += [pr, pr, pr, pr]
             cols += [2 * i, 2 * i + 1, 2 * j, 2 * j + 1]
@@ -143,12 +154,19 @@ class PositionSubproblem:
             v["ballistic"] = origin.ballistic_xy - c
             v["accel_radius"] = np.full(s.M, max(origin.accel_radius_m - SOLVER_MARGIN_M, 0.0))
         lin = lin_xy - c
-        tgt = origin.target_xy - c
+        points = origin.target_xy[None]
+        if self.n_keep_out:
+            keep_out = origin.keep_out_xy
+            if keep_out is None or len(keep_out) != self.n_keep_out:
+                raise ValueError(f"expected {self.n_keep_out} keep-out points, got {keep_out}")
+            points = np.vstack([points, keep_out])
         ds2 = (s.d_safe + SOLVER_MARGIN_M) ** 2
-        diff_t = lin - tgt[None]
+        # Row p M + m: lin_m - point_p.
+        diff_t = np.tile(lin, (len(points), 1)) - np.repeat(points - c, s.M, axis=0)
+        lin_rows = np.tile(lin, (len(points), 1))
         # ||q^r - u||^2 + 2 (q^r - u)^T (q - q^r) >= D_s^2  (eq. 23)
         v["target_normal"] = 2.0 * diff_t
-        v["target_rhs"] = ds2 - np.sum(diff_t**2, axis=1) + 2.0 * np.sum(diff_t * lin, axis=1)
+        v["target_rhs"] = ds2 - np.sum(diff_t**2, axis=1) + 2.0 * np.sum(diff_t * lin_rows, axis=1)
         if len(self.pairs):
             diff_p = lin[self.pairs[:, 0]] - lin[self.pairs[:, 1]]
             # 2 (q_i^r - q_j^r)^T (q_i - q_j) - ||q_i^r - q_j^r||^2 >= D_s^2  (eq. 22)

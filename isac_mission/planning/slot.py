@@ -39,7 +39,9 @@ class SlotInput:
     prev_xy [M, 2]: where the UAVs are (q_{n-1}); prev_eta [M]: last slot's shares;
     prev_assoc [M] or None: last slot's BS per UAV; x_pred [4]: predicted target state;
     J_pred [4, 4]: prior information of the bound at this slot; prev_velocity [M, 2] or None:
-    the vehicles' velocities now (used when planner.accel_limit_mps2 is set).
+    the vehicles' velocities now (used when planner.accel_limit_mps2 is set); keep_out_xy
+    [L, 2] or None: vehicles outside this plan that every planned UAV keeps D_s from (the kit
+    must be built with n_keep_out = L).
     """
 
     prev_xy: FloatArray
@@ -48,21 +50,24 @@ class SlotInput:
     x_pred: FloatArray
     J_pred: FloatArray
     prev_velocity: FloatArray | None = None
+    keep_out_xy: FloatArray | None = None
 
 
 class SolverKit:
     """The convex problems of one scenario, built once (DPP) and re-solved every slot."""
 
-    def __init__(self, scenario: Scenario, fast: bool = True) -> None:
+    def __init__(self, scenario: Scenario, fast: bool = True, n_keep_out: int = 0) -> None:
         """fast=False is the reference path (the planner before docs/performance.md): (P1.1.2)
         through cvxpy instead of a direct Clarabel call, (P1.2.1) by the cvxpy LP instead of its
         closed-form vertex, the association LP every slot, and the per-UAV line search on full
-        batches. Both paths solve the same problems; they differ by solver tolerance."""
+        batches. Both paths solve the same problems; they differ by solver tolerance.
+        n_keep_out: the number of keep-out points (SlotInput.keep_out_xy) each slot carries."""
         s = scenario
         self.scenario = s
         self.fast = fast
+        self.n_keep_out = n_keep_out
         self.sensing = SensingParams.from_scenario(s)
-        self.positions = PositionSubproblem(s, s.planner.solver, direct=fast)
+        self.positions = PositionSubproblem(s, s.planner.solver, direct=fast, n_keep_out=n_keep_out)
         self.shares = BandwidthSubproblem(s.M, "closed-form" if fast else "HIGHS")
         self.association = AssociationLP(s.M, s.K, s.n_a, shortcut=fast)
 
@@ -76,6 +81,8 @@ class SolverKit:
                 prev_assoc=None,
                 x_pred=s.x0,
                 J_pred=np.asarray(np.linalg.inv(s.P0), dtype=float),
+                # Far outside the area: present for the solver's shape, never binding.
+                keep_out_xy=np.full((self.n_keep_out, 2), -1e6) if self.n_keep_out else None,
             ),
             self,
             "proposed",
@@ -119,6 +126,9 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
     t0 = time.perf_counter()
     s = kit.scenario
     cfg = s.planner
+    n_keep_out = 0 if inp.keep_out_xy is None else len(inp.keep_out_xy)
+    if n_keep_out != kit.n_keep_out:
+        raise ValueError(f"{n_keep_out} keep-out points, but the kit is built for {kit.n_keep_out}")
     if cfg.association == "keep" and inp.prev_assoc is not None:
         assoc = inp.prev_assoc
     else:
@@ -144,6 +154,7 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         accel_radius_m=(cfg.accel_limit_mps2 or 0.0) * s.dt**2 / 4
         if ballistic is not None
         else np.inf,
+        keep_out_xy=inp.keep_out_xy if n_keep_out else None,
     )
     moves = method not in ("sd",)
     step = s.v_max * s.dt if moves else 0.0

@@ -62,7 +62,7 @@ from typing import Any, Final, Protocol
 
 import numpy as np
 
-from isac_mission.config import Scenario
+from isac_mission.config import MavlinkSigningKey, Scenario
 from isac_mission.errors import IsacError, LinkError, MessageError
 from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus
 from isac_mission.service.codec import (
@@ -92,6 +92,11 @@ log = logging.getLogger(__name__)
 
 MIN_WALL_PERIOD_S: Final = 0.001
 """Shortest wall sleep of a periodic loop (a very fast or unpaced simulation)."""
+
+TIMESTAMPS_KEPT: Final = 1024
+"""How many setpoint wall times, and first-setpoint times of plans, a bridge keeps for the
+timing figures: the latest ones, so that a long mission's memory does not grow with it
+(docs/reliability.md, "Soak")."""
 
 _MANUAL_MODES: Final = frozenset({"manual", "altctl", "posctl", "acro", "stabilized", "rattitude"})
 
@@ -472,6 +477,8 @@ class BridgeSettings:
         telemetry_rate_hz: Telemetry publication rate (simulation Hz).
         heartbeat_rate_hz: GCS HEARTBEAT rate (simulation Hz).
         link_lost_after_s: No vehicle HEARTBEAT for this long = link lost.
+        interruption_after_s: A gap this long in the vehicle's position stream is an
+            interruption (PX4's COM_OF_LOSS_T: the vehicle may have left OFFBOARD).
         arrive_tolerance_m: Horizontal distance to the start point counted as arrived.
         altitude_tolerance_m: |altitude - H| counted as at altitude.
         offboard_stream_s: How long setpoints stream before the OFFBOARD switch.
@@ -480,6 +487,8 @@ class BridgeSettings:
         command_timeout_s: Wall seconds to wait for a COMMAND_ACK per attempt.
         command_attempts: Attempts per command.
         connect_timeout_s: Wall seconds to wait for the vehicle's first heartbeat and position.
+        signing: MAVLink 2 signing key of the link (sign all, reject unsigned or badly signed;
+            `link.errors` counts them); None = no signing.
     """
 
     index: int = 0
@@ -497,6 +506,7 @@ class BridgeSettings:
     telemetry_rate_hz: float = 10.0
     heartbeat_rate_hz: float = 1.0
     link_lost_after_s: float = 3.0
+    interruption_after_s: float = 1.0
     arrive_tolerance_m: float = 1.0
     altitude_tolerance_m: float = 1.0
     offboard_stream_s: float = 1.0
@@ -505,6 +515,7 @@ class BridgeSettings:
     command_timeout_s: float = 1.0
     command_attempts: int = 3
     connect_timeout_s: float = 30.0
+    signing: MavlinkSigningKey | None = None
 
     def __post_init__(self) -> None:
         problems: list[str] = []
@@ -518,6 +529,7 @@ class BridgeSettings:
             "telemetry_rate_hz",
             "heartbeat_rate_hz",
             "link_lost_after_s",
+            "interruption_after_s",
             "arrive_tolerance_m",
             "altitude_tolerance_m",
             "phase_timeout_s",
@@ -562,6 +574,7 @@ class BridgeCounters:
     setpoints_sent: int = 0
     heartbeats_sent: int = 0
     link_losses: int = 0
+    link_interruptions: int = 0
     offboard_reentries: int = 0
     loop_errors: int = 0
     last_error: str = ""
@@ -629,16 +642,19 @@ class VehicleBridge:
             system_id=settings.vehicle_system_id,
             clock=time.now_s,
             lost_after_s=settings.link_lost_after_s,
+            signing=settings.signing,
             name=f"vehicle {settings.index}",
         )
         self.counters = BridgeCounters()
         self.phase = "idle"
         """idle, preparing, ready (flying the mission in offboard), hold, landing, landed."""
         self.plan_slot = -1
-        self.setpoint_wall_s: deque[float] = deque(maxlen=200_000)
-        """Wall times (time.monotonic) of the stream's periodic setpoints, for jitter figures."""
+        self.setpoint_wall_s: deque[float] = deque(maxlen=TIMESTAMPS_KEPT)
+        """Wall times (time.monotonic) of the stream's latest periodic setpoints (at most
+        TIMESTAMPS_KEPT), for jitter figures."""
         self.first_setpoint_wall_s: dict[int, float] = {}
-        """Plan slot -> wall time of the first setpoint sent for it (latency figures)."""
+        """Plan slot -> wall time of the first setpoint sent for it, for the latest
+        TIMESTAMPS_KEPT plans (latency figures)."""
         """The latest plan slot fed to this bridge (-1: none)."""
         self._origin = np.array(settings.origin_xy_m, dtype=float)
         self._altitude_m: float | None = None
@@ -651,6 +667,10 @@ class VehicleBridge:
         self._ever_ok = False
         self._tasks: list[asyncio.Task[None]] = []
         self._reentry: asyncio.Task[None] | None = None
+        self._last_position_s: float | None = None
+        self._reentry_watch_until_s = -math.inf
+        """After the vehicle's stream resumes from a gap, re-enter OFFBOARD until this time if
+        the vehicle reports the offboard-loss hold (the gap may be shorter than link loss)."""
         self._waypoints_set = 0  # set_waypoint calls, to notice plans arriving during prepare
 
     # -- lifecycle ---------------------------------------------------------------------------
@@ -954,8 +974,11 @@ class VehicleBridge:
             wall = time.monotonic()
             if periodic:
                 self.setpoint_wall_s.append(wall)
-            if self.plan_slot >= 0 and self.plan_slot not in self.first_setpoint_wall_s:
-                self.first_setpoint_wall_s[self.plan_slot] = wall
+            firsts = self.first_setpoint_wall_s
+            if self.plan_slot >= 0 and self.plan_slot not in firsts:
+                firsts[self.plan_slot] = wall
+                if len(firsts) > TIMESTAMPS_KEPT:
+                    del firsts[next(iter(firsts))]  # the oldest plan (insertion order)
 
     # -- internals: periodic loops -----------------------------------------------------------
 
@@ -991,7 +1014,12 @@ class VehicleBridge:
             self.counters.telemetry_published += 1
 
     def _supervise(self, st: VehicleStatus) -> None:
-        """Follow link-state transitions; after a loss, take the vehicle back to OFFBOARD."""
+        """Follow link-state transitions; after a loss, take the vehicle back to OFFBOARD.
+
+        A radio gap shorter than link loss but longer than PX4's offboard-loss timeout also
+        leaves the vehicle in hold: when its position stream resumes after such a gap, the
+        bridge re-enters OFFBOARD once the vehicle reports the hold."""
+        self._watch_interruptions(st)
         if st.lost == self._reported_lost:
             return
         self._reported_lost = st.lost
@@ -1012,6 +1040,30 @@ class VehicleBridge:
                 self._reentry = asyncio.create_task(
                     self._reenter_offboard(), name=f"bridge-{self.index}-reentry"
                 )
+
+    def _watch_interruptions(self, st: VehicleStatus) -> None:
+        now = self.time.now_s()
+        if st.position_s is not None:
+            last, self._last_position_s = self._last_position_s, st.position_s
+            if last is not None and st.position_s - last > self.settings.interruption_after_s:
+                log.warning(
+                    "vehicle %d: no position for %.1f s; link interrupted",
+                    self.index,
+                    st.position_s - last,
+                )
+                self.counters.link_interruptions += 1
+                self._reentry_watch_until_s = now + 3.0 * self.settings.interruption_after_s + 2.0
+        if (
+            now <= self._reentry_watch_until_s
+            and not st.lost
+            and st.mode != "offboard"
+            and self._want_offboard
+            and (self._reentry is None or self._reentry.done())
+        ):
+            self._reentry_watch_until_s = -math.inf
+            self._reentry = asyncio.create_task(
+                self._reenter_offboard(), name=f"bridge-{self.index}-reentry"
+            )
 
     async def _reenter_offboard(self) -> None:
         s = self.settings
@@ -1169,7 +1221,8 @@ class BridgeFleet:
     ) -> BridgeFleet:
         """M bridges for `scenario`: V_max, vehicle m on base_port + m with system id m + 1,
         local origins `origins_xy_m` (default: the scenario origin for all), start points and
-        altitude H for `prepare_all`; `overrides` go to every BridgeSettings."""
+        altitude H for `prepare_all`, the scenario's MAVLink signing key; `overrides` go to
+        every BridgeSettings."""
         if origins_xy_m is not None and len(origins_xy_m) != scenario.M:
             raise IsacError(f"origins_xy_m: {len(origins_xy_m)} origins for M = {scenario.M}")
         settings = [
@@ -1178,7 +1231,7 @@ class BridgeFleet:
                 base_port=base_port,
                 origin_xy_m=origins_xy_m[m] if origins_xy_m is not None else (0.0, 0.0),
                 v_max_mps=scenario.v_max,
-                **overrides,
+                **{"signing": scenario.mavlink_signing_key, **overrides},
             )
             for m in range(scenario.M)
         ]

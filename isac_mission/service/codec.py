@@ -26,8 +26,9 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Final
 
 import numpy as np
@@ -149,6 +150,28 @@ def loads(payload: bytes | bytearray | memoryview | str) -> dict[str, Any]:
     if not isinstance(obj, dict):
         raise MessageError(f"payload: expected a JSON object, got {type(obj).__name__}")
     return obj
+
+
+_PAYLOAD_REASONS: Final = (
+    ("bytes, more than", "payload too large"),
+    ("not UTF-8", "payload not UTF-8"),
+    ("is not allowed", "payload non-finite"),
+    ("not JSON", "payload not JSON"),
+    ("expected a JSON object", "payload not an object"),
+)
+_REASON_NAME_RE: Final = re.compile(r"[A-Za-z_][A-Za-z0-9_.\[\]]{0,63}")
+
+
+def rejection_reason(err: MessageError) -> str:
+    """A short, stable name for why a payload was refused, for counters: the field at fault
+    ("schema", "type", "detection.range_m", ...) or, for the payload as a whole, "payload too
+    large" (refused before parsing), "payload not UTF-8", "payload not JSON", "payload
+    non-finite" (a NaN/Infinity token) or "payload not an object". Anything unexpected is
+    "other", so that the set of names stays small whatever a sender puts in a payload."""
+    name, _, detail = str(err).partition(":")
+    if name == "payload":
+        return next((r for needle, r in _PAYLOAD_REASONS if needle in detail), "payload")
+    return name if _REASON_NAME_RE.fullmatch(name) else "other"
 
 
 def envelope(kind: str, slot: int, t_s: float) -> dict[str, Any]:
@@ -458,7 +481,8 @@ def decode_plan(
     """Validate a plan payload.
 
     Checks: assoc, bandwidth_share and waypoints_xy_m have the same length M (= n_uavs when
-    given, 1 <= M <= MAX_UAVS); assoc entries are BS indices in [0, n_bs); shares lie in [0, 1]
+    given, 1 <= M <= MAX_UAVS); assoc entries are BS indices in [0, n_bs), or -1 for a vehicle
+    outside the plan (link lost; its share must then be 0); shares lie in [0, 1]
     and sum to 1 within SHARE_SUM_TOL; waypoints are finite [M, 2]; objective is >= 0 or null;
     status is a non-empty string; solve_s >= 0. reason is optional ("" when absent).
     """
@@ -472,10 +496,13 @@ def decode_plan(
         raise MessageError(f"plan.assoc: {m} values, expected 1 to {MAX_UAVS}")
     hi_bs = (n_bs if n_bs is not None else 10 * MAX_UAVS) - 1
     assoc = np.array(
-        [check_int(v, f"plan.assoc[{i}]", lo=0, hi=hi_bs) for i, v in enumerate(assoc_raw)],
+        [check_int(v, f"plan.assoc[{i}]", lo=-1, hi=hi_bs) for i, v in enumerate(assoc_raw)],
         dtype=np.int64,
     )
     shares = get_vector(obj, "bandwidth_share", kind, length=m, lo=0.0, hi=1.0)
+    unserved = np.flatnonzero((assoc < 0) & (shares > 0))
+    if len(unserved):
+        raise MessageError(f"plan.assoc[{unserved[0]}]: -1 (no BS) with a share > 0")
     total = float(shares.sum())
     if abs(total - 1.0) > SHARE_SUM_TOL:
         raise MessageError(f"plan.bandwidth_share: sums to {total:.9g}, expected 1")
@@ -645,6 +672,8 @@ class HealthMsg:
     status: str
     counters: dict[str, int]
     last_error: str
+    vehicles: dict[int, str] = field(default_factory=dict)
+    """Vehicle index -> "active" or "excluded: <why>" (optional on the wire)."""
 
 
 def encode_health(msg: HealthMsg) -> bytes:
@@ -654,6 +683,7 @@ def encode_health(msg: HealthMsg) -> bytes:
         status=msg.status,
         counters={str(k): int(v) for k, v in msg.counters.items()},
         last_error=msg.last_error[:MAX_REASON_CHARS],
+        vehicles={str(m): state[:MAX_STATUS_CHARS] for m, state in msg.vehicles.items()},
     )
     data = dumps(obj)
     decode_health(data)
@@ -675,13 +705,68 @@ def decode_health(payload: bytes | bytearray | memoryview | str) -> HealthMsg:
         )
         for k, v in raw.items()
     }
+    vehicles: dict[int, str] = {}
+    raw_vehicles = obj.get("vehicles", {})
+    if not isinstance(raw_vehicles, dict) or len(raw_vehicles) > MAX_UAVS:
+        raise MessageError(f"{_where(kind, 'vehicles')}: expected an object of vehicle states")
+    for k, v in raw_vehicles.items():
+        if not str(k).isdigit() or not isinstance(v, str):
+            raise MessageError(f"{_where(kind, 'vehicles')}.{k}: expected index -> state string")
+        vehicles[int(k)] = v[:MAX_STATUS_CHARS]
     return HealthMsg(
         slot=slot,
         t_s=t_s,
         status=get_str(obj, "status", kind, max_chars=MAX_STATUS_CHARS),
         counters=counters,
         last_error=get_str(obj, "last_error", kind, max_chars=MAX_REASON_CHARS),
+        vehicles=vehicles,
     )
+
+
+# --------------------------------------------------------------------------- control
+
+
+CONTROL_PARAMS: Final = {"rate_min_mbps": (1e-3, 1e5)}
+"""Operator-settable planning parameters and their accepted ranges (`isac/<mission>/control`)."""
+
+
+@dataclass(frozen=True)
+class ControlMsg:
+    """An operator's command (`isac/<mission>/control`): set planning parameters from the next
+    planned slot on. params: name (CONTROL_PARAMS) -> value; rate_min_mbps is R_th in Mbit/s."""
+
+    slot: int
+    t_s: float
+    params: dict[str, float]
+
+
+def encode_control(msg: ControlMsg) -> bytes:
+    """Payload of `isac/<mission>/control`."""
+    obj = envelope("control", msg.slot, msg.t_s)
+    obj.update(command="set", params={k: float(v) for k, v in msg.params.items()})
+    data = dumps(obj)
+    decode_control(data)
+    return data
+
+
+def decode_control(payload: bytes | bytearray | memoryview | str) -> ControlMsg:
+    """Validate a control payload: command "set" and known parameters within their ranges."""
+    kind = "control"
+    obj, slot, t_s = open_envelope(payload, kind, min_slot=-1)
+    command = get_str(obj, "command", kind, max_chars=MAX_STATUS_CHARS)
+    if command != "set":
+        raise MessageError(f"control.command: {command!r} is not a command (expected 'set')")
+    raw = _require(obj, "params", kind)
+    if not isinstance(raw, dict) or not raw:
+        raise MessageError("control.params: expected a non-empty object")
+    params: dict[str, float] = {}
+    for name, value in raw.items():
+        if name not in CONTROL_PARAMS:
+            known = ", ".join(sorted(CONTROL_PARAMS))
+            raise MessageError(f"control.params.{name}: unknown parameter (known: {known})")
+        lo, hi = CONTROL_PARAMS[name]
+        params[name] = check_number(value, f"control.params.{name}", lo=lo, hi=hi)
+    return ControlMsg(slot=slot, t_s=t_s, params=params)
 
 
 AnyMsg = DetectionMsg | ClockMsg | TruthMsg | PlanMsg | TelemetryMsg | TrackMsg | HealthMsg

@@ -12,21 +12,25 @@ dropped and counted, never used twice. The trace is written and flushed slot by 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.experiment.trace import SlotRecord, TraceWriter, read_trace
-from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.planning.slot import Method, SolverKit, plan_slot
 from isac_mission.service.bus import Keys, Subscription, ZenohBus
 from isac_mission.service.codec import (
+    MAX_REASON_CHARS,
     DetectionMsg,
     HealthMsg,
     PlanMsg,
@@ -34,15 +38,18 @@ from isac_mission.service.codec import (
     TrackMsg,
     collect_detections,
     decode_clock,
+    decode_control,
     decode_detection,
     decode_telemetry,
     decode_truth,
     encode_health,
     encode_plan,
     encode_track,
+    rejection_reason,
 )
+from isac_mission.service.fleet_plan import Planner, PlanningJob
 from isac_mission.service.mission import MissionState
-from isac_mission.types import FloatArray, Gaussian
+from isac_mission.types import FloatArray, Gaussian, SlotPlan
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +61,15 @@ class GroundSettings:
     slot boundary before a partial update; detection_wall_wait_s: the same bound in wall seconds,
     counted from the first detection of the slot (for a held or stalled clock);
     telemetry_max_age_s: older telemetry is not used as a UAV position; trace_config: entries
-    that override or extend the trace's config line."""
+    that override or extend the trace's config line.
+
+    Faults (docs/reliability.md): plan_budget_s: wall seconds a slot's planning may take (None:
+    no limit); past it the slot's plan is "hold" (status "timeout") and the next slot plans
+    normally. vehicle_lost_after_s (simulation) and vehicle_lost_wall_s (wall): a vehicle whose
+    telemetry position is older than both, or whose bridge reports its link lost, is planned
+    around (fleet_plan.py) until its link is back and it is in OFFBOARD again.
+    plan_rate_factor: the planner's R_th margin, applied to an operator's new R_th too.
+    planner: the per-slot planning function (plan_slot; replaceable to inject faults)."""
 
     method: Method = "proposed"
     trace_path: Path | None = None
@@ -63,6 +78,11 @@ class GroundSettings:
     detection_wall_wait_s: float = 2.0
     telemetry_max_age_s: float = 1.0
     trace_config: dict[str, object] = field(default_factory=dict)
+    plan_budget_s: float | None = 1.0
+    vehicle_lost_after_s: float = 1.5
+    vehicle_lost_wall_s: float = 1.0
+    plan_rate_factor: float = 1.0
+    planner: Planner = plan_slot
 
 
 @dataclass
@@ -117,6 +137,11 @@ class GroundLoop:
         self.telemetry: dict[int, TelemetryMsg] = {}
         self.truth: dict[int, FloatArray] = {}
         self.done = asyncio.Event()
+        self.excluded: dict[int, str] = {}
+        """Vehicles planned around, with the reason."""
+        self.telemetry_fresh_wall: dict[int, float] = {}
+        """Vehicle -> wall time (time.monotonic) its telemetry position last advanced."""
+        self.planning: asyncio.Task[None] | None = None
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -158,6 +183,8 @@ class GroundLoop:
                 await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
                 for task in (*waiters, pump, ticker):
                     task.cancel()
+                if self.planning is not None:
+                    self.planning.cancel()
         finally:
             sub.close()
             if self.writer is not None:
@@ -172,6 +199,7 @@ class GroundLoop:
             "truth": self._on_truth,
             "detections": self._on_detection,
             "telemetry": self._on_telemetry,
+            "control": self._on_control,
         }
         async for key, payload in sub:
             kind = key.removeprefix(prefix).split("/", 1)[0]
@@ -185,16 +213,22 @@ class GroundLoop:
             self._advance()
 
     async def _wall_ticker(self) -> None:
-        """Wakes the loop so that a wall-clock detection deadline can pass without traffic."""
+        """Wakes the loop so that a wall-clock deadline can pass without traffic."""
         while True:
             await asyncio.sleep(0.05)
+            self._update_vehicle_states()
             self._advance()
 
     def _reject(self, err: MessageError) -> None:
-        reason = str(err).split(":", 1)[0]
-        self.report.counters[f"rejected {reason}"] += 1
-        self.report.last_error = str(err)
-        log.warning("dropped message: %s", err)
+        """Count an invalid payload under "rejected <reason>" (codec.rejection_reason), keep its
+        message as the last error, and log it (the first few of each reason, then every 100th:
+        a flood of garbage must not turn into a flood of log lines)."""
+        name = f"rejected {rejection_reason(err)}"
+        self.report.counters[name] += 1
+        self.report.last_error = str(err)[:MAX_REASON_CHARS]
+        n = self.report.counters[name]
+        if n <= 5 or n % 100 == 0:
+            log.warning("dropped message (%s #%d): %s", name, n, self.report.last_error)
 
     # ------------------------------------------------------------------ inputs
 
@@ -226,7 +260,49 @@ class GroundLoop:
 
     def _on_telemetry(self, payload: bytes) -> None:
         msg = decode_telemetry(payload, n_uavs=self.s.M)
+        last = self.telemetry.get(msg.uav)
+        if last is None or msg.t_s > last.t_s:
+            self.telemetry_fresh_wall[msg.uav] = time.monotonic()
         self.telemetry[msg.uav] = msg
+        self._update_vehicle_states()
+
+    def _on_control(self, payload: bytes) -> None:
+        msg = decode_control(payload)
+        r_th_mbps = msg.params["rate_min_mbps"]
+        new = self.state.scenario.with_changes(
+            r_th=r_th_mbps * 1e6 * self.settings.plan_rate_factor
+        )
+        self.state.set_scenario(new)
+        self.s = new
+        self.report.counters["operator commands"] += 1
+        log.warning("operator: R_th = %.3f Mbit/s from slot %d on", r_th_mbps, self.state.slot + 2)
+        self._publish_health("running")
+
+    def _update_vehicle_states(self) -> None:
+        """Exclude a vehicle whose link is lost or whose telemetry is stale; re-admit it once
+        its link is back, its telemetry fresh and it is in OFFBOARD again."""
+        now = time.monotonic()
+        changed = False
+        for m, tel in self.telemetry.items():
+            age_s = self.t_s - tel.t_s
+            stale = (
+                age_s > self.settings.vehicle_lost_after_s
+                and now - self.telemetry_fresh_wall.get(m, now) > self.settings.vehicle_lost_wall_s
+            )
+            if m not in self.excluded and (tel.link == "lost" or stale):
+                why = "link lost" if tel.link == "lost" else f"telemetry {age_s:.1f} s old"
+                self.excluded[m] = why
+                self.report.counters["vehicle exclusions"] += 1
+                self.report.last_error = f"vehicle {m}: {why}; planning around it"
+                log.warning("vehicle %d: %s; planning the others around it", m, why)
+                changed = True
+            elif m in self.excluded and tel.link == "ok" and not stale and tel.mode == "offboard":
+                del self.excluded[m]
+                self.report.counters["vehicle readmissions"] += 1
+                log.warning("vehicle %d: link back and in OFFBOARD; planning it again", m)
+                changed = True
+        if changed:
+            self._publish_health("running")
 
     def _on_truth(self, payload: bytes) -> None:
         msg = decode_truth(payload)
@@ -239,12 +315,9 @@ class GroundLoop:
         xy = np.array(det_xy, dtype=float) if det_xy is not None else np.full((self.s.M, 2), np.nan)
         for m in range(self.s.M):
             tel = self.telemetry.get(m)
-            if (
-                tel is not None
-                and tel.link == "ok"
-                and self.t_s - tel.t_s <= self.settings.telemetry_max_age_s
-            ):
-                xy[m] = tel.position_xy_m
+            fresh = tel is not None and self.t_s - tel.t_s <= self.settings.telemetry_max_age_s
+            if tel is not None and ((fresh and tel.link == "ok") or m in self.excluded):
+                xy[m] = tel.position_xy_m  # an excluded vehicle holds where it was last seen
         if np.any(~np.isfinite(xy)):
             last = self.state.pending.plan.uav_xy_m if self.state.pending else None
             fallback = (
@@ -260,14 +333,19 @@ class GroundLoop:
         return xy
 
     def _advance(self) -> None:
-        """Process every slot that is ready; plan slot 1 once the mission has started."""
-        if self.done.is_set():
+        """Process every slot that is ready; plan slot 1 once the mission has started. Nothing
+        moves while a plan is being made (slot n+1 needs plan n+1's prediction)."""
+        if self.done.is_set() or self.planning is not None:
             return
         if self.state.pending is None and self.state.slot == 0 and self.mission_t0_s is not None:
-            self._plan_and_publish(self._uav_positions(), latency_from=None)
-        while self.state.pending is not None and self._slot_ready(self.state.pending.slot):
+            self._start_planning(self._uav_positions(), latency_from=None, record=None)
+        while (
+            self.planning is None
+            and self.state.pending is not None
+            and self._slot_ready(self.state.pending.slot)
+        ):
             self._process_slot(self.state.pending.slot)
-        if self.state.done:
+        if self.state.done and self.planning is None:
             self.done.set()
 
     def _slot_ready(self, n: int) -> bool:
@@ -314,11 +392,20 @@ class GroundLoop:
                 )
             ),
         )
-        latency = 0.0
-        if not self.state.done:
-            latency = self._plan_and_publish(self._uav_positions(det.uav_xy_m), latency_from)
+        if self.state.done:
+            self._complete_record(record, truth, 0.0)
+        else:
+            self._start_planning(self._uav_positions(det.uav_xy_m), latency_from, (record, truth))
+
+    def _complete_record(
+        self, record: SlotRecord, truth: FloatArray | None, latency: float
+    ) -> None:
+        """Slot n is done once plan n+1 is out: trace line, counters, health, on_slot."""
+        extra: dict[str, object] = {"latency_ms": latency * 1e3}
+        if self.excluded:
+            extra["excluded"] = sorted(self.excluded)
+        record = SlotRecord.from_dict(record.to_dict() | extra)
         if self.writer is not None:
-            record = SlotRecord.from_dict(record.to_dict() | {"latency_ms": latency * 1e3})
             self.writer.write_slot(record)
         self.report.records.append(record)
         self.report.counters["slots"] += 1
@@ -340,16 +427,64 @@ class GroundLoop:
                 v[m] = tel.velocity_xy_mps
         return v
 
-    def _plan_and_publish(self, uav_xy: FloatArray, latency_from: float | None) -> float:
-        pending = self.state.plan_next(uav_xy, self._uav_velocities())
+    def _start_planning(
+        self,
+        uav_xy: FloatArray,
+        latency_from: float | None,
+        record: tuple[SlotRecord, FloatArray | None] | None,
+    ) -> None:
+        """Plan the next slot on the planner thread, within the time budget; then publish it
+        and complete `record` (the slot just processed, with its truth)."""
+        self._update_vehicle_states()
+        job = self.state.next_job(uav_xy, self._uav_velocities(), tuple(self.excluded))
+        self.planning = asyncio.get_running_loop().create_task(
+            self._plan(job, latency_from, record), name=f"plan-{job.slot}"
+        )
+
+    async def _plan(
+        self,
+        job: PlanningJob,
+        latency_from: float | None,
+        record: tuple[SlotRecord, FloatArray | None] | None,
+    ) -> None:
+        t0 = time.perf_counter()
+        budget = self.settings.plan_budget_s
+        future = _in_daemon_thread(lambda: job.run(self.settings.planner), f"plan-{job.slot}")
+        try:
+            plan = await asyncio.wait_for(asyncio.shield(future), budget)
+        except TimeoutError:
+            self.report.counters["plans timed out"] += 1
+            why = f"timeout: planning took longer than the {budget:g} s budget; hold"
+            plan = job.hold(why, "timeout", solve_s=time.perf_counter() - t0)
+            future.add_done_callback(_consume_result)
+            # The late thread keeps its kit; the next slot plans on fresh ones.
+            self.state.renew_kits()
+        except Exception as err:  # any planner failure: fall back, say why, go on
+            self.report.counters["planner errors"] += 1
+            why = f"solver error: {type(err).__name__}: {err}"
+            plan = job.fallback_after_error(why, time.perf_counter() - t0)
+        self.planning = None
+        self._finish_planning(job, plan, latency_from, record)
+        self._advance()
+
+    def _finish_planning(
+        self,
+        job: PlanningJob,
+        plan: SlotPlan,
+        latency_from: float | None,
+        record: tuple[SlotRecord, FloatArray | None] | None,
+    ) -> None:
+        pending = self.state.commit(job, plan)
         self.bus.publish(self.keys.plan, encode_plan(PlanMsg(pending.slot, self.t_s, pending.plan)))
-        if pending.plan.report.status != "ok":
-            log.warning("slot %d: %s", pending.slot, pending.plan.report.reason)
-        if latency_from is None:
-            return 0.0
-        latency = time.monotonic() - latency_from
-        self.report.latencies_s.append(latency)
-        return latency
+        if plan.report.status != "ok":
+            self.report.last_error = f"slot {pending.slot}: {plan.report.reason}"
+            log.warning("slot %d: %s", pending.slot, plan.report.reason)
+        latency = 0.0
+        if latency_from is not None:
+            latency = time.monotonic() - latency_from
+            self.report.latencies_s.append(latency)
+        if record is not None:
+            self._complete_record(record[0], record[1], latency)
 
     def _publish_health(self, status: str) -> None:
         try:
@@ -362,8 +497,46 @@ class GroundLoop:
                         status,
                         dict(self.report.counters),
                         self.report.last_error,
+                        {
+                            m: f"excluded: {self.excluded[m]}" if m in self.excluded else "active"
+                            for m in range(self.s.M)
+                        },
                     )
                 ),
             )
         except Exception as err:  # the bus may already be closing at shutdown
             log.debug("health not published: %s", err)
+
+
+def _in_daemon_thread(fn: Callable[[], SlotPlan], name: str) -> asyncio.Future[SlotPlan]:
+    """Run fn on a new daemon thread; its result as a future of the running loop. A daemon
+    thread, so that a planner that never returns cannot keep the process from exiting."""
+    loop = asyncio.get_running_loop()
+    future: asyncio.Future[SlotPlan] = loop.create_future()
+
+    def settle(result: SlotPlan | None, error: BaseException | None) -> None:
+        if future.done():
+            return
+        if error is not None:
+            future.set_exception(error)
+        else:
+            future.set_result(cast(SlotPlan, result))
+
+    def target() -> None:
+        try:
+            result = fn()
+        except BaseException as err:  # delivered to the loop, which decides
+            with contextlib.suppress(RuntimeError):  # the loop may be closed by now
+                loop.call_soon_threadsafe(settle, None, err)
+            return
+        with contextlib.suppress(RuntimeError):
+            loop.call_soon_threadsafe(settle, result, None)
+
+    threading.Thread(target=target, name=name, daemon=True).start()
+    return future
+
+
+def _consume_result(future: asyncio.Future[SlotPlan]) -> None:
+    """Retrieve a timed-out plan's late result or error, so that asyncio does not log it."""
+    if not future.cancelled():
+        future.exception()

@@ -14,7 +14,7 @@ import contextlib
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +23,8 @@ from isac_mission.config import Scenario
 from isac_mission.errors import IsacError
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.service.bridge import BridgeFleet, ClockSimTime
-from isac_mission.service.bus import DEFAULT_ENDPOINT, BusSettings, ZenohBus
+from isac_mission.service.bus import ZenohBus
+from isac_mission.service.bus_security import default_endpoint, secured_settings
 from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings, SlotEvent
 
 log = logging.getLogger(__name__)
@@ -33,7 +34,8 @@ log = logging.getLogger(__name__)
 class LiveOptions:
     """speed: simulation seconds per wall second; lockstep: the world waits for each slot's plan;
     method: planning strategy; seed: world noise seed (None: the scenario's); out_dir: trace and
-    plots; zenoh_endpoint: where the ground loop listens (the world and observers connect);
+    plots; zenoh_endpoint: where the ground loop listens (the world and observers connect; None:
+    `tcp/127.0.0.1:7447`, or `tls/...` when the scenario's security.zenoh has TLS on);
     mavlink_base_port / gcs_base_port: vehicle m's offboard / ground-station ports (base + m);
     resume: continue an existing trace (serve); plan_speed_fraction: the planner's speed budget
     as a fraction of V_max, the headroom a vehicle with finite acceleration needs to be at each
@@ -48,7 +50,7 @@ class LiveOptions:
     method: Method = "proposed"
     seed: int | None = None
     out_dir: Path = Path("out/run")
-    zenoh_endpoint: str = DEFAULT_ENDPOINT
+    zenoh_endpoint: str | None = None
     zenoh_connect: tuple[str, ...] = ()
     mavlink_base_port: int = 14540
     gcs_base_port: int = 14550
@@ -57,6 +59,8 @@ class LiveOptions:
     plan_rate_factor: float = 1.05
     plan_safety_margin_m: float = 10.0
     plan_accel_fraction: float = 0.8
+    link_outages: tuple[str, ...] = ()
+    """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S` (sim.world)."""
 
     @property
     def trace_path(self) -> Path:
@@ -72,9 +76,11 @@ class LiveResult:
     phases: dict[str, float] = field(default_factory=dict)
     fleet_counters: dict[str, int] = field(default_factory=dict)
     detection_to_setpoint_s: list[float] = field(default_factory=list)
-    """Per slot n: wall time from slot n's last detection to the first setpoint of plan n+1."""
+    """Per slot n: wall time from slot n's last detection to the first setpoint of plan n+1
+    (the latest bridge.TIMESTAMPS_KEPT plans of a long mission)."""
     setpoint_periods_s: dict[int, list[float]] = field(default_factory=dict)
-    """Per vehicle: wall intervals between the stream's periodic setpoints during the mission."""
+    """Per vehicle: wall intervals between the stream's periodic setpoints during the mission
+    (its latest bridge.TIMESTAMPS_KEPT setpoints)."""
 
 
 def planning_scenario(s: Scenario, opts: LiveOptions) -> Scenario:
@@ -115,6 +121,7 @@ async def _fly_mission(
             method=opts.method,
             trace_path=opts.trace_path,
             resume=opts.resume,
+            plan_rate_factor=opts.plan_rate_factor,
             # The trace states the vehicles' real limit; the planner's budget goes beside it.
             trace_config={
                 "v_max": s.v_max,
@@ -162,6 +169,9 @@ async def _fly_mission(
                 "plans applied": c.plans_applied,
                 "plans invalid": c.plans_invalid,
                 "vehicles landed": sum(b.phase == "landed" for b in fleet.bridges),
+                "link losses": sum(b.counters.link_losses for b in fleet.bridges),
+                "link interruptions": sum(b.counters.link_interruptions for b in fleet.bridges),
+                "offboard re-entries": sum(b.counters.offboard_reentries for b in fleet.bridges),
             }
     return result
 
@@ -203,19 +213,26 @@ async def run_embedded(
     on_status: Callable[[str], None] | None = None,
 ) -> LiveResult:
     """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh."""
-    from sim.world import WorldOptions, run_world
+    from sim.world import LinkOutage, WorldOptions, run_world
 
     world_stop = asyncio.Event()
+    zenoh_cfg, endpoint = s.security.zenoh, _endpoint(s, opts)
+    hub = secured_settings(zenoh_cfg, s.mission_id, "ground", listen=(endpoint,))
+    # The world logs in as the world role, with its password from the hub's own users file.
+    world_bus = secured_settings(
+        zenoh_cfg, s.mission_id, "world", connect=(endpoint,), login_from_users_file=True
+    )
     world_opts = WorldOptions(
         speed=opts.speed,
         lockstep=opts.lockstep,
         seed=opts.seed,
-        bus=BusSettings(connect=(opts.zenoh_endpoint,)),
+        bus=world_bus,
         mavlink_base_port=opts.mavlink_base_port,
         gcs_base_port=opts.gcs_base_port,
         start="offboard",
+        link_outages=tuple(LinkOutage.parse(text) for text in opts.link_outages),
     )
-    with ZenohBus.open(BusSettings.hub(opts.zenoh_endpoint)) as bus:
+    with ZenohBus.open(hub) as bus:
         world = asyncio.create_task(run_world(s, world_opts, world_stop))
         try:
             return await _fly_mission(s, opts, bus, stop, on_slot, on_status)
@@ -232,9 +249,20 @@ async def run_serve(
     on_status: Callable[[str], None] | None = None,
 ) -> LiveResult:
     """Bridges and ground loop only: the world (or vehicles and sensing) runs elsewhere."""
-    settings = replace(BusSettings.hub(opts.zenoh_endpoint), connect=opts.zenoh_connect)
+    settings = secured_settings(
+        s.security.zenoh,
+        s.mission_id,
+        "ground",
+        listen=(_endpoint(s, opts),),
+        connect=opts.zenoh_connect,
+    )
     with ZenohBus.open(settings) as bus:
         return await _fly_mission(s, opts, bus, stop, on_slot, on_status)
+
+
+def _endpoint(s: Scenario, opts: LiveOptions) -> str:
+    """Where the ground loop listens: the option, else the default for the scenario's security."""
+    return opts.zenoh_endpoint or default_endpoint(s.security.zenoh)
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.experiment.trace import SlotRecord
 from isac_mission.model.kinematics import process_noise, transition_matrix
-from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.service.fleet_plan import KitCache, PlanningJob
 from isac_mission.tracking.ekf import ekf_predict, ekf_update
 from isac_mission.tracking.pcrb import Bound, bound_step, predict_information, scaled_inverse
 from isac_mission.types import Detections, FloatArray, Gaussian, IntArray, SlotPlan
@@ -45,6 +46,7 @@ class MissionState:
         self.eta: FloatArray = np.full(s.M, 1.0 / s.M)
         self.assoc: IntArray | None = None
         self.pending: PendingSlot | None = None
+        self.kits = KitCache(kit)
 
     @classmethod
     def resumed(cls, s: Scenario, kit: SolverKit, method: Method, last: SlotRecord) -> MissionState:
@@ -60,21 +62,56 @@ class MissionState:
     def done(self) -> bool:
         return self.slot >= self.scenario.N
 
-    def plan_next(self, uav_xy: FloatArray, uav_v: FloatArray | None = None) -> PendingSlot:
-        """Predict slot n+1 and plan it from the UAVs' current positions uav_xy [M, 2] (and
-        velocities uav_v [M, 2], for a dynamics-aware planner)."""
+    def next_job(
+        self,
+        uav_xy: FloatArray,
+        uav_v: FloatArray | None = None,
+        excluded: tuple[int, ...] = (),
+    ) -> PlanningJob:
+        """Predict slot n+1: the planning job from the UAVs' current positions uav_xy [M, 2]
+        (and velocities uav_v [M, 2], for a dynamics-aware planner), planning without the
+        `excluded` vehicles (fleet_plan.py). Nothing changes until `commit`."""
         prediction = ekf_predict(self.belief, self.F, self.W)
         J_pred = predict_information(self.bound, self.F, self.W)
         prior = J_pred if self.scenario.bound_prior == "pcrb" else scaled_inverse(prediction.P)
-        plan = plan_slot(
-            SlotInput(
-                np.asarray(uav_xy, dtype=float), self.eta, self.assoc, prediction.x, prior, uav_v
-            ),
-            self.kit,
-            self.method,
+        return PlanningJob(
+            slot=self.slot + 1,
+            method=self.method,
+            kits=self.kits,
+            uav_xy=np.asarray(uav_xy, dtype=float),
+            uav_v=None if uav_v is None else np.asarray(uav_v, dtype=float),
+            prev_eta=self.eta,
+            prev_assoc=self.assoc,
+            prediction=prediction,
+            J_pred=prior,
+            excluded=tuple(sorted(excluded)),
         )
-        self.pending = PendingSlot(self.slot + 1, prediction, plan)
+
+    def commit(self, job: PlanningJob, plan: SlotPlan) -> PendingSlot:
+        """Adopt `plan` (from job.run(), or a fallback) as the plan of slot n+1."""
+        if job.slot != self.slot + 1:
+            raise ValueError(f"job for slot {job.slot}, but the next slot is {self.slot + 1}")
+        self.pending = PendingSlot(job.slot, job.prediction, plan)
         return self.pending
+
+    def plan_next(
+        self, uav_xy: FloatArray, uav_v: FloatArray | None = None, excluded: tuple[int, ...] = ()
+    ) -> PendingSlot:
+        """next_job, run and commit in one call."""
+        job = self.next_job(uav_xy, uav_v, excluded)
+        return self.commit(job, job.run())
+
+    def renew_kits(self) -> None:
+        """Plan on fresh solver kits from now on (a timed-out planner thread keeps the old)."""
+        self.kit = SolverKit(self.scenario, fast=self.kit.fast)
+        self.kits = KitCache(self.kit)
+
+    def set_scenario(self, s: Scenario) -> None:
+        """Plan from now on with `s` (e.g. an operator's new R_th); same M and geometry."""
+        if s.M != self.scenario.M:
+            raise ValueError(f"the new scenario has M = {s.M}, the mission {self.scenario.M}")
+        self.scenario = s
+        self.renew_kits()
 
     def process(self, det: Detections, eta_used: FloatArray, fallback_xy: FloatArray) -> SlotRecord:
         """Fold in slot n's detections (NaN = missing: a partial update) and advance the bound.
@@ -89,8 +126,9 @@ class MissionState:
         uav_xy = np.where(np.isfinite(det.uav_xy_m), det.uav_xy_m, fallback_xy)
         pred = pending.prediction
         z = np.concatenate([det.range_m, det.radial_velocity_mps])
-        r_diag = sens.variances(np.linalg.norm(pred.x[None, :2] - uav_xy, axis=1), eta_used)
-        r_used = np.where(np.isfinite(z), r_diag, np.nan)
+        with np.errstate(divide="ignore"):  # eta = 0: a vehicle outside the plan senses nothing
+            r_diag = sens.variances(np.linalg.norm(pred.x[None, :2] - uav_xy, axis=1), eta_used)
+        r_used = np.where(np.isfinite(z) & np.isfinite(r_diag), r_diag, np.nan)
         self.belief = ekf_update(pred, z, uav_xy, r_used, self.scenario.ekf_iterations)
         self.bound = bound_step(self.bound, self.F, self.W, pred.x, uav_xy, r_used)
         self.slot = det.slot

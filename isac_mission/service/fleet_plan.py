@@ -1,0 +1,159 @@
+"""One slot's planning for the vehicles that can follow a plan, without I/O.
+
+A vehicle whose link is lost (or whose telemetry went stale) still flies: it holds where it was
+last seen. The slot is then planned for the others only: association, bandwidth and positions
+over the active vehicles (a planner kit for that sub-fleet, built once per set and cached), with
+the excluded vehicles' last known positions as keep-out points (D_s, like 14i). The plan is then
+widened back to all M vehicles: an excluded vehicle gets its hold position as waypoint, no
+bandwidth (eta = 0, so it takes no measurement) and no BS (-1).
+
+`PlanningJob.run` may be called on a worker thread (the ground loop's time budget); it touches
+nothing but the job and its kit. `hold` is the plan of last resort: no solver at all.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.tracking.pcrb import PlanningObjective
+from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan, SolveReport
+
+NO_BS = -1
+"""bs_of_uav of a vehicle outside the plan."""
+
+Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
+
+
+class KitCache:
+    """Solver kits per set of active vehicles (the full fleet's kit is given)."""
+
+    def __init__(self, full: SolverKit) -> None:
+        self.full = full
+        self._kits: dict[tuple[int, ...], SolverKit] = {}
+
+    @property
+    def scenario(self) -> Scenario:
+        return self.full.scenario
+
+    def for_active(self, active: tuple[int, ...]) -> SolverKit:
+        """The kit planning `active` (sorted vehicle indices) with the others as keep-out points.
+        Built and warmed up on first use (a few hundred ms), then reused."""
+        s = self.full.scenario
+        if len(active) == s.M:
+            return self.full
+        kit = self._kits.get(active)
+        if kit is None:
+            idx = list(active)
+            sub = s.with_changes(M=len(idx), uav_start_xy=s.uav_start_xy[idx])
+            kit = SolverKit(sub, fast=self.full.fast, n_keep_out=s.M - len(idx))
+            kit.warm_up()
+            self._kits[active] = kit
+        return kit
+
+
+@dataclass(frozen=True)
+class PlanningJob:
+    """Everything needed to plan slot `slot` (arrays over all M vehicles).
+
+    uav_xy [M, 2], uav_v [M, 2]: positions and velocities now (m, m/s); prev_eta [M];
+    prev_assoc [M] or None; prediction: the predicted target for the slot; J_pred [4, 4]: the
+    bound's prior information; excluded: vehicles outside the plan (sorted).
+    """
+
+    slot: int
+    method: Method
+    kits: KitCache
+    uav_xy: FloatArray
+    uav_v: FloatArray | None
+    prev_eta: FloatArray
+    prev_assoc: IntArray | None
+    prediction: Gaussian
+    J_pred: FloatArray
+    excluded: tuple[int, ...] = ()
+
+    @property
+    def active(self) -> tuple[int, ...]:
+        M = self.kits.scenario.M
+        return tuple(m for m in range(M) if m not in self.excluded)
+
+    def run(self, planner: Planner = plan_slot) -> SlotPlan:
+        """Plan the active vehicles and widen the plan to all of them (see the module doc)."""
+        active = self.active
+        if not active:
+            return self.hold("hold: no vehicle can follow a plan (all excluded)", "no vehicles")
+        idx = list(active)
+        kit = self.kits.for_active(active)
+        eta = self.prev_eta[idx]
+        eta = eta / eta.sum() if eta.sum() > 0 else np.full(len(idx), 1.0 / len(idx))
+        assoc = None if self.prev_assoc is None else self.prev_assoc[idx]
+        if assoc is not None and np.any(assoc < 0):
+            assoc = None
+        inp = SlotInput(
+            prev_xy=self.uav_xy[idx],
+            prev_eta=eta,
+            prev_assoc=assoc,
+            x_pred=self.prediction.x,
+            J_pred=self.J_pred,
+            prev_velocity=None if self.uav_v is None else self.uav_v[idx],
+            keep_out_xy=self.uav_xy[list(self.excluded)] if self.excluded else None,
+        )
+        plan = planner(inp, kit, self.method)
+        if not self.excluded:
+            return plan
+        return self._widen(plan, idx)
+
+    def _widen(self, sub: SlotPlan, idx: list[int]) -> SlotPlan:
+        M = self.kits.scenario.M
+        xy = np.array(self.uav_xy, dtype=float)
+        xy[idx] = sub.uav_xy_m
+        eta = np.zeros(M)
+        eta[idx] = sub.bandwidth_share
+        assoc = np.full(M, NO_BS, dtype=np.int64)
+        assoc[idx] = sub.bs_of_uav
+        note = f"vehicles {list(self.excluded)} excluded (link lost), holding"
+        reason = f"{sub.report.reason}; {note}" if sub.report.reason else note
+        return SlotPlan(xy, assoc, eta, sub.pcrb_trace, replace(sub.report, reason=reason))
+
+    def hold(self, reason: str, status: str, solve_s: float = 0.0) -> SlotPlan:
+        """Every vehicle holds where it is, with last slot's shares and association (a plan that
+        needs no solver; its bound is evaluated for the record)."""
+        M = self.kits.scenario.M
+        eta = np.array(self.prev_eta, dtype=float)
+        eta[list(self.excluded)] = 0.0
+        eta = eta / eta.sum() if eta.sum() > 0 else np.full(M, 1.0 / M)
+        assoc = (
+            np.array(self.prev_assoc, dtype=np.int64)
+            if self.prev_assoc is not None
+            else np.full(M, NO_BS, dtype=np.int64)
+        )
+        objective = PlanningObjective(self.J_pred, self.prediction.x, self.kits.full.sensing)
+        with np.errstate(divide="ignore"):
+            pcrb = float(objective.value(self.uav_xy, np.maximum(eta, 1e-12)))
+        return SlotPlan(
+            np.array(self.uav_xy, dtype=float),
+            assoc,
+            eta,
+            pcrb,
+            SolveReport(status, reason, solve_s=solve_s),
+        )
+
+    def fallback_after_error(self, reason: str, solve_s: float) -> SlotPlan:
+        """After a planner error: the communication-optimal plan (method "comm") for the active
+        vehicles; if that fails too, hold. Status "solver error" either way, with the reason."""
+        try:
+            plan = replace(self, method="comm").run()
+        except Exception as err:  # the fallback must not raise: hold instead
+            return self.hold(
+                f"{reason}; communication-optimal fallback failed too: {err}; hold",
+                "solver error",
+                solve_s,
+            )
+        note = f"{reason}; fell back to the communication-optimal plan"
+        return replace(
+            plan, report=replace(plan.report, status="solver error", reason=note, solve_s=solve_s)
+        )
