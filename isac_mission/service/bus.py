@@ -17,6 +17,14 @@ Topology note (measured with zenoh 1.10): a peer or router hub forwards between 
 connected to it, but not between *peer* sessions connected to it (peers are expected to mesh
 directly). A peer that connects to the ground loop reaches the ground loop; an observer that must
 see another leaf's data either runs in client mode or is the one the leaf connects to.
+
+Security (`BusSecurity`, README "Security"; measured with zenoh 1.10.2): the listening side checks
+user/password logins against a dictionary file (`transport/auth/usrpwd`) and applies an access
+control list whose subjects are those usernames (`access_control`); ACL by username is enforced by
+a peer hub as well as a router, on what enters it from the network (its own session is not
+filtered). TLS (`transport/link/tls`) encrypts the link and lets the connecting side check the
+listener's certificate against a CA. A peer with a wrong password opens without error and keeps
+retrying, with nothing delivered; a client raises.
 """
 
 from __future__ import annotations
@@ -27,7 +35,8 @@ import json
 import logging
 import re
 from collections.abc import AsyncIterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 from types import TracebackType
 from typing import Any, Final, Literal
 
@@ -65,6 +74,113 @@ def tcp_loopback(port: int) -> str:
 
 
 @dataclass(frozen=True)
+class BusRole:
+    """One ACL role: the usernames that hold it and the keys (or key expressions) they may put."""
+
+    name: str
+    users: tuple[str, ...]
+    publishes: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class BusAcl:
+    """Access control of the listening side: default deny; every role may subscribe to and
+    receive `subscribe` (e.g. `isac/<mission>/**`); a role may put only on its own keys."""
+
+    subscribe: str
+    roles: tuple[BusRole, ...]
+
+
+@dataclass(frozen=True)
+class BusSecurity:
+    """Authentication, access control and TLS of one session (all optional, all files).
+
+    user / password: this session's login when it connects (the password is never shown in
+    repr or logs). users_file: the zenoh dictionary (`user:password` lines) that the listening
+    side checks logins against. acl: the listening side's access control. tls: endpoints are
+    `tls/...`; tls_ca_file: the CA a connecting side trusts (None: the system's public roots);
+    tls_cert_file / tls_key_file: the listening side's certificate and key.
+    """
+
+    user: str | None = None
+    password: str | None = field(default=None, repr=False)
+    users_file: Path | None = None
+    acl: BusAcl | None = None
+    tls_ca_file: Path | None = None
+    tls_cert_file: Path | None = None
+    tls_key_file: Path | None = None
+    tls: bool = False
+
+    def check(self, listen: tuple[str, ...], connect: tuple[str, ...]) -> None:
+        """ConfigError if the pieces do not fit the endpoints (names the missing piece)."""
+        if (self.user is None) != (self.password is None):
+            raise ConfigError("zenoh security: a login needs both a user and a password")
+        if (self.tls_cert_file is None) != (self.tls_key_file is None):
+            raise ConfigError("zenoh security: TLS needs both a certificate and its private key")
+        for ep in (*listen, *connect):
+            if ep.startswith("tls/") != self.tls:
+                want = "tls/" if self.tls else "tcp/"
+                raise ConfigError(
+                    f"zenoh endpoint {ep!r}: with TLS {'on' if self.tls else 'off'} use {want}"
+                    f"127.0.0.1:PORT endpoints"
+                )
+        if listen and self.tls and self.tls_cert_file is None:
+            raise ConfigError("zenoh security: a TLS listener needs a certificate and key")
+        if self.acl is not None and self.users_file is None:
+            raise ConfigError("zenoh security: access control by username needs a users file")
+
+
+def acl_json(acl: BusAcl) -> dict[str, Any]:
+    """The `access_control` section for `acl` (zenoh 1.x schema): default deny."""
+    rules: list[dict[str, Any]] = [
+        {
+            "id": "subscribe",
+            "messages": ["declare_subscriber"],
+            "flows": ["ingress", "egress"],
+            "permission": "allow",
+            "key_exprs": [acl.subscribe],
+        },
+        {
+            "id": "receive",
+            "messages": ["put"],
+            "flows": ["egress"],
+            "permission": "allow",
+            "key_exprs": [acl.subscribe],
+        },
+    ]
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    every = [f"role-{r.name}" for r in acl.roles]
+    for r in acl.roles:
+        subjects.append({"id": f"role-{r.name}", "usernames": list(r.users)})
+        if r.publishes:
+            rules.append(
+                {
+                    "id": f"publish-{r.name}",
+                    "messages": ["put"],
+                    "flows": ["ingress"],
+                    "permission": "allow",
+                    "key_exprs": list(r.publishes),
+                }
+            )
+            policies.append(
+                {
+                    "id": f"publish-{r.name}",
+                    "rules": [f"publish-{r.name}"],
+                    "subjects": [f"role-{r.name}"],
+                }
+            )
+    policies.append({"id": "everyone", "rules": ["subscribe", "receive"], "subjects": every})
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+@dataclass(frozen=True)
 class BusSettings:
     """How a process joins the Zenoh network.
 
@@ -82,6 +198,7 @@ class BusSettings:
     multicast_scouting: bool = False
     allow_non_loopback: bool = False
     connect_timeout_ms: int | None = None
+    security: BusSecurity | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in ("peer", "client", "router"):
@@ -101,6 +218,10 @@ class BusSettings:
             raise ConfigError(
                 f"zenoh connect_timeout_ms: must be > 0, got {self.connect_timeout_ms}"
             )
+        if self.security is not None:
+            self.security.check(self.listen, self.connect)
+        elif any(ep.startswith("tls/") for ep in (*self.listen, *self.connect)):
+            raise ConfigError("zenoh tls/ endpoints need security settings (certificates)")
 
     @classmethod
     def hub(cls, endpoint: str = DEFAULT_ENDPOINT, mode: BusMode = "peer") -> BusSettings:
@@ -117,7 +238,29 @@ def make_config(settings: BusSettings) -> zenoh.Config:
     cfg.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
     if settings.connect_timeout_ms is not None:
         cfg.insert_json5("connect/timeout_ms", json.dumps(settings.connect_timeout_ms))
+    if settings.security is not None:
+        _insert_security(cfg, settings.security)
     return cfg
+
+
+def _insert_security(cfg: zenoh.Config, sec: BusSecurity) -> None:
+    """Login, users dictionary, ACL and TLS keys of `sec` (only those that are set)."""
+    entries: dict[str, Any] = {
+        "transport/auth/usrpwd/user": sec.user,
+        "transport/auth/usrpwd/password": sec.password,
+        "transport/auth/usrpwd/dictionary_file": sec.users_file,
+        "transport/link/tls/root_ca_certificate": sec.tls_ca_file,
+        "transport/link/tls/listen_certificate": sec.tls_cert_file,
+        "transport/link/tls/listen_private_key": sec.tls_key_file,
+    }
+    for key, value in entries.items():
+        if value is not None:
+            cfg.insert_json5(key, json.dumps(str(value)))
+    if sec.tls:
+        # The listener's certificate names 127.0.0.1 and localhost: check the name too.
+        cfg.insert_json5("transport/link/tls/verify_name_on_connect", "true")
+    if sec.acl is not None:
+        cfg.insert_json5("access_control", json.dumps(acl_json(sec.acl)))
 
 
 @dataclass(frozen=True)
@@ -182,6 +325,21 @@ class Keys:
     def health(self) -> str:
         """`isac/<mission>/health`."""
         return f"{self.prefix}/health"
+
+    @property
+    def control(self) -> str:
+        """`isac/<mission>/control`: an operator's commands to the ground loop."""
+        return f"{self.prefix}/control"
+
+
+def _security_summary(sec: BusSecurity | None) -> str:
+    """What a log line may say about `sec`: the user name and which pieces are on, no secret."""
+    if sec is None:
+        return ""
+    parts = [f"user {sec.user}" if sec.user else "", "users file" if sec.users_file else ""]
+    parts += ["ACL" if sec.acl else "", "TLS" if sec.tls else ""]
+    shown = [p for p in parts if p]
+    return f" ({', '.join(shown)})" if shown else ""
 
 
 def _index(m: int) -> int:
@@ -312,7 +470,13 @@ class ZenohBus:
                 f"zenoh: cannot open a {s.mode} session "
                 f"(listen {list(s.listen)}, connect {list(s.connect)}): {err}"
             ) from None
-        log.info("zenoh %s session open: listen %s, connect %s", s.mode, s.listen, s.connect)
+        log.info(
+            "zenoh %s session open: listen %s, connect %s%s",
+            s.mode,
+            s.listen,
+            s.connect,
+            _security_summary(s.security),
+        )
         return cls(session, s)
 
     @classmethod
@@ -324,6 +488,12 @@ class ZenohBus:
     def closed(self) -> bool:
         """True after close()."""
         return self._closed
+
+    def connected_sessions(self) -> int:
+        """How many peers and routers this session has a transport with now (0: not connected:
+        nothing up at the endpoint yet, or the login or certificate was refused)."""
+        info = self._session.info
+        return len(list(info.peers_zid())) + len(list(info.routers_zid()))
 
     def publish(self, key: str, payload: bytes) -> None:
         """Put payload bytes on `key` (non-blocking in practice; lost if nobody is connected)."""

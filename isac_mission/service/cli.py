@@ -198,7 +198,10 @@ def sim(
     ] = None,
     zenoh_connect: Annotated[
         list[str] | None,
-        typer.Option(help="Zenoh endpoint to connect to (repeatable; default tcp/127.0.0.1:7447)."),
+        typer.Option(
+            help="Zenoh endpoint to connect to (repeatable; default tcp/127.0.0.1:7447, or "
+            "tls/127.0.0.1:7447 with security.zenoh.tls)."
+        ),
     ] = None,
     zenoh_mode: Annotated[str, typer.Option(help="Zenoh mode: peer, client or router.")] = "peer",
     mavlink_base_port: Annotated[
@@ -217,21 +220,32 @@ def sim(
     import logging
     import signal
 
-    from isac_mission.service.bus import DEFAULT_ENDPOINT, BusSettings
+    from isac_mission.service.bus_security import default_endpoint, secured_settings
     from sim.world import WorldOptions, run_world
 
     s = load_or_exit(config)
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     listen = tuple(zenoh_listen or ())
-    connect = tuple(zenoh_connect or ()) or (() if listen else (DEFAULT_ENDPOINT,))
+    connect = tuple(zenoh_connect or ()) or (
+        () if listen else (default_endpoint(s.security.zenoh),)
+    )
     try:
+        # Security on: logs in as the world role (README, "Security").
+        bus = secured_settings(
+            s.security.zenoh,
+            s.mission_id,
+            "world",
+            mode=zenoh_mode,  # type: ignore[arg-type]
+            listen=listen,
+            connect=connect,
+        )
         options = WorldOptions(
             speed=speed,
             lockstep=lockstep,
             lockstep_timeout_s=lockstep_timeout,
             seed=seed,
-            bus=BusSettings(mode=zenoh_mode, listen=listen, connect=connect),  # type: ignore[arg-type]
+            bus=bus,
             mavlink_base_port=mavlink_base_port,
             gcs_base_port=gcs_base_port,
             start=start,  # type: ignore[arg-type]
@@ -272,7 +286,7 @@ def _live(
     method: str,
     seed: int | None,
     out: Path | None,
-    zenoh_listen: str,
+    zenoh_listen: str | None,
     zenoh_connect: list[str],
     mavlink_base_port: int,
     gcs_base_port: int,
@@ -417,8 +431,12 @@ def run(
     ] = None,
     out: Annotated[Path | None, typer.Option(help="Output folder (trace, plots).")] = None,
     zenoh_listen: Annotated[
-        str, typer.Option(help="Zenoh endpoint the ground loop listens on.")
-    ] = "tcp/127.0.0.1:7447",
+        str | None,
+        typer.Option(
+            help="Zenoh endpoint the ground loop listens on (default tcp/127.0.0.1:7447, or "
+            "tls/127.0.0.1:7447 with security.zenoh.tls)."
+        ),
+    ] = None,
     mavlink_base_port: Annotated[
         int, typer.Option(help="Vehicle m's offboard port: base + m.")
     ] = 14540,
@@ -450,8 +468,12 @@ def serve(
     method: MethodOpt = "proposed",
     out: Annotated[Path | None, typer.Option(help="Output folder (trace, plots).")] = None,
     zenoh_listen: Annotated[
-        str, typer.Option(help="Zenoh endpoint to listen on.")
-    ] = "tcp/127.0.0.1:7447",
+        str | None,
+        typer.Option(
+            help="Zenoh endpoint to listen on (default tcp/127.0.0.1:7447, or "
+            "tls/127.0.0.1:7447 with security.zenoh.tls)."
+        ),
+    ] = None,
     zenoh_connect: Annotated[
         list[str] | None, typer.Option(help="Zenoh endpoints to connect to.")
     ] = None,
@@ -478,6 +500,53 @@ def serve(
         gcs_base_port=14550,
         resume=resume,
     )
+
+
+@app.command("gen-certs")
+def gen_certs(
+    out_dir: Annotated[Path, typer.Argument(help="Folder for ca.pem, server.pem and their keys.")],
+    days: Annotated[int, typer.Option(min=1, help="Validity in days.")] = 365,
+    force: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
+) -> None:
+    """A local CA and a TLS certificate for 127.0.0.1 / localhost (needs the openssl command),
+    for security.zenoh.tls (README, "Security")."""
+    from isac_mission.service.certs import generate_certs
+
+    try:
+        files = generate_certs(out_dir, days=days, force=force)
+    except ConfigError as err:
+        err_console.print(f"[bold red]{err}[/]", highlight=False)
+        raise typer.Exit(1) from None
+    console.print(
+        "security.zenoh.tls:\n"
+        f"  ca_file: {files.ca_file}\n  cert_file: {files.cert_file}\n  key_file: {files.key_file}\n"
+        f"(keep {files.ca_key_file} elsewhere: it signs certificates)",
+        highlight=False,
+    )
+
+
+@app.command("gen-users")
+def gen_users(
+    users_file: Annotated[Path, typer.Argument(help="The users file to write (mode 0600).")],
+    config: Annotated[
+        Path | None, typer.Option(help="Take the users from this scenario's security.zenoh.roles.")
+    ] = None,
+    force: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
+) -> None:
+    """A Zenoh users file (`user:password` lines, random passwords) for security.zenoh.users_file;
+    by default the users ground, world and observer. Prints the users, never the passwords."""
+    from isac_mission.config import ZenohSecurityConfig
+    from isac_mission.service.certs import generate_users_file
+
+    cfg = load_or_exit(config).security.zenoh if config is not None else ZenohSecurityConfig()
+    try:
+        names = generate_users_file(
+            users_file, (u for role in cfg.roles.values() for u in role.users), force=force
+        )
+    except ConfigError as err:
+        err_console.print(f"[bold red]{err}[/]", highlight=False)
+        raise typer.Exit(1) from None
+    console.print(f"{users_file}: users {', '.join(names)}", highlight=False)
 
 
 def main() -> None:
