@@ -11,6 +11,14 @@ Bad input is counted per reason in `errors`: `garbage` (bytes that are not MAVLi
 `bad_data` (other pymavlink complaints), `truncated` (a datagram ending inside a packet),
 `unknown_message` (a message id outside the common dialect), `parse_error` (pymavlink raised).
 
+MAVLink 2 signing (`signing=` a `MavlinkSigningKey`, from the scenario's
+`security.mavlink_signing`): every message we send is signed, with timestamps that follow the wall
+clock; every packet without a valid signature is dropped and counted in `errors` as `unsigned`
+(no signature, or MAVLink 1), `bad_signature` (another key, or altered) or `replayed` (our key,
+but a timestamp not newer than its stream's last). pymavlink does the checks (`enable_signing`);
+`_MAVLink` fixes its order so a forged packet cannot poison a stream's timestamp. Off by default:
+nothing is signed and everything is accepted, as MAVSDK and PX4 SITL expect.
+
 Vehicle state (`VehicleStatus`, a snapshot taken by `status()`): local NED position and velocity
 (LOCAL_POSITION_NED), heading (ATTITUDE), home altitude AMSL (GLOBAL_POSITION_INT), the PX4 mode
 name decoded from HEARTBEAT.custom_mode (`px4_mode_name`), armed (HEARTBEAT base_mode), landed
@@ -37,14 +45,16 @@ common MAVLink 2 dialect module is imported directly.
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import logging
 import math
 import os
+import struct
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Final, cast
+from typing import Any, Final, Literal, cast
 
 import numpy as np
 
@@ -52,6 +62,7 @@ os.environ.setdefault("MAVLINK20", "1")
 os.environ.setdefault("MAVLINK_DIALECT", "common")
 from pymavlink.dialects.v20 import common as mavlink2
 
+from isac_mission.config import MavlinkSigningKey
 from isac_mission.errors import LinkError
 from isac_mission.types import FloatArray
 
@@ -293,15 +304,129 @@ def position_target_local_ned(
     )
 
 
+# --------------------------------------------------------------------------- signing
+
+SIGNING_EPOCH_UNIX_S: Final = 1_420_070_400
+"""MAVLink signature timestamps count 10 us units from 2015-01-01 00:00 UTC."""
+SIGNATURE_LEN: Final = 13
+"""link id (1) + timestamp (6) + signature (6) bytes at the end of a signed packet."""
+SignatureRejection = Literal["unsigned", "bad_signature", "replayed"]
+
+
+def signing_timestamp(unix_s: float | None = None) -> int:
+    """A MAVLink signature timestamp: 10 us units since 2015-01-01 (now by default)."""
+    t = time.time() if unix_s is None else unix_s
+    return int(max(0.0, t - SIGNING_EPOCH_UNIX_S) * 100_000)
+
+
+def signature_matches(packet: bytes, secret: bytes) -> bool:
+    """True when the last 6 bytes of a signed MAVLink 2 packet are SHA-256(secret + the rest)[:6]
+    (whatever its timestamp)."""
+    if len(packet) < SIGNATURE_LEN + 12:
+        return False
+    return hashlib.sha256(secret + packet[:-6]).digest()[:6] == packet[-6:]
+
+
+def signature_rejection(packet: bytes, secret: bytes) -> SignatureRejection:
+    """Why pymavlink's signature check refused `packet`: "unsigned" (MAVLink 1, or MAVLink 2
+    without the signed flag), "replayed" (signed with our key but its timestamp is not newer
+    than the last one of its stream, or over a minute older than ours: a replay) or
+    "bad_signature" (signed with another key, or altered)."""
+    signed = len(packet) >= 3 and packet[0] == mavlink2.PROTOCOL_MARKER_V2 and packet[2] & 1
+    if not signed:
+        return "unsigned"
+    return "replayed" if signature_matches(packet, secret) else "bad_signature"
+
+
+def packet_origin(packet: bytes) -> str:
+    """ "message 76 from system 255/190" from a packet's header (for logs), "?" if too short."""
+    try:
+        if packet[0] == mavlink2.PROTOCOL_MARKER_V2:
+            sysid, compid, lo, mid, hi = struct.unpack_from("<BBBBB", packet, 5)
+            return f"message {lo | (mid << 8) | (hi << 16)} from system {sysid}/{compid}"
+        sysid, compid, msgid = struct.unpack_from("<BBB", packet, 3)
+        return f"message {msgid} from system {sysid}/{compid}"
+    except (IndexError, struct.error):
+        return "?"
+
+
+def _reject_unsigned(mav: Any, msg_id: int) -> bool:
+    """pymavlink's allow_unsigned_callback: accept nothing unsigned."""
+    return False
+
+
+class _MAVLink(mavlink2.MAVLink):  # type: ignore[misc]  # pymavlink is untyped
+    """pymavlink's MAVLink 2 object with one fix to the signature check.
+
+    pymavlink's `check_signature` records a packet's timestamp as its stream's newest *before*
+    it compares the signature, so one forged packet with a far-future timestamp would make every
+    genuine packet of that stream look like a replay. Here the signature is compared first; only
+    a correctly signed packet reaches pymavlink's timestamp check.
+    """
+
+    def check_signature(self, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+        """True when `msgbuf` carries our signature and a fresh timestamp (pymavlink's check,
+        reached only by correctly signed packets)."""
+        if not signature_matches(bytes(msgbuf), self.signing.secret_key):
+            return False
+        return bool(super().check_signature(msgbuf, src_system, src_component))
+
+
 def new_encoder(system_id: int = GCS_SYSTEM_ID, component_id: int = GCS_COMPONENT_ID) -> Any:
     """A pymavlink MAVLink 2 encoder/parser object for our side of a link (no file)."""
-    mav = mavlink2.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+    mav = _MAVLink(None, srcSystem=system_id, srcComponent=component_id)
     mav.robust_parsing = True
     return mav
 
 
+def new_parser(encoder: Any) -> Any:
+    """A fresh parser for the link of `encoder` (same MAVLink address), sharing its signing
+    state: the key, the newest timestamp of every stream heard (replay protection survives the
+    fresh parser) and our own timestamp."""
+    parser = new_encoder(encoder.srcSystem, encoder.srcComponent)
+    parser.signing = encoder.signing
+    return parser
+
+
+def enable_signing(encoder: Any, key: MavlinkSigningKey) -> None:
+    """Sign everything `encoder` packs with `key`, and make it (and every `new_parser` of it)
+    reject unsigned, badly signed and replayed packets (they come out as BAD_DATA with reason
+    "Invalid signature"; `signature_rejection` tells which). Timestamps start at the wall
+    clock and follow it (`refresh_signing_clock`)."""
+    signing = encoder.signing
+    signing.secret_key = key.secret
+    signing.link_id = key.link_id
+    signing.sign_outgoing = True
+    signing.allow_unsigned_callback = _reject_unsigned
+    signing.timestamp = max(int(signing.timestamp), signing_timestamp())
+
+
+def signing_enabled(mav: Any) -> bool:
+    """True when `mav` checks signatures (a key is set)."""
+    return mav.signing.secret_key is not None
+
+
+def refresh_signing_clock(mav: Any) -> None:
+    """Move `mav`'s signing timestamp up to the wall clock (never back): our packets then carry
+    the real time, so a restarted peer's fresh stream is not older than what we remember, and a
+    stream new to us is judged against the real time."""
+    signing = mav.signing
+    if signing.secret_key is not None:
+        signing.timestamp = max(int(signing.timestamp), signing_timestamp())
+
+
+def signature_failure(msg: Any, mav: Any) -> SignatureRejection | None:
+    """For a BAD_DATA message from parser `mav`: why its signature was refused, or None when
+    it was refused for another reason."""
+    if not signing_enabled(mav) or str(getattr(msg, "reason", "")) != "Invalid signature":
+        return None
+    return signature_rejection(bytes(msg.data), mav.signing.secret_key)
+
+
 def pack(msg: Any, encoder: Any) -> bytes:
-    """The wire bytes of `msg` from `encoder` (a `new_encoder()`), advancing its sequence."""
+    """The wire bytes of `msg` from `encoder` (a `new_encoder()`), advancing its sequence
+    (and signed, with the wall-clock timestamp, when `encoder` signs)."""
+    refresh_signing_clock(encoder)
     data = bytes(msg.pack(encoder))
     encoder.seq = (encoder.seq + 1) % 256
     return data
@@ -383,6 +508,9 @@ class MavlinkLink(asyncio.DatagramProtocol):
         lost_after_s: The link is lost after this long without a HEARTBEAT (clock seconds)...
         lost_min_wall_s: ... and at least this long in wall seconds.
         own_system_id / own_component_id: Our MAVLink address (a GCS by default).
+        signing: MAVLink 2 signing key: sign everything we send and drop (and count in
+            `errors` as "unsigned", "bad_signature" or "replayed") every packet without a
+            valid signature; None (default): no signing, unsigned and signed packets accepted.
         name: For log messages.
 
     Use `await link.open()` (or `async with`) on the event loop that will own the socket.
@@ -399,6 +527,7 @@ class MavlinkLink(asyncio.DatagramProtocol):
         lost_min_wall_s: float = 2.0,
         own_system_id: int = GCS_SYSTEM_ID,
         own_component_id: int = GCS_COMPONENT_ID,
+        signing: MavlinkSigningKey | None = None,
         name: str = "",
     ) -> None:
         if not 0 <= port <= 65535:
@@ -414,7 +543,16 @@ class MavlinkLink(asyncio.DatagramProtocol):
         self._vehicle_component = vehicle_component
         self._own_system = own_system_id
         self._encoder = new_encoder(own_system_id, own_component_id)
-        self._parser = new_encoder(own_system_id, own_component_id)
+        if signing is not None:
+            enable_signing(self._encoder, signing)
+            log.info(
+                "%s: MAVLink signing on (key %s from %s, link id %d)",
+                self.name,
+                signing.fingerprint,
+                signing.source,
+                signing.link_id,
+            )
+        self._parser = new_parser(self._encoder)
         self._transport: asyncio.DatagramTransport | None = None
         self._address: Address | None = None
         self._system_id: int | None = system_id
@@ -509,17 +647,18 @@ class MavlinkLink(asyncio.DatagramProtocol):
 
     def datagram_received(self, data: bytes, addr: Address) -> None:
         """Parse one datagram and dispatch its messages (UDP keeps packets whole)."""
+        refresh_signing_clock(self._parser)
         try:
             msgs = self._parser.parse_buffer(data) or []
         except Exception as err:  # pymavlink raises on some malformed input even when robust
             self._count_error("parse_error", f"{err} from {addr}")
-            self._parser = new_encoder(self._own_system)
+            self._parser = new_parser(self._encoder)
             return
         for msg in msgs:
             self.dispatch(msg, addr)
         if self._parser.buf_len() > 0:
             self._count_error("truncated", f"{self._parser.buf_len()} bytes left from {addr}")
-            self._parser = new_encoder(self._own_system)  # drop the partial packet
+            self._parser = new_parser(self._encoder)  # drop the partial packet
 
     # -- dispatch ----------------------------------------------------------------------------
 
@@ -533,7 +672,10 @@ class MavlinkLink(asyncio.DatagramProtocol):
         mtype = str(msg.get_type())
         if mtype == "BAD_DATA":
             reason = str(getattr(msg, "reason", ""))
-            if "CRC" in reason:
+            refused = signature_failure(msg, self._parser)
+            if refused is not None:
+                self._count_error(refused, f"{packet_origin(bytes(msg.data))} from {addr}")
+            elif "CRC" in reason:
                 self._count_error("bad_crc", f"{reason} from {addr}")
             elif "prefix" in reason.lower():
                 self._count_error("garbage", f"{len(msg.data)} bytes from {addr}")
@@ -694,6 +836,11 @@ class MavlinkLink(asyncio.DatagramProtocol):
             self._clock() - hb > self.lost_after_s
             and time.monotonic() - self._heartbeat_wall_s > self.lost_min_wall_s
         )
+
+    @property
+    def signatures_ok(self) -> int:
+        """Packets whose signature was checked and accepted (0 when signing is off)."""
+        return int(self._encoder.signing.goodsig_count)
 
     @property
     def target(self) -> Target:
