@@ -164,10 +164,13 @@ def _check_slot(
     for m, e in enumerate(eta):
         if not share_ok[m]:
             flag("14d", (m,), e, 0.0 if not e >= 0.0 else 1.0, "share outside [0, 1]")
+    # A vehicle outside the plan (its link lost) is marked by BS -1 and share 0: it has no link
+    # to check (14a, 14f/g); it still counts for 14b-14j.
+    unplanned = {m for m, k in enumerate(assoc) if k == -1 and eta[m] == 0.0}
     # 14f/g: exactly one valid BS per UAV
     bs_of = [_bs_index(k, n_bs) for k in assoc]
     for m, k in enumerate(assoc):
-        if bs_of[m] is None:
+        if bs_of[m] is None and m not in unplanned:
             value = float(k) if isinstance(k, int | float | np.number) else math.nan
             flag("14f/g", (m,), value, n_bs - 1, f"BS index not an integer in [0, {n_bs})")
     # 14e: capacity N_a per BS
@@ -234,6 +237,7 @@ def check_constraints(
            the first record is compared with uav_start_xy (the positions at slot 0) with
            s = max(1, its slot number).
     - 14i  ||q_i - q_j|| >= d_safe - tol_m;  14j  ||q_m - target_pred[:2]|| >= d_safe - tol_m.
+    A UAV with BS -1 and share 0 is outside the plan (link lost): 14a and 14f/g skip it.
     Non-finite values count as violations. Every slot is checked whatever its status; each
     Violation carries the status so the caller decides what a non-"ok" slot may break.
     """

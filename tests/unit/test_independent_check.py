@@ -163,6 +163,24 @@ def test_14fg_invalid_bs_index_breaks_alone(bad: int) -> None:
     assert got == {("14f/g", 1, (1,))}
 
 
+def test_a_vehicle_outside_the_plan_is_exempt_from_14a_and_14fg_only() -> None:
+    """BS -1 with share 0 marks a vehicle planned around (link lost): no link to check."""
+    out = mutate(valid_trace(), 0, assoc=np.array([0, -1]), eta=np.array([1.0, 0.0]))
+    assert flagged(out) == set()
+    # ... but a share with no BS is still an invalid association,
+    with_share = mutate(valid_trace(), 0, assoc=np.array([0, -1]), eta=np.array([0.5, 0.5]))
+    assert flagged(with_share) == {("14f/g", 1, (1,))}
+    # and separations still count: move it onto UAV 0.
+    close = mutate(
+        valid_trace(),
+        0,
+        assoc=np.array([0, -1]),
+        eta=np.array([1.0, 0.0]),
+        uav_xy=np.array([[400.0, 300.0], [410.0, 300.0]]),
+    )
+    assert ("14i", 1, (0, 1)) in flagged(close)
+
+
 def test_14h_too_fast_breaks_alone() -> None:
     # UAV 0 moves 30 m west in slot 2 (limit 25 m); it stays 80 m from UAV 1
     got = flagged(mutate(valid_trace(), 1, uav_xy=np.array([[370.0, 300.0], [450.0, 300.0]])))
