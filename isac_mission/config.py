@@ -310,7 +310,9 @@ def mavlink_signing_key(
     return MavlinkSigningKey(secret=secret, link_id=cfg.link_id, source=source)
 
 
-ZenohTopic = Literal["plan", "track", "health", "clock", "truth", "detections", "telemetry"]
+ZenohTopic = Literal[
+    "plan", "track", "health", "clock", "truth", "detections", "telemetry", "control"
+]
 """The key expressions of DESIGN.md ("Zenoh") by name: `isac/<mission>/<topic>[/<m>]`."""
 _NAME_PATTERN = r"^[A-Za-z0-9_.-]+$"
 _ENV_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
@@ -345,6 +347,7 @@ def _default_roles() -> dict[str, ZenohRoleConfig]:
         "world": ZenohRoleConfig(
             users=["world"], publishes=["clock", "truth", "detections", "telemetry"]
         ),
+        "operator": ZenohRoleConfig(users=["operator"], publishes=["control"]),
         "observer": ZenohRoleConfig(users=["observer"], publishes=[]),
     }
 

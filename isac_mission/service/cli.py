@@ -534,7 +534,8 @@ def gen_users(
     force: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
 ) -> None:
     """A Zenoh users file (`user:password` lines, random passwords) for security.zenoh.users_file;
-    by default the users ground, world and observer. Prints the users, never the passwords."""
+    by default the users ground, world, operator and observer. Prints the users, never the
+    passwords."""
     from isac_mission.config import ZenohSecurityConfig
     from isac_mission.service.certs import generate_users_file
 

@@ -32,7 +32,7 @@ REFUSED_TIMEOUT_S = 3.0
 """How long a refused session gets to find a subscriber (it never does: it is not connected)."""
 MISSION = "sec"
 KEYS = Keys(MISSION)
-USERS = ("ground", "world", "observer")
+USERS = ("ground", "world", "operator", "observer")
 
 needs_openssl = pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")
 
@@ -150,17 +150,19 @@ async def test_an_authenticated_session_puts_only_on_its_roles_keys(users_file: 
         with world, observer:
             assert await world.wait_for_subscribers(KEYS.plan, TIMEOUT_S)
             assert await observer.wait_for_subscribers(KEYS.plan, TIMEOUT_S)
-            # The world may not plan, nor speak for the ground loop; the same session's allowed
-            # detection comes after on the same link.
+            # The world may not plan, nor speak for the ground loop or the operator; the same
+            # session's allowed detection comes after on the same link.
             world.publish(KEYS.plan, b"world plan")
             world.publish(KEYS.track, b"world track")
             world.publish(KEYS.health, b"world health")
+            world.publish(KEYS.control, b"world control")
             world.publish(KEYS.detections(1), b"world sentinel")
             got = await receive_until(sub, b"world sentinel")
             assert got == [(KEYS.detections(1), b"world sentinel")]
             # The observer may only read: no plan, no detection.
             observer.publish(KEYS.plan, b"observer plan")
             observer.publish(KEYS.detections(0), b"observer detection")
+            observer.publish(KEYS.control, b"observer control")
             world.publish(KEYS.clock, b"sentinel 1")
             got = await receive_until(sub, b"sentinel 1")
             world.publish(KEYS.clock, b"sentinel 2")
@@ -174,15 +176,21 @@ async def test_every_role_publishes_its_keys_and_everyone_reads_them(users_file:
     async with hub_session(cfg, endpoint) as hub:
         hub_sub = hub.subscribe(KEYS.everything)
         world = await ZenohBus.open_async(leaf(cfg, endpoint, "world", login(cfg, "world")))
+        operator = await ZenohBus.open_async(
+            leaf(cfg, endpoint, "operator", login(cfg, "operator"))
+        )
         # A client observer is forwarded what the world puts through the hub (bus.py, topology).
         observer = await ZenohBus.open_async(
             leaf(cfg, endpoint, "observer", login(cfg, "observer"), mode="client")
         )
-        with world, observer:
+        with world, operator, observer:
             world_sub = world.subscribe(KEYS.everything)
             observer_sub = observer.subscribe(KEYS.everything)
             assert await hub.wait_for_subscribers(KEYS.plan, TIMEOUT_S)
             assert await world.wait_for_subscribers(KEYS.clock, TIMEOUT_S)
+            assert await operator.wait_for_subscribers(KEYS.control, TIMEOUT_S)
+            operator.publish(KEYS.control, b"operator control")
+            assert await hub_sub.get(TIMEOUT_S) == (KEYS.control, b"operator control")
             ground_puts = [(KEYS.plan, b"plan"), (KEYS.track, b"track"), (KEYS.health, b"end")]
             world_puts = [
                 (KEYS.clock, b"clock"),
@@ -196,7 +204,9 @@ async def test_every_role_publishes_its_keys_and_everyone_reads_them(users_file:
                 world.publish(key, data)
             # Each session sees all 7 puts (its own locally), each publisher's in its order.
             for sub in (world_sub, hub_sub, observer_sub):
-                got = [await sub.get(TIMEOUT_S) for _ in range(7)]
+                got: list[tuple[str, bytes]] = []
+                while [g[1] for g in got].count(b"end") < 2:
+                    got.append(await sub.get(TIMEOUT_S))
                 assert [g for g in got if g in ground_puts] == ground_puts
                 assert [g for g in got if g in world_puts] == world_puts
 

@@ -61,6 +61,7 @@ def test_a_scenario_file_turns_it_on_with_the_default_roles(tmp_path: Path) -> N
     assert cfg.enabled and cfg.users_file == Path("secrets/users.txt")
     assert cfg.roles["ground"].publishes == ["plan", "track", "health", "telemetry"]
     assert cfg.roles["world"].publishes == ["clock", "truth", "detections", "telemetry"]
+    assert cfg.roles["operator"].publishes == ["control"]
     assert cfg.roles["observer"].publishes == []
 
 
@@ -184,13 +185,20 @@ def test_acl_denies_by_default_and_lets_each_role_put_on_its_keys(users_file: Pa
     assert rules["subscribe"]["key_exprs"] == ["isac/paper/**"]
     policies = {p["id"]: p for p in acl["policies"]}
     assert policies["publish-world"]["subjects"] == ["role-world"]
-    assert set(policies["everyone"]["subjects"]) == {"role-ground", "role-world", "role-observer"}
+    assert set(policies["everyone"]["subjects"]) == {
+        "role-ground",
+        "role-world",
+        "role-operator",
+        "role-observer",
+    }
     subjects = {s["id"]: s["usernames"] for s in acl["subjects"]}
     assert subjects == {
         "role-ground": ["ground"],
         "role-world": ["world"],
+        "role-operator": ["operator"],
         "role-observer": ["observer"],
     }
+    assert rules["publish-operator"]["key_exprs"] == ["isac/paper/control"]
 
 
 def test_secured_configs_keep_loopback_and_no_multicast(users_file: Path, tmp_path: Path) -> None:
@@ -248,3 +256,18 @@ def test_gen_users_writes_random_private_passwords(tmp_path: Path) -> None:
         generate_users_file(path, ["ground"])
     with pytest.raises(ConfigError, match="must not be empty or hold ':'"):
         generate_users_file(tmp_path / "u2.txt", ["a:b"])
+
+
+def test_gen_users_command_prints_the_users_but_no_password(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from isac_mission.service.cli import app
+
+    path = tmp_path / "users.txt"
+    result = CliRunner().invoke(app, ["gen-users", str(path)])
+    assert result.exit_code == 0, result.output
+    users = read_users_file(path)
+    assert list(users) == ["ground", "world", "operator", "observer"]
+    assert all(password not in result.output for password in users.values())
+    again = CliRunner().invoke(app, ["gen-users", str(path)])
+    assert again.exit_code == 1 and read_users_file(path) == users
