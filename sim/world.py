@@ -22,7 +22,9 @@ Slot convention: plan n carries the waypoints the vehicles fly to during (n-1, n
 eta_n of slot n's detections; the ground publishes plan n+1 after processing slot n. Lockstep:
 after publishing slot n (for n < N) the clock holds at t0 + n dt until plan n+1 (or a later
 one) has arrived, or `lockstep_timeout_s` wall seconds have passed (counted, logged; the world
-then goes on with the latest shares).
+then goes on with the latest shares). While it holds, the clock message is repeated every
+`HELD_CLOCK_PERIOD_S` wall seconds, so that a ground loop or bridges (re)started meanwhile learn
+the time and the mission start (a restarted `serve --resume` plans its next slot from them).
 
 Vehicle telemetry is not published on Zenoh here: it goes over MAVLink (the service's bridge
 publishes it). The vehicles' local NED frames are all centred on the scenario origin (0, 0)
@@ -34,6 +36,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -61,6 +64,8 @@ from sim.vehicle import VehicleLimits
 log = logging.getLogger(__name__)
 
 _EPS_S = 1e-9
+HELD_CLOCK_PERIOD_S = 0.5
+"""Wall seconds between repeats of the clock message while the world holds in lockstep."""
 StartMode = Literal["immediate", "offboard"]
 
 
@@ -86,6 +91,17 @@ class LinkOutage:
                 f"link outage {text!r}: expected VEHICLE:START_S:DURATION_S, e.g. 1:20:5"
             ) from None
         return cls(m, start, duration)
+
+
+def parse_outages(texts: Sequence[str], n_vehicles: int) -> tuple[LinkOutage, ...]:
+    """LinkOutage.parse of each text, checked against the fleet size; ValueError names the bad one."""
+    outages = tuple(LinkOutage.parse(text) for text in texts)
+    for text, outage in zip(texts, outages, strict=True):
+        if outage.vehicle >= n_vehicles:
+            raise ValueError(
+                f"link outage {text!r}: no vehicle {outage.vehicle} (M = {n_vehicles})"
+            )
+    return outages
 
 
 @dataclass(frozen=True)
@@ -234,6 +250,7 @@ class World:
         self._next_clock_s = 0.0
         self._held_slot: int | None = None
         self._hold_timer: asyncio.TimerHandle | None = None
+        self._held_clock_timer: asyncio.TimerHandle | None = None
         self._opened_vehicles: list[Autopilot] = []
 
     # -- lifecycle ---------------------------------------------------------------------------
@@ -354,6 +371,16 @@ class World:
         self.clock.hold_at(now_s)
         loop = asyncio.get_running_loop()
         self._hold_timer = loop.call_later(self.options.lockstep_timeout_s, self._hold_timeout, n)
+        self._held_clock_timer = loop.call_later(HELD_CLOCK_PERIOD_S, self._repeat_held_clock, n)
+
+    def _repeat_held_clock(self, n: int) -> None:
+        """Publish the held clock again (and again) while slot n holds."""
+        self._held_clock_timer = None
+        if self._held_slot != n or self.bus is None:
+            return
+        self._publish_clock(self.clock.now_s)
+        loop = asyncio.get_running_loop()
+        self._held_clock_timer = loop.call_later(HELD_CLOCK_PERIOD_S, self._repeat_held_clock, n)
 
     def _release(self) -> None:
         self._cancel_hold_timer()
@@ -381,6 +408,9 @@ class World:
         if self._hold_timer is not None:
             self._hold_timer.cancel()
             self._hold_timer = None
+        if self._held_clock_timer is not None:
+            self._held_clock_timer.cancel()
+            self._held_clock_timer = None
 
     # -- outputs -----------------------------------------------------------------------------
 

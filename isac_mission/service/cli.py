@@ -35,6 +35,21 @@ def load_or_exit(path: Path) -> Scenario:
         raise typer.Exit(2) from None
 
 
+PlanBudgetOpt = Annotated[
+    float,
+    typer.Option(
+        help="Wall seconds a slot's planning may take; past it the slot holds (0: no limit)."
+    ),
+]
+InjectLinkLossOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        help="Fault injection: vehicle M's MAVLink radio dies START_S into the mission for "
+        "DURATION_S, as M:START_S:DURATION_S (repeatable; docs/reliability.md)."
+    ),
+]
+
+
 @app.command("check-config")
 def check_config(config: ConfigArg) -> None:
     """Validate a scenario and print its derived constants in SI units."""
@@ -214,6 +229,7 @@ def sim(
         str,
         typer.Option(help="Slot 0 begins: immediate, or offboard (all vehicles up in OFFBOARD)."),
     ] = "immediate",
+    inject_link_loss: InjectLinkLossOpt = None,
 ) -> None:
     """The world alone (vehicles, target, sensing, clock) until SIGINT or SIGTERM."""
     import asyncio
@@ -221,7 +237,7 @@ def sim(
     import signal
 
     from isac_mission.service.bus_security import default_endpoint, secured_settings
-    from sim.world import WorldOptions, run_world
+    from sim.world import WorldOptions, parse_outages, run_world
 
     s = load_or_exit(config)
     if not logging.getLogger().handlers:
@@ -249,6 +265,7 @@ def sim(
             mavlink_base_port=mavlink_base_port,
             gcs_base_port=gcs_base_port,
             start=start,  # type: ignore[arg-type]
+            link_outages=parse_outages(inject_link_loss or [], s.M),
         )
     except (ConfigError, ValueError) as err:
         err_console.print(f"[bold red]invalid option[/] {err}", highlight=False)
@@ -291,6 +308,8 @@ def _live(
     mavlink_base_port: int,
     gcs_base_port: int,
     resume: bool,
+    plan_budget: float,
+    link_outages: list[str],
 ) -> None:
     """Shared body of `run` and `serve`: live progress, summary, plots; exit 0 on SIGINT/SIGTERM."""
     import asyncio
@@ -314,6 +333,14 @@ def _live(
         if out is not None
         else Path("out") / f"{'serve' if serve_only else 'run'}-{s.mission_id}"
     )
+    if link_outages:
+        from sim.world import parse_outages
+
+        try:
+            parse_outages(link_outages, s.M)
+        except ValueError as err:
+            err_console.print(f"--inject-link-loss: {err}", highlight=False)
+            raise typer.Exit(2) from None
     opts = LiveOptions(
         speed=speed,
         lockstep=lockstep,
@@ -325,6 +352,8 @@ def _live(
         mavlink_base_port=mavlink_base_port,
         gcs_base_port=gcs_base_port,
         resume=resume,
+        plan_budget_s=plan_budget if plan_budget > 0 else None,
+        link_outages=tuple(link_outages),
     )
     status = {"phase": "starting", "line": ""}
 
@@ -443,6 +472,8 @@ def run(
     gcs_base_port: Annotated[
         int, typer.Option(help="Vehicle m's ground-station port: base + m.")
     ] = 14550,
+    plan_budget: PlanBudgetOpt = 1.0,
+    inject_link_loss: InjectLinkLossOpt = None,
 ) -> None:
     """The live system in one process: simulated vehicles (MAVLink), target and sensing, MAVLink
     bridges and the ground loop, over real loopback UDP and Zenoh."""
@@ -459,6 +490,8 @@ def run(
         mavlink_base_port=mavlink_base_port,
         gcs_base_port=gcs_base_port,
         resume=False,
+        plan_budget=plan_budget,
+        link_outages=inject_link_loss or [],
     )
 
 
@@ -483,6 +516,7 @@ def serve(
     resume: Annotated[
         bool, typer.Option(help="Continue the trace in --out after its last slot.")
     ] = False,
+    plan_budget: PlanBudgetOpt = 1.0,
 ) -> None:
     """The ground loop and the MAVLink bridges, for vehicles and sensing that run elsewhere
     (`isac-mission sim`, or real UAVs). The clock comes from the world over Zenoh."""
@@ -499,6 +533,8 @@ def serve(
         mavlink_base_port=mavlink_base_port,
         gcs_base_port=14550,
         resume=resume,
+        plan_budget=plan_budget,
+        link_outages=[],
     )
 
 

@@ -60,6 +60,8 @@ class LiveOptions:
     plan_safety_margin_m: float = 10.0
     plan_accel_fraction: float = 0.8
     link_outages: tuple[str, ...] = ()
+    plan_budget_s: float | None = 1.0
+    """Wall seconds a slot's planning may take (GroundSettings.plan_budget_s)."""
     """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S` (sim.world)."""
 
     @property
@@ -122,6 +124,7 @@ async def _fly_mission(
             trace_path=opts.trace_path,
             resume=opts.resume,
             plan_rate_factor=opts.plan_rate_factor,
+            plan_budget_s=opts.plan_budget_s,
             # The trace states the vehicles' real limit; the planner's budget goes beside it.
             trace_config={
                 "v_max": s.v_max,
@@ -213,7 +216,7 @@ async def run_embedded(
     on_status: Callable[[str], None] | None = None,
 ) -> LiveResult:
     """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh."""
-    from sim.world import LinkOutage, WorldOptions, run_world
+    from sim.world import WorldOptions, parse_outages, run_world
 
     world_stop = asyncio.Event()
     zenoh_cfg, endpoint = s.security.zenoh, _endpoint(s, opts)
@@ -230,7 +233,7 @@ async def run_embedded(
         mavlink_base_port=opts.mavlink_base_port,
         gcs_base_port=opts.gcs_base_port,
         start="offboard",
-        link_outages=tuple(LinkOutage.parse(text) for text in opts.link_outages),
+        link_outages=parse_outages(opts.link_outages, s.M),
     )
     with ZenohBus.open(hub) as bus:
         world = asyncio.create_task(run_world(s, world_opts, world_stop))
