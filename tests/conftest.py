@@ -20,12 +20,27 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         default=False,
         help="Run long tests at full size (Monte Carlo runs, soak length).",
     )
+    parser.addoption(
+        "--soak-slots",
+        type=int,
+        default=None,
+        help="Length of the live soak test in slots (default 240; 3600 with --full).",
+    )
 
 
 @pytest.fixture(scope="session")
 def full_size(request: pytest.FixtureRequest) -> bool:
     """True when the suite runs with --full."""
     return bool(request.config.getoption("--full"))
+
+
+@pytest.fixture(scope="session")
+def soak_slots(request: pytest.FixtureRequest, full_size: bool) -> int:
+    """Slots of the live soak test: --soak-slots N, else 3600 with --full, else 240."""
+    given = request.config.getoption("--soak-slots")
+    if given is not None:
+        return int(given)
+    return 3600 if full_size else 240
 
 
 @pytest.fixture(scope="session")
