@@ -152,7 +152,7 @@ class GroundLoop:
         path.parent.mkdir(parents=True, exist_ok=True)
         if self.settings.resume and path.exists():
             trace = read_trace(path)
-            self.writer = TraceWriter.resume(path)
+            self.writer = TraceWriter.resume(path, fsync=True)
             if trace.slots:
                 self.state = MissionState.resumed(
                     self.s, self.kit, self.settings.method, trace.slots[-1]
@@ -337,7 +337,8 @@ class GroundLoop:
         moves while a plan is being made (slot n+1 needs plan n+1's prediction)."""
         if self.done.is_set() or self.planning is not None:
             return
-        if self.state.pending is None and self.state.slot == 0 and self.mission_t0_s is not None:
+        if self.state.pending is None and not self.state.done and self.mission_t0_s is not None:
+            # Slot 1 at mission start, or the slot after the last traced one on a resume.
             self._start_planning(self._uav_positions(), latency_from=None, record=None)
         while (
             self.planning is None

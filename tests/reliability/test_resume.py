@@ -42,11 +42,6 @@ from tests.support.ports import free_port_block
 
 ROOT = Path(__file__).resolve().parents[2]
 
-GROUND_RESUME_GAP = (
-    "ground.py: a resumed GroundLoop never plans slot L+1 (_advance plans only when "
-    "state.slot == 0), so the mission stalls after a restart; see docs/reliability.md"
-)
-
 
 # --------------------------------------------------------------------------- helpers
 
@@ -199,11 +194,6 @@ def test_resumed_ground_loop_starts_from_the_last_complete_slot(
     _strict_json_lines(path)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="ground.py: the resumed TraceWriter is opened without fsync=True, so slots after a "
-    "restart are flushed but not fsynced (TraceWriter.resume(path, fsync=True) fixes it)",
-)
 def test_resumed_ground_loop_fsyncs_every_slot(
     paper: Scenario, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -235,7 +225,6 @@ async def _ground(s: Scenario, bus: ZenohBus, path: Path, resume: bool, timeout_
     return report.counters["slots"]
 
 
-@pytest.mark.xfail(strict=True, reason=GROUND_RESUME_GAP)
 async def test_restarted_ground_loop_continues_with_the_next_slot(
     paper: Scenario, free_tcp_port: int, tmp_path: Path
 ) -> None:
@@ -296,7 +285,6 @@ def _wait_for_slots(path: Path, n: int, proc: subprocess.Popen[str], timeout_s: 
     raise AssertionError(f"fewer than {n} slots in {path} after {timeout_s} s")
 
 
-@pytest.mark.xfail(strict=True, reason=GROUND_RESUME_GAP)
 def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(tmp_path: Path) -> None:
     """serve + sim as two processes; SIGKILL the serve after a few slots; `serve --resume`
     continues from the trace's last complete slot (L+1 first, computed from L's estimate, P and
