@@ -32,7 +32,8 @@ clock, so links stay up while the clock is held or slow.
 
 Bad input is counted per reason in `rejected` (and logged): garbage bytes, bad CRC, unknown
 message ids, truncated packets, non-finite or unsupported setpoints (dropped), setpoints out of
-the area or below the minimum altitude (clamped), bad parameter values, and handler exceptions.
+the area or below the minimum altitude (clamped), bad parameter values, commands with a NaN,
+infinite or absurd integer parameter (answered DENIED), and handler exceptions.
 Benign drops (messages for another system or component, message types this vehicle does not
 handle) are counted in `ignored`. Nothing a client sends stops the vehicle from flying.
 
@@ -102,6 +103,12 @@ Address = tuple[str, int]
 _RESULT_ACCEPTED: int = mavlink2.MAV_RESULT_ACCEPTED
 _RESULT_DENIED: int = mavlink2.MAV_RESULT_DENIED
 _RESULT_UNSUPPORTED: int = mavlink2.MAV_RESULT_UNSUPPORTED
+_INTEGER_PARAMS: dict[int, int] = {
+    mavlink2.MAV_CMD_DO_SET_MODE: 3,
+    mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL: 1,
+    mavlink2.MAV_CMD_REQUEST_MESSAGE: 1,
+}
+"""Commands whose first n parameters are integers carried in floats (a mode, a message id)."""
 LossAction = Literal["none", "hold", "land"]
 
 
@@ -889,6 +896,12 @@ class Autopilot:
         self, link: _Link, msg: Any, addr: Address, command: int, p: tuple[float, ...]
     ) -> None:
         followup: Any = None
+        n_ints = _INTEGER_PARAMS.get(command, 0)
+        if not all(math.isfinite(x) and abs(x) < 2**31 for x in p[:n_ints]):
+            # NaN, inf or absurd where an integer is expected: refused, as PX4 does.
+            self._reject("bad_command_param", f"command {command} {p[:n_ints]} from {addr}")
+            self._ack(link, msg, addr, command, _RESULT_DENIED)
+            return
         if command == mavlink2.MAV_CMD_COMPONENT_ARM_DISARM:
             result = self._arm() if p[0] >= 0.5 else self._disarm("commanded")
         elif command == mavlink2.MAV_CMD_NAV_TAKEOFF:

@@ -9,7 +9,9 @@ type). A handler that raises is logged and counted in `errors["handler_error"]`;
 the link. A message type without a handler is noted once in the log and counted in `ignored`.
 Bad input is counted per reason in `errors`: `garbage` (bytes that are not MAVLink), `bad_crc`,
 `bad_data` (other pymavlink complaints), `truncated` (a datagram ending inside a packet),
-`unknown_message` (a message id outside the common dialect), `parse_error` (pymavlink raised).
+`unknown_message` (a message id outside the common dialect), `parse_error` (pymavlink raised),
+`foreign_address` (a packet in the vehicle's name from another address than the vehicle's:
+the address is learnt from the vehicle's HEARTBEAT and moves only after the link was lost).
 
 MAVLink 2 signing (`signing=` a `MavlinkSigningKey`, from the scenario's
 `security.mavlink_signing`): every message we send is signed, with timestamps that follow the wall
@@ -698,9 +700,9 @@ class MavlinkLink(asyncio.DatagramProtocol):
         if getattr(msg, "target_system", 0) not in (0, self._own_system):
             self.ignored["for_other_system"] += 1
             return
-        if self._address != addr and (self._address is None or mtype == "HEARTBEAT"):
-            log.info("%s: vehicle %d at %s:%d", self.name, src, *addr)
-            self._address = addr
+        if self._address != addr and not self._learn_address(msg, mtype, addr):
+            self._count_error("foreign_address", f"{mtype} as system {src} from {addr}")
+            return
         self.received[mtype] += 1
         handlers = self.handlers.get(mtype)
         if not handlers:
@@ -716,6 +718,21 @@ class MavlinkLink(asyncio.DatagramProtocol):
                 self.errors["handler_error"] += 1
                 log.exception("%s: handler for %s failed", self.name, mtype)
         self._notify()
+
+    def _learn_address(self, msg: Any, mtype: str, addr: Address) -> bool:
+        """Whether a packet from `addr`, not the vehicle's known address, may be taken; if so the
+        link now sends there. Like MAVSDK's udpin, the link learns where the vehicle is from
+        what it hears, but only from a HEARTBEAT of the vehicle's own system and autopilot
+        component, and only while no address is known or the vehicle has been lost (it
+        restarted on another port). While the vehicle is heard, anything in its name from
+        elsewhere is dropped: a sender on our port cannot take the link over."""
+        if mtype != "HEARTBEAT" or int(msg.get_srcComponent()) != self._vehicle_component:
+            return self._address is None  # state before the first heartbeat; no address yet
+        if self._address is not None and not self.lost:
+            return False
+        log.info("%s: vehicle %d at %s:%d", self.name, int(msg.get_srcSystem()), *addr)
+        self._address = addr
+        return True
 
     def _count_error(self, reason: str, detail: str) -> None:
         self.errors[reason] += 1

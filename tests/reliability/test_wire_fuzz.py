@@ -1,0 +1,717 @@
+"""Bad wire input over the real parts (issue 7, item 3): Zenoh payloads to a real GroundLoop,
+MAVLink fuzz to a simulated vehicle's port and to the service's bridge port, and a live mission
+under a garbage flood.
+
+- Zenoh: a catalogue of invalid payloads (not JSON, not UTF-8, wrong schema or version, wrong
+  types, NaN and huge numbers, missing fields, megabytes long) and hypothesis-mutated payloads
+  are published to a GroundLoop; each must be counted under "rejected <reason>" and dropped,
+  quickly (an oversized payload is refused before parsing), and the loop must go on to fly a
+  mission.
+- MAVLink: hypothesis draws valid-CRC packets of random common-dialect messages with random field
+  values (NaN, infinities, out-of-range) and random byte strings; they go to the vehicle's
+  offboard port (sim/autopilot.py) and to the bridge's udpin port. After each batch a packet of an
+  unknown message id is sent from the same socket: when it has been counted, the batch has been
+  processed (a barrier, not a sleep). Nothing may crash, every malformed datagram must be
+  counted, the bridge must keep the vehicle's address and state (a fuzzer on its port must not
+  hijack the link), and afterwards the vehicle must still arm, take off, enter OFFBOARD and fly
+  where the bridge sends it, with telemetry flowing on Zenoh.
+- Slot rate: `run_embedded` flies a short mission with and without a flooder process publishing
+  garbage (a few MB-sized payloads among it) on the detections, telemetry and clock keys; every
+  slot must complete, the garbage must be counted, and the wall-clock slot periods must stay in
+  their normal band.
+
+Every socket is on 127.0.0.1; every Zenoh session has explicit loopback endpoints and no
+multicast scouting (BusSettings).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from collections import Counter
+from collections.abc import AsyncIterator, Callable
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from pymavlink.dialects.v20 import common as mavlink2
+
+from isac_mission.config import Scenario
+from isac_mission.errors import MessageError
+from isac_mission.service import codec
+from isac_mission.service.bridge import BridgeSettings, FuncTime, VehicleBridge
+from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
+from isac_mission.service.codec import (
+    ClockMsg,
+    decode_clock,
+    decode_detection,
+    decode_telemetry,
+    encode_clock,
+    rejection_reason,
+)
+from isac_mission.service.ground import SlotEvent
+from isac_mission.service.live import LiveOptions, run_embedded
+from isac_mission.service.mavlink import (
+    MavlinkLink,
+    gcs_heartbeat,
+    message_interval_command,
+    new_encoder,
+    pack,
+)
+from sim.autopilot import AutopilotSettings, FlightMode
+from tests.support.mavlink_fuzz import mavlink_frames, random_datagrams, unknown_message
+from tests.support.ports import free_port_block
+from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports, wait_until
+from tests.support.wire_garbage import (
+    GroundThread,
+    bad_payloads,
+    valid_clock,
+    valid_detection,
+    valid_telemetry,
+)
+
+T = TypeVar("T")
+
+WAIT_S = 30.0
+"""Generous wall-clock bound for any single awaited event."""
+FUZZ = settings(
+    max_examples=int(os.environ.get("ISAC_FUZZ_EXAMPLES", "150")),
+    derandomize=True,
+    database=None,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+"""Bounded, reproducible hypothesis runs (the same examples every time)."""
+
+
+# ============================================================================ Zenoh payloads
+
+
+def _publish_and_wait(ground: GroundThread, world: ZenohBus, key: str, payload: bytes) -> None:
+    """Publish, then publish a sentinel (not JSON) on the same key and wait until it has been
+    counted: Zenoh keeps one publisher's order, so the payload has been handled too."""
+    before = ground.counters.get("rejected payload not JSON", 0)
+    world.publish(key, payload)
+    world.publish(key, b"sentinel")
+    wait_until(
+        lambda: ground.counters.get("rejected payload not JSON", 0) > before,
+        WAIT_S,
+        "the sentinel to be counted",
+    )
+
+
+def _counted(g: GroundThread, name: str, count: int) -> Callable[[], bool]:
+    """A condition: the ground has counted `name` at least `count` times."""
+    return lambda: g.counters.get(name, 0) >= count
+
+
+def _rejected(counters: dict[str, int]) -> Counter[str]:
+    return Counter({k: v for k, v in counters.items() if k.startswith("rejected ")})
+
+
+@pytest.fixture
+def ground(paper: Scenario, free_tcp_port: int) -> Any:
+    """A GroundLoop (N = 3 slots) in its own thread, and a world session connected to it."""
+    s = paper.with_changes(N=3)
+    endpoint = tcp_loopback(free_tcp_port)
+    g = GroundThread(s, endpoint).start()
+    world = ZenohBus.open(BusSettings(connect=(endpoint,)))
+    try:
+        assert asyncio.run(world.wait_for_subscribers(g.keys.clock, WAIT_S))
+        yield g, world
+    finally:
+        world.close()
+        if g.alive:
+            g.stop()
+
+
+def test_each_bad_payload_is_counted_under_its_reason_and_the_mission_still_flies(
+    ground: tuple[GroundThread, ZenohBus],
+) -> None:
+    g, world = ground
+    keys, m = g.keys, g.s.M
+    catalogue = bad_payloads(m)
+    expected: Counter[str] = Counter()
+    lag_s: dict[str, float] = {}
+    for i, bad in enumerate(catalogue):
+        key = {
+            "detections": keys.detections(i % m),
+            "telemetry": keys.telemetry(i % m),
+            "clock": keys.clock,
+        }[bad.kind]
+        name = f"rejected {bad.reason}"
+        before = g.counters.get(name, 0)
+        t0 = time.monotonic()
+        world.publish(key, bad.payload)
+        wait_until(_counted(g, name, before + 1), WAIT_S, bad.name)
+        lag_s[bad.name] = time.monotonic() - t0
+        expected[name] += 1
+        assert g.alive, f"the ground loop stopped after {bad.name!r}"
+    assert _rejected(g.counters) == expected
+    # Megabytes go over the wire (Zenoh fragments them) and are dropped at once on arrival.
+    big = [b.name for b in catalogue if len(b.payload) > codec.MAX_PAYLOAD_BYTES]
+    print(
+        "publish-to-counted lag of the oversized payloads (ms):",
+        {n: round(lag_s[n] * 1e3, 1) for n in big},
+    )
+    assert len(big) == 3 and max(lag_s[n] for n in big) < 2.0
+
+    # Then a normal mission: clock, M detections per slot, all N slots complete.
+    world.publish(keys.clock, encode_clock(ClockMsg(0, 0.0, g.s.dt, 1.0, 0.0)))
+    for n in range(1, g.s.N + 1):
+        for u in range(m):
+            obj = valid_detection(slot=n, uav=u) | {"uav_xy_m": list(g.s.uav_start_xy[u])}
+            world.publish(keys.detections(u), json.dumps(obj).encode())
+        wait_until(_counted(g, "slots", n), WAIT_S, f"slot {n}")
+    report = g.stop()
+    assert report.counters["slots"] == g.s.N
+    assert _rejected(report.counters) == expected
+    assert "slot_s" in report.last_error  # the last refusal, with its reason
+
+
+def test_an_oversized_payload_is_refused_before_it_is_parsed() -> None:
+    """4 MB of valid JSON would take json.loads tens of milliseconds; the size check refuses it
+    in microseconds (the limit is codec.MAX_PAYLOAD_BYTES)."""
+    body = json.dumps(valid_detection() | {"pad": [1.5] * 800_000}).encode()
+    assert len(body) > 3_000_000
+    t0 = time.perf_counter()
+    json.loads(body)
+    parse_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with pytest.raises(MessageError) as info:
+        decode_detection(body)
+    refuse_s = time.perf_counter() - t0
+    print(f"4 MB payload: json.loads {parse_s * 1e3:.1f} ms, refused in {refuse_s * 1e6:.0f} us")
+    assert rejection_reason(info.value) == "payload too large"
+    assert refuse_s < parse_s / 10
+
+
+_JSON_SCALARS = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(10**30), max_value=10**30),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([1e308, -1e308, 1e9 + 1, 2**63, "NaN", "inf", "", "isac/2"]),
+    st.text(max_size=20),
+)
+_JSON = st.recursive(
+    _JSON_SCALARS,
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=8), inner, max_size=4)
+    ),
+    max_leaves=12,
+)
+
+
+@st.composite
+def mutated_payloads(draw: st.DrawFn) -> tuple[str, bytes]:
+    """(key kind, payload): a valid payload with 1-3 fields replaced, deleted or added, or
+    random bytes."""
+    kind = draw(st.sampled_from(["detections", "telemetry", "clock"]))
+    if draw(st.integers(0, 9)) == 0:
+        return kind, draw(st.binary(max_size=200))
+    makers: dict[str, Callable[[], dict[str, Any]]] = {
+        "detections": valid_detection,
+        "telemetry": valid_telemetry,
+        "clock": valid_clock,
+    }
+    obj = makers[kind]()
+    for _ in range(draw(st.integers(1, 3))):
+        name = draw(st.one_of(st.sampled_from(sorted(obj)), st.text(max_size=8)))
+        if draw(st.booleans()) and name in obj:
+            del obj[name]
+        else:
+            obj[name] = draw(_JSON)
+    return kind, json.dumps(obj, allow_nan=True).encode()
+
+
+def test_mutated_payloads_are_each_counted_or_used_and_never_crash_the_loop(
+    ground: tuple[GroundThread, ZenohBus],
+) -> None:
+    """Property: a payload the codec refuses (only ever with MessageError) is counted by the
+    ground under exactly that reason; one it accepts is not counted as rejected."""
+    g, world = ground
+    keys, m = g.keys, g.s.M
+    expected = _rejected(g.counters)
+    decoders: dict[str, Callable[[bytes], object]] = {
+        "detections": lambda p: decode_detection(p, n_uavs=m),
+        "telemetry": lambda p: decode_telemetry(p, n_uavs=m),
+        "clock": decode_clock,
+    }
+    seen: Counter[str] = Counter()
+
+    @FUZZ
+    @given(mutated_payloads())
+    def one(case: tuple[str, bytes]) -> None:
+        kind, payload = case
+        try:
+            decoders[kind](payload)
+            reason = None
+        except MessageError as err:
+            reason = rejection_reason(err)
+        if reason is None and kind == "clock":
+            return  # a valid clock would start the mission: not what this test is about
+        key = {"detections": keys.detections(0), "telemetry": keys.telemetry(1)}.get(
+            kind, keys.clock
+        )
+        _publish_and_wait(g, world, key, payload)
+        expected["rejected payload not JSON"] += 1  # the sentinel
+        if reason is not None:
+            expected[f"rejected {reason}"] += 1
+            seen[reason] += 1
+        assert g.alive
+        assert _rejected(g.counters) == expected
+
+    one()
+    print("mutated payloads refused, by reason:", dict(seen))
+    assert len(seen) >= 5  # the fuzz reached several distinct checks
+
+
+# ============================================================================ MAVLink fuzz
+
+SPEED = 8.0
+"""Simulation seconds per wall second for the MAVLink tests."""
+ALTITUDE_M = 10.0
+START_XY = np.array([58.0, 74.0])
+KEYS = Keys("fuzz")
+DEFAULT_STREAMS = (0, 1, 24, 30, 32, 33, 242, 245)
+"""HEARTBEAT, SYS_STATUS, GPS_RAW_INT, ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT,
+HOME_POSITION, EXTENDED_SYS_STATE: the vehicle's default streams."""
+
+
+@dataclass
+class MavRig:
+    """A simulated vehicle (own thread), its bridge (this loop) and the Zenoh hub."""
+
+    runner: SimRunner
+    bridge: VehicleBridge
+    hub: ZenohBus
+    loop: asyncio.AbstractEventLoop
+    fuzzer: socket.socket
+    sentinels: int = 0
+    notes: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def vehicle(self) -> Any:
+        return self.runner.autopilots[0]
+
+    def on_loop(self, fn: Callable[[], T]) -> T:
+        """fn() on the bridge's event loop (from a worker thread); its result."""
+        fut: Future[T] = Future()
+
+        def run() -> None:
+            try:
+                fut.set_result(fn())
+            except BaseException as exc:
+                fut.set_exception(exc)
+
+        self.loop.call_soon_threadsafe(run)
+        return fut.result(timeout=WAIT_S)
+
+    def vehicle_counts(self) -> Counter[str]:
+        return self.runner.call(lambda: Counter(self.vehicle.rejected))
+
+    def link_counts(self) -> Counter[str]:
+        return self.on_loop(lambda: Counter(self.bridge.link.errors))
+
+
+@pytest.fixture
+async def mav_rig(free_tcp_port: int) -> AsyncIterator[MavRig]:
+    bridge_port, gcs_port = free_udp_ports(2)
+    settings_ = AutopilotSettings(
+        index=0, offboard_port=bridge_port, gcs_port=gcs_port, spawn_xy_m=(50.0, 80.0)
+    )
+    runner = SimRunner([settings_], speed=SPEED).start()
+    hub = await ZenohBus.open_async(BusSettings.hub(tcp_loopback(free_tcp_port)))
+    clock = runner.clock
+    bridge = VehicleBridge(
+        BridgeSettings(index=0, port=bridge_port, v_max_mps=12.0),
+        FuncTime(lambda: clock.now_s, lambda: clock.speed),
+        KEYS,
+        hub,
+    )
+    fuzzer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    fuzzer.bind(("127.0.0.1", 0))
+    fuzzer.setblocking(False)
+    try:
+        await bridge.start()
+        yield MavRig(runner, bridge, hub, asyncio.get_running_loop(), fuzzer)
+    finally:
+        fuzzer.close()
+        await bridge.stop()
+        hub.close()
+        runner.stop()
+
+
+_BATCHES = st.lists(
+    st.one_of(
+        mavlink_frames().map(lambda b: ("packet", b)),
+        random_datagrams().map(lambda b: ("junk", b)),
+    ),
+    min_size=1,
+    max_size=6,
+)
+
+
+def _fuzz(
+    rig: MavRig,
+    target: tuple[str, int],
+    counts: Callable[[], Counter[str]],
+    batches: st.SearchStrategy[list[tuple[str, bytes]]],
+    check: Callable[[], None],
+) -> Counter[str]:
+    """Send hypothesis batches from the fuzzer socket to `target`; after each, the barrier
+    (an unknown-id packet counted in counts()["unknown_message"]), then: every junk datagram
+    counted (at least one count each), no handler raised, and `check()`. Returns the counts."""
+
+    @FUZZ
+    @given(batches)
+    def one(batch: list[tuple[str, bytes]]) -> None:
+        before = counts()
+        for _kind, data in batch:
+            rig.fuzzer.sendto(data, target)
+        rig.sentinels += 1
+        rig.fuzzer.sendto(unknown_message(seq=rig.sentinels), target)
+        wait_until(
+            lambda: counts()["unknown_message"] >= rig.sentinels, WAIT_S, "the barrier packet"
+        )
+        after = counts()
+        junk = sum(kind == "junk" for kind, _ in batch)
+        assert sum(after.values()) - sum(before.values()) - 1 >= junk, (after - before, batch)
+        assert after["handler_error"] == before["handler_error"], batch
+        check()
+
+    one()
+    return counts()
+
+
+async def _ack_on(sock: socket.socket, command: int) -> Any:
+    """The next COMMAND_ACK for `command` arriving on the non-blocking socket `sock`."""
+    parser = new_encoder(200, 190)
+    found: list[Any] = []
+
+    def poll() -> bool:
+        while True:
+            try:
+                data = sock.recv(65536)
+            except BlockingIOError:
+                return bool(found)
+            for msg in parser.parse_buffer(data) or []:
+                if msg.get_type() == "COMMAND_ACK" and msg.command == command:
+                    found.append(msg)
+
+    await async_wait_until(poll, WAIT_S, f"COMMAND_ACK for command {command}")
+    return found[0]
+
+
+async def test_fuzz_on_the_vehicle_port_is_counted_and_the_vehicle_still_flies(
+    mav_rig: MavRig,
+) -> None:
+    rig = mav_rig
+    bridge, vehicle = rig.bridge, rig.vehicle
+    await bridge.link.wait_for(lambda st: not st.lost, WAIT_S, "the vehicle's heartbeat")
+
+    # Integer parameters (a mode, a message id) given as NaN or inf: answered DENIED, counted.
+    nan, inf = float("nan"), float("inf")
+    fuzz_gcs = new_encoder(200, 190)
+    for command, params in (
+        (mavlink2.MAV_CMD_DO_SET_MODE, (nan, 6.0, 0.0)),
+        (mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, (inf, 1e5)),
+        (mavlink2.MAV_CMD_REQUEST_MESSAGE, (-nan,)),
+    ):
+        p7 = [*params, *([0.0] * (7 - len(params)))]
+        msg = mavlink2.MAVLink_command_long_message(1, 1, command, 0, *p7)
+        rig.fuzzer.sendto(pack(msg, fuzz_gcs), vehicle.offboard_address)
+        ack = await _ack_on(rig.fuzzer, command)
+        assert ack.result == mavlink2.MAV_RESULT_DENIED
+    assert rig.vehicle_counts()["bad_command_param"] == 3
+    assert rig.vehicle_counts()["handler_error"] == 0
+
+    def alive() -> None:
+        assert rig.runner._thread.is_alive(), "the simulation thread died"
+
+    counts = await asyncio.to_thread(
+        _fuzz, rig, vehicle.offboard_address, rig.vehicle_counts, _BATCHES, alive
+    )
+    print("vehicle counters after the fuzz:", dict(counts))
+    assert counts["garbage"] + counts["bad_crc"] + counts["truncated"] > 0
+
+    # The vehicle still answers and flies: restore its default streams (the fuzz may have
+    # changed them with SET_MESSAGE_INTERVAL, which any client may send), then the bridge
+    # arms, takes off, enters OFFBOARD and flies to the start point.
+    target = bridge.link.target
+    for msg_id in DEFAULT_STREAMS:
+        await bridge.link.command(message_interval_command(target, msg_id, 0.0))
+    async with rig.hub.subscribe(KEYS.telemetry(0)) as telemetry:
+        await asyncio.wait_for(bridge.prepare(START_XY, ALTITUDE_M), 4 * WAIT_S)
+        st_ = vehicle.state
+        assert st_.armed and not st_.landed and st_.mode is FlightMode.OFFBOARD
+        assert float(np.hypot(*(st_.position_xy_m - START_XY))) <= 1.5
+        t_ready = bridge.time.now_s()
+        while True:
+            _, payload = await telemetry.get(WAIT_S)
+            tel = decode_telemetry(payload)
+            if tel.t_s >= t_ready:
+                break
+        assert tel.link == "ok" and tel.mode == "offboard"
+        np.testing.assert_allclose(tel.position_xy_m, vehicle.state.position_xy_m, atol=1.0)
+
+
+async def test_fuzz_on_the_bridge_port_is_counted_and_does_not_hijack_the_link(
+    mav_rig: MavRig,
+) -> None:
+    rig = mav_rig
+    bridge, vehicle = rig.bridge, rig.vehicle
+    await asyncio.wait_for(bridge.prepare(START_XY, ALTITUDE_M), 4 * WAIT_S)
+    vehicle_addr = vehicle.offboard_address
+    assert bridge.link.vehicle_address == vehicle_addr
+    sysid = vehicle.system_id
+
+    def unhijacked() -> None:
+        def look() -> tuple[Any, Any, bool]:
+            st_ = bridge.link.status()
+            return st_.address, st_.position_ned_m, st_.lost
+
+        address, position, lost = rig.on_loop(look)
+        assert address == vehicle_addr, "the fuzzer took the vehicle's address"
+        assert not lost
+        truth = rig.runner.call(lambda: vehicle.state.position_ned_m.copy())
+        assert position is not None and float(np.linalg.norm(position - truth)) < 3.0, (
+            f"the link's position {position} is not the vehicle's {truth}"
+        )
+        with pytest.raises(BlockingIOError):
+            rig.fuzzer.recv(65536)  # nothing the bridge sends goes to the fuzzer
+
+    # Half of the packets claim to come from the vehicle's own system id.
+    batches = st.lists(
+        st.one_of(
+            mavlink_frames(sysids=st.one_of(st.just(sysid), st.integers(0, 255))).map(
+                lambda b: ("packet", b)
+            ),
+            random_datagrams().map(lambda b: ("junk", b)),
+        ),
+        min_size=1,
+        max_size=6,
+    )
+    counts = await asyncio.to_thread(
+        _fuzz, rig, bridge.link.local_address, rig.link_counts, batches, unhijacked
+    )
+    print("bridge link counters after the fuzz:", dict(counts))
+    assert counts["foreign_address"] > 0  # packets in the vehicle's name, from elsewhere
+
+    # The bridge still flies the vehicle: a new waypoint, reached; telemetry flows.
+    goal = START_XY + np.array([15.0, -10.0])
+    sent_before = bridge.counters.setpoints_sent
+    bridge.set_waypoint(goal, bridge.time.now_s() + 6.0)
+    await async_wait_until(
+        lambda: float(np.hypot(*(vehicle.state.position_xy_m - goal))) < 1.5,
+        WAIT_S,
+        "the vehicle at the new waypoint",
+    )
+    assert vehicle.state.mode is FlightMode.OFFBOARD
+    assert bridge.counters.setpoints_sent > sent_before
+    async with rig.hub.subscribe(KEYS.telemetry(0)) as telemetry:
+        tel = decode_telemetry((await telemetry.get(WAIT_S))[1])
+    assert tel.link == "ok"
+    np.testing.assert_allclose(tel.position_xy_m, goal, atol=2.0)
+
+
+async def test_a_spoofed_vehicle_on_the_bridge_port_cannot_take_over_the_link(
+    mav_rig: MavRig,
+) -> None:
+    """Packets with the vehicle's system and component ids from another socket (a forged
+    HEARTBEAT, a forged position, a forged COMMAND_ACK) are counted as "foreign_address" and
+    dropped: the bridge keeps sending to the real vehicle and keeps its real state."""
+    rig = mav_rig
+    bridge, vehicle = rig.bridge, rig.vehicle
+    await asyncio.wait_for(bridge.prepare(START_XY, ALTITUDE_M), 4 * WAIT_S)
+    vehicle_addr = vehicle.offboard_address
+    spoof = new_encoder(vehicle.system_id, 1)
+    forged = [
+        mavlink2.MAVLink_heartbeat_message(
+            mavlink2.MAV_TYPE_QUADROTOR,
+            mavlink2.MAV_AUTOPILOT_PX4,
+            mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            0x06040000,  # LAND
+            mavlink2.MAV_STATE_ACTIVE,
+            3,
+        ),
+        mavlink2.MAVLink_local_position_ned_message(0, 999.0, -999.0, -500.0, 50.0, 0.0, 0.0),
+    ]
+    before = bridge.link.errors["foreign_address"]
+    for _ in range(20):
+        for msg in forged:
+            rig.fuzzer.sendto(pack(msg, spoof), bridge.link.local_address)
+    await async_wait_until(
+        lambda: bridge.link.errors["foreign_address"] >= before + 40, WAIT_S, "40 counted"
+    )
+    st_ = bridge.link.status()
+    assert st_.address == vehicle_addr
+    assert st_.mode == "offboard"
+    assert st_.position_ned_m is not None and abs(st_.position_ned_m[0]) < 500.0
+    # The bridge's next setpoints and heartbeats still reach the vehicle, none the spoofer.
+    sent = bridge.counters.setpoints_sent
+    await async_wait_until(
+        lambda: bridge.counters.setpoints_sent >= sent + 20, WAIT_S, "20 more setpoints"
+    )
+    with pytest.raises(BlockingIOError):
+        rig.fuzzer.recv(65536)
+    assert vehicle.state.mode is FlightMode.OFFBOARD
+
+
+async def test_the_link_moves_to_a_restarted_vehicle_only_after_losing_it() -> None:
+    """The fix above keeps the one legitimate move: a vehicle that restarts on another port is
+    followed, once its old address has gone silent for the link-loss time."""
+    now = [0.0]
+    (port,) = free_udp_ports(1)
+    link = MavlinkLink(
+        port, system_id=1, clock=lambda: now[0], lost_after_s=3.0, lost_min_wall_s=0.0
+    )
+    await link.open()
+    old, new = (socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2))
+    try:
+        for s_ in (old, new):
+            s_.bind(("127.0.0.1", 0))
+            s_.setblocking(False)
+        vehicle = new_encoder(1, 1)
+        heartbeat = mavlink2.MAVLink_heartbeat_message(
+            mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_PX4, 0, 0, 3, 3
+        )
+        old.sendto(pack(heartbeat, vehicle), link.local_address)
+        await async_wait_until(
+            lambda: link.vehicle_address == old.getsockname(), WAIT_S, "the first heartbeat"
+        )
+        new.sendto(pack(heartbeat, vehicle), link.local_address)  # vehicle still heard: refused
+        await async_wait_until(
+            lambda: link.errors["foreign_address"] == 1, WAIT_S, "the refusal to be counted"
+        )
+        assert link.vehicle_address == old.getsockname()
+        now[0] = 10.0  # the old address has been silent for longer than lost_after_s
+        assert link.lost
+        new.sendto(pack(heartbeat, vehicle), link.local_address)
+        await async_wait_until(
+            lambda: link.vehicle_address == new.getsockname(), WAIT_S, "the move"
+        )
+        assert link.send(gcs_heartbeat())
+        await async_wait_until(lambda: _readable(new), WAIT_S, "our heartbeat at the new port")
+    finally:
+        link.close()
+        old.close()
+        new.close()
+
+
+def _readable(sock: socket.socket) -> bool:
+    try:
+        return bool(sock.recv(65536))
+    except BlockingIOError:
+        return False
+
+
+# ============================================================================ slot rate
+
+
+@dataclass
+class SlotTimes:
+    """Wall times of the slots of one live run, and what the run counted."""
+
+    wall_s: list[float] = field(default_factory=list)
+    counters: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def periods_s(self) -> list[float]:
+        return list(np.diff(self.wall_s))
+
+
+async def _live_run(
+    s: Scenario, tmp: Path, speed: float, flood: tuple[float, float] | None
+) -> SlotTimes:
+    """run_embedded on free ports; flood = (messages per second, seconds between the MB-sized
+    ones) starts the flooder process for the duration of the run."""
+    endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
+    opts = LiveOptions(
+        speed=speed,
+        lockstep=False,
+        out_dir=tmp,
+        zenoh_endpoint=endpoint,
+        mavlink_base_port=free_port_block(s.M),
+        gcs_base_port=free_port_block(s.M),
+    )
+    times = SlotTimes()
+
+    def on_slot(_event: SlotEvent) -> None:
+        times.wall_s.append(time.monotonic())
+
+    flooder: subprocess.Popen[str] | None = None
+    if flood is not None:
+        flooder = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "tests.support.wire_garbage",
+                endpoint,
+                s.mission_id,
+                str(s.M),
+                *(str(x) for x in flood),
+            ],
+            cwd=Path(__file__).resolve().parents[2],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=os.environ | {"PYTHONUNBUFFERED": "1"},
+        )
+    try:
+        result = await asyncio.wait_for(
+            run_embedded(s, opts, asyncio.Event(), on_slot=on_slot), timeout=150
+        )
+    finally:
+        if flooder is not None:
+            flooder.terminate()
+            out, err = flooder.communicate(timeout=30)
+            assert flooder.returncode == 0, err[-2000:]
+            assert "flooding" in out, (out, err[-2000:])
+            times.counters["flood sent"] = int(out.strip().rsplit(" ", 1)[-1])
+    times.counters |= dict(result.report.counters)
+    assert len(result.report.records) == s.N, "not every slot completed"
+    return times
+
+
+async def test_the_slot_rate_holds_under_a_garbage_flood(paper: Scenario, tmp_path: Path) -> None:
+    """A clean live run, then the same run while a flooder process publishes the bad-payload
+    catalogue at 300 messages per wall second on the detections, telemetry and clock keys, a 2-3
+    MB payload every 0.5 s among them. Every slot completes, the garbage is counted, and every slot
+    period stays within 0.5x-2x the nominal dt / speed (its median within 20 %)."""
+    s = paper.with_changes(N=16, H=20.0)  # a low altitude: a short climb before slot 0
+    speed = 5.0
+    nominal = s.dt / speed
+    clean = await _live_run(s, tmp_path / "clean", speed, None)
+    flooded = await _live_run(s, tmp_path / "flood", speed, (300.0, 0.5))
+    rows = []
+    for name, run in (("clean", clean), ("flood", flooded)):
+        p = run.periods_s
+        rows.append(
+            f"{name}: median {statistics.median(p) * 1e3:.1f} ms, min {min(p) * 1e3:.1f} ms, "
+            f"max {max(p) * 1e3:.1f} ms (nominal {nominal * 1e3:.0f} ms)"
+        )
+    rejected = sum(v for k, v in flooded.counters.items() if k.startswith("rejected "))
+    print("slot periods, N = 16 at speed 5:", "; ".join(rows))
+    print(f"flood: {flooded.counters['flood sent']} sent, {rejected} counted as rejected")
+    for run in (clean, flooded):
+        p = run.periods_s
+        assert all(0.5 * nominal <= x <= 2.0 * nominal for x in p), p
+        assert abs(statistics.median(p) - nominal) <= 0.2 * nominal
+    assert sum(v for k, v in clean.counters.items() if k.startswith("rejected ")) == 0
+    reasons = {k for k in flooded.counters if k.startswith("rejected ")}
+    assert {"rejected payload too large", "rejected payload not JSON", "rejected schema"} <= reasons
+    # The mission lasted > N x nominal wall seconds at 300 per second: thousands of messages.
+    assert rejected >= 0.5 * 300.0 * (s.N - 1) * nominal
