@@ -41,6 +41,10 @@ SCHEMA: Final = "isac/1"
 MAX_PAYLOAD_BYTES: Final = 64 * 1024
 """Longest payload accepted (a plan for 256 UAVs is about 20 kB)."""
 MAX_ABS: Final = 1.0e9
+MAX_ABS_COVARIANCE: Final = 1.0e150
+"""Covariance and information entries span many decades (the literal eq. 8 gives PCRB
+information near 1e20 m^-2, a UAV close to the target 1e9 with the calibrated model): only
+finiteness and a bound far beyond them are checked."""
 """Largest magnitude accepted for any number (m, m/s, s, m^2): far beyond any sane value."""
 MAX_SLOT: Final = 1_000_000_000
 MAX_UAVS: Final = 256
@@ -212,19 +216,25 @@ def _require(obj: Mapping[str, Any], name: str, kind: str) -> Any:
 
 
 def check_number(
-    value: Any, where: str, *, lo: float | None = None, hi: float | None = None
+    value: Any,
+    where: str,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    limit: float = MAX_ABS,
 ) -> float:
-    """A JSON number (not a bool) that is finite, |x| <= MAX_ABS and within [lo, hi]."""
+    """A JSON number (not a bool) that is finite, |x| <= limit (MAX_ABS unless the field's
+    scale needs more) and within [lo, hi]."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise MessageError(f"{where}: expected a number, got {type(value).__name__}")
     try:
         x = float(value)
     except OverflowError:
-        raise MessageError(f"{where}: {value} is too large (limit {MAX_ABS:g})") from None
+        raise MessageError(f"{where}: {value} is too large (limit {limit:g})") from None
     if not math.isfinite(x):
         raise MessageError(f"{where}: {x} is not finite")
-    if abs(x) > MAX_ABS:
-        raise MessageError(f"{where}: {x:g} is too large (limit {MAX_ABS:g})")
+    if abs(x) > limit:
+        raise MessageError(f"{where}: {x:g} is too large (limit {limit:g})")
     if lo is not None and x < lo:
         raise MessageError(f"{where}: {x:g} is below {lo:g}")
     if hi is not None and x > hi:
@@ -305,15 +315,23 @@ def get_vector(
     return np.array([check_number(v, f"{where}[{i}]", lo=lo, hi=hi) for i, v in enumerate(items)])
 
 
-def get_matrix(obj: Mapping[str, Any], name: str, kind: str, *, rows: int, cols: int) -> FloatArray:
-    """Field `name` as a float matrix [rows, cols] of checked numbers."""
+def get_matrix(
+    obj: Mapping[str, Any],
+    name: str,
+    kind: str,
+    *,
+    rows: int,
+    cols: int,
+    limit: float = MAX_ABS,
+) -> FloatArray:
+    """Field `name` as a float matrix [rows, cols] of checked numbers (|x| <= limit)."""
     items = get_list(obj, name, kind, length=rows)
     where = _where(kind, name)
     out = np.empty((rows, cols))
     for i, row in enumerate(items):
         r = check_list(row, f"{where}[{i}]", length=cols)
         for j, v in enumerate(r):
-            out[i, j] = check_number(v, f"{where}[{i}][{j}]")
+            out[i, j] = check_number(v, f"{where}[{i}][{j}]", limit=limit)
     return out
 
 
@@ -651,8 +669,8 @@ def decode_track(payload: bytes | bytearray | memoryview | str) -> TrackMsg:
         slot=slot,
         t_s=t_s,
         x=get_vector(obj, "x", kind, length=4),
-        P=get_matrix(obj, "P", kind, rows=4, cols=4),
-        J=get_matrix(obj, "J", kind, rows=4, cols=4),
+        P=get_matrix(obj, "P", kind, rows=4, cols=4, limit=MAX_ABS_COVARIANCE),
+        J=get_matrix(obj, "J", kind, rows=4, cols=4, limit=MAX_ABS_COVARIANCE),
         pcrb_trace=get_float(obj, "pcrb_trace", kind, lo=0.0),
     )
 

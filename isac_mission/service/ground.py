@@ -210,14 +210,27 @@ class GroundLoop:
                 handler(payload)
             except MessageError as err:
                 self._reject(err)
-            self._advance()
+            self._advance_guarded()
 
     async def _wall_ticker(self) -> None:
         """Wakes the loop so that a wall-clock deadline can pass without traffic."""
         while True:
             await asyncio.sleep(0.05)
             self._update_vehicle_states()
+            self._advance_guarded()
+
+    def _advance_guarded(self) -> None:
+        """_advance, with a bug in it counted and logged instead of ending the service."""
+        try:
             self._advance()
+        except Exception as err:
+            self._internal_error(err)
+
+    def _internal_error(self, err: Exception) -> None:
+        """A bug: counted, logged with its traceback, and the loop goes on."""
+        self.report.counters["internal errors"] += 1
+        self.report.last_error = f"internal error: {type(err).__name__}: {err}"[:MAX_REASON_CHARS]
+        log.exception("ground loop: internal error (the loop goes on)")
 
     def _reject(self, err: MessageError) -> None:
         """Count an invalid payload under "rejected <reason>" (codec.rejection_reason), keep its
@@ -380,9 +393,9 @@ class GroundLoop:
         latency_from = self.last_detection_wall if msgs else None
         if latency_from is not None:
             self.report.last_detection_wall_s[n] = latency_from
-        self.bus.publish(
+        self._publish(
             self.keys.track,
-            encode_track(
+            lambda: encode_track(
                 TrackMsg(
                     n,
                     self.t_s,
@@ -465,8 +478,11 @@ class GroundLoop:
             why = f"solver error: {type(err).__name__}: {err}"
             plan = job.fallback_after_error(why, time.perf_counter() - t0)
         self.planning = None
-        self._finish_planning(job, plan, latency_from, record)
-        self._advance()
+        try:
+            self._finish_planning(job, plan, latency_from, record)
+        except Exception as err:
+            self._internal_error(err)
+        self._advance_guarded()
 
     def _finish_planning(
         self,
@@ -476,7 +492,9 @@ class GroundLoop:
         record: tuple[SlotRecord, FloatArray | None] | None,
     ) -> None:
         pending = self.state.commit(job, plan)
-        self.bus.publish(self.keys.plan, encode_plan(PlanMsg(pending.slot, self.t_s, pending.plan)))
+        self._publish(
+            self.keys.plan, lambda: encode_plan(PlanMsg(pending.slot, self.t_s, pending.plan))
+        )
         if plan.report.status != "ok":
             self.report.last_error = f"slot {pending.slot}: {plan.report.reason}"
             log.warning("slot %d: %s", pending.slot, plan.report.reason)
@@ -486,6 +504,19 @@ class GroundLoop:
             self.report.latencies_s.append(latency)
         if record is not None:
             self._complete_record(record[0], record[1], latency)
+
+    def _publish(self, key: str, encode: Callable[[], bytes]) -> None:
+        """Publish encode() on `key`; a message that fails its own validation is counted and
+        logged, and the slot goes on (the trace keeps everything)."""
+        try:
+            payload = encode()
+        except MessageError as err:
+            kind = key.rsplit("/", 1)[-1]
+            self.report.counters[f"{kind} not published"] += 1
+            self.report.last_error = f"{kind} not published: {err}"[:MAX_REASON_CHARS]
+            log.error("%s not published: %s", kind, err)
+            return
+        self.bus.publish(key, payload)
 
     def _publish_health(self, status: str) -> None:
         try:

@@ -9,7 +9,6 @@ import re
 import signal
 import socket
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ from isac_mission.experiment.trace import read_trace
 from isac_mission.service.bus import tcp_loopback
 from isac_mission.service.live import LiveOptions, planning_scenario, run_embedded, summarize_live
 from tests.support.independent_check import check_constraints, compare_pcrb
+from tests.support.live_cli import cli, serve_argv, sim_argv, start
 from tests.support.ports import free_port_block
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -37,15 +37,11 @@ def _ports(m: int) -> tuple[str, int, int]:
     )
 
 
-def _cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "isac_mission.service.cli", *args]
-
-
 def test_run_cli_flies_all_60_slots_within_the_constraints(tmp_path: Path) -> None:
     endpoint, mav, gcs = _ports(3)
     out = tmp_path / "run"
     proc = subprocess.run(
-        _cli(
+        cli(
             "run",
             "config/paper.yaml",
             "--speed",
@@ -121,43 +117,8 @@ def test_serve_and_sim_as_two_processes_complete_a_mission(tmp_path: Path) -> No
     config.write_text(yaml.safe_dump(cfg))
     endpoint, mav, gcs = _ports(3)
     out = tmp_path / "serve"
-    serve = subprocess.Popen(
-        _cli(
-            "serve",
-            str(config),
-            "--out",
-            str(out),
-            "--zenoh-listen",
-            endpoint,
-            "--mavlink-base-port",
-            str(mav),
-        ),
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=os.environ | {"COLUMNS": "160"},
-    )
-    sim = subprocess.Popen(
-        _cli(
-            "sim",
-            str(config),
-            "--speed",
-            "10",
-            "--start",
-            "offboard",
-            "--zenoh-connect",
-            endpoint,
-            "--mavlink-base-port",
-            str(mav),
-            "--gcs-base-port",
-            str(gcs),
-        ),
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    serve = start(serve_argv(config, out, endpoint, mav))
+    sim = start(sim_argv(config, endpoint, mav, gcs))
     try:
         serve_out, serve_err = serve.communicate(timeout=300)
         assert serve.returncode == 0, serve_err[-3000:]
@@ -248,7 +209,7 @@ def _start_run(
     """`isac-mission run CONFIG --speed 5` on free loopback ports (gcs: a given GCS base port)."""
     endpoint, mav, free_gcs = _ports(3)
     return subprocess.Popen(
-        _cli(
+        cli(
             "run",
             config,
             "--speed",

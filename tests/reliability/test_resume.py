@@ -17,12 +17,10 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import json
-import os
 import re
 import signal
 import socket
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -38,6 +36,7 @@ from isac_mission.service.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.service.ground import GroundLoop, GroundSettings
 from sim.world import WorldOptions, run_world
 from tests.support.independent_check import bound_update, compare_pcrb, cv_model, jacobian
+from tests.support.live_cli import serve_argv, sim_argv, start
 from tests.support.ports import free_port_block
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -266,10 +265,6 @@ async def test_restarted_ground_loop_continues_with_the_next_slot(
 # --------------------------------------------------------------------------- end to end
 
 
-def _cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "isac_mission.service.cli", *args]
-
-
 def _wait_for_slots(path: Path, n: int, proc: subprocess.Popen[str], timeout_s: float) -> Trace:
     """Poll the trace file (generous bound) until it holds n complete slots."""
     deadline = time.monotonic() + timeout_s
@@ -301,51 +296,15 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(tmp_path: P
     mav, gcs = free_port_block(3), free_port_block(3)
     out = tmp_path / "serve"
     path = out / "trace_proposed.jsonl"
-    serve_args = _cli(
-        "serve",
-        str(config),
-        "--out",
-        str(out),
-        "--zenoh-listen",
-        endpoint,
-        "--mavlink-base-port",
-        str(mav),
-    )
-    env = os.environ | {"COLUMNS": "160"}
+    serve_cmd = serve_argv(config, out, endpoint, mav)
 
     def start_serve(*extra: str) -> subprocess.Popen[str]:
-        return subprocess.Popen(
-            [*serve_args, *extra],
-            cwd=ROOT,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env=env,
-        )
+        return start([*serve_cmd, *extra])
 
     first = start_serve()
-    sim = subprocess.Popen(
-        _cli(
-            "sim",
-            str(config),
-            "--speed",
-            "10",
-            "--lockstep",
-            "--lockstep-timeout",
-            "3",
-            "--start",
-            "offboard",
-            "--zenoh-connect",
-            endpoint,
-            "--mavlink-base-port",
-            str(mav),
-            "--gcs-base-port",
-            str(gcs),
-        ),
-        cwd=ROOT,
+    sim = start(
+        sim_argv(config, endpoint, mav, gcs, "--lockstep", "--lockstep-timeout", "3"),
         stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
     )
     procs = [first, sim]
     try:

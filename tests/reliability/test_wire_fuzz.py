@@ -37,7 +37,6 @@ import sys
 import time
 from collections import Counter
 from collections.abc import AsyncIterator, Callable
-from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -71,6 +70,7 @@ from isac_mission.service.mavlink import (
     pack,
 )
 from sim.autopilot import AutopilotSettings, FlightMode
+from tests.support.loop_calls import call_on_loop
 from tests.support.mavlink_fuzz import mavlink_frames, random_datagrams, unknown_message
 from tests.support.ports import free_port_block
 from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports, wait_until
@@ -309,16 +309,7 @@ class MavRig:
 
     def on_loop(self, fn: Callable[[], T]) -> T:
         """fn() on the bridge's event loop (from a worker thread); its result."""
-        fut: Future[T] = Future()
-
-        def run() -> None:
-            try:
-                fut.set_result(fn())
-            except BaseException as exc:
-                fut.set_exception(exc)
-
-        self.loop.call_soon_threadsafe(run)
-        return fut.result(timeout=WAIT_S)
+        return call_on_loop(self.loop, fn, WAIT_S)
 
     def vehicle_counts(self) -> Counter[str]:
         return self.runner.call(lambda: Counter(self.vehicle.rejected))

@@ -14,11 +14,11 @@ import socket
 import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import Future
 from typing import TypeVar
 
 from sim.autopilot import Autopilot, AutopilotSettings
 from sim.clock import SimClock
+from tests.support.loop_calls import call_on_loop
 
 T = TypeVar("T")
 
@@ -109,16 +109,7 @@ class SimRunner:
 
     def call(self, fn: Callable[[], T]) -> T:
         """Run `fn()` on the simulation's loop thread and return its result."""
-        fut: Future[T] = Future()
-
-        def run() -> None:
-            try:
-                fut.set_result(fn())
-            except BaseException as exc:
-                fut.set_exception(exc)
-
-        self._loop.call_soon_threadsafe(run)
-        return fut.result(timeout=10.0)
+        return call_on_loop(self._loop, fn, 10.0)
 
     def stop(self) -> None:
         if self._thread.is_alive() and self._stop is not None:

@@ -37,6 +37,7 @@ from isac_mission.service.codec import (
     encode_telemetry,
 )
 from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings
+from tests.support.loop_calls import call_on_loop
 
 T = TypeVar("T")
 
@@ -237,16 +238,7 @@ class GroundThread:
 
     def call(self, fn: Callable[[], T]) -> T:
         """fn() on the loop's thread; its result."""
-        fut: Future[T] = Future()
-
-        def run() -> None:
-            try:
-                fut.set_result(fn())
-            except BaseException as exc:
-                fut.set_exception(exc)
-
-        self._aio.call_soon_threadsafe(run)
-        return fut.result(timeout=30.0)
+        return call_on_loop(self._aio, fn, 30.0)
 
     def stop(self) -> GroundReport:
         if self._stop is not None and self.alive:

@@ -15,17 +15,20 @@ from isac_mission.service.codec import (
     ClockMsg,
     DetectionMsg,
     PlanMsg,
+    TrackMsg,
     TruthMsg,
     collect_detections,
     decode_any,
     decode_clock,
     decode_detection,
     decode_plan,
+    decode_track,
     decode_truth,
     detection_messages,
     encode_clock,
     encode_detection,
     encode_plan,
+    encode_track,
     encode_truth,
 )
 from isac_mission.types import Detections, SlotPlan, SolveReport
@@ -253,3 +256,18 @@ def test_encoders_refuse_what_decoders_would_refuse() -> None:
         encode_detection(_detection(bandwidth_share=2.0))
     with pytest.raises(MessageError, match="target_x"):
         encode_truth(TruthMsg(1, 1.0, np.array([0.0, np.inf, 0.0, 0.0])))
+
+
+def test_track_carries_information_far_beyond_the_position_bound() -> None:
+    """PCRB information reaches 1e9 m^-2 with a UAV near the target (found by the 3600-slot
+    soak, where it ended the run) and 1e20 with the literal eq. 8: a track must carry it."""
+    for scale in (2.7e9, 1e20):
+        J = np.diag([scale, scale, 1.0, 1.0])
+        msg = TrackMsg(7, 7.0, np.zeros(4), np.linalg.inv(J), J, 2.0 / scale)
+        back = decode_track(encode_track(msg))
+        np.testing.assert_array_equal(back.J, J)
+    bad = encode_track(TrackMsg(7, 7.0, np.zeros(4), np.eye(4), np.eye(4), 1.0))
+    with pytest.raises(MessageError, match=r"track\.J"):
+        decode_track(bad.replace(b'"J":[[1.0', b'"J":[[1e300', 1))
+    with pytest.raises(MessageError, match=r"track\.x"):
+        decode_track(bad.replace(b'"x":[0.0', b'"x":[2e9', 1))
