@@ -177,6 +177,11 @@ class PlannerConfig(_Section):
         description="If set, each waypoint stays within a dt^2 / 4 of the vehicle's ballistic "
         "point q + v dt (reachable on a smooth leg); null = the paper's kinematics (docs/model.md).",
     )
+    keep_in_area: bool = Field(
+        True,
+        description="Keep every waypoint inside the operating area (the vehicles' geofence; "
+        "not in the paper, docs/model.md).",
+    )
     solver: str = Field("CLARABEL", description="cvxpy solver for the SOCP subproblems.")
     feasibility_tol_m: float = Field(
         1e-6, gt=0, description="Slack allowed when re-checking 14a-14j on a returned plan."

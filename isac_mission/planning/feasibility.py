@@ -36,6 +36,14 @@ class SlotConstraints:
     accel_radius_m: float = np.inf
     keep_out_xy: FloatArray | None = None
 
+    def area_bounds(self) -> tuple[FloatArray, FloatArray]:
+        """(lower [2], upper [2]) corners of the box every UAV stays in, m: the operating area
+        when planner.keep_in_area is set, else unbounded."""
+        s = self.scenario
+        if not s.planner.keep_in_area:
+            return np.full(2, -np.inf), np.full(2, np.inf)
+        return np.zeros(2), np.asarray(s.area, dtype=float)
+
     def full_rates(self, uav_xy: FloatArray) -> FloatArray:
         """R~ [..., M] of each UAV on its serving BS, bit/s."""
         s = self.scenario
@@ -54,6 +62,10 @@ class SlotConstraints:
             "14h max speed": np.any(step > s.v_max * s.dt + tol_m, axis=1),
             "14j target distance": np.any(to_target < s.d_safe - tol_m, axis=1),
         }
+        if s.planner.keep_in_area:
+            lo, hi = self.area_bounds()
+            outside = np.any((q < lo - tol_m) | (q > hi + tol_m), axis=-1)
+            out["operating area"] = np.any(outside, axis=1)
         if self.ballistic_xy is not None:
             off = np.linalg.norm(q - self.ballistic_xy[None], axis=-1)
             out["vehicle acceleration"] = np.any(off > self.accel_radius_m + tol_m, axis=1)
@@ -93,6 +105,9 @@ class SlotConstraints:
         bad |= nearest_bs > s.d_th
         bad |= np.sqrt(_sq_norm(q - self.prev_xy[m])) > s.v_max * s.dt
         bad |= np.sqrt(_sq_norm(q - self.target_xy)) < s.d_safe
+        if s.planner.keep_in_area:
+            lo, hi = self.area_bounds()
+            bad |= np.any((q < lo) | (q > hi), axis=-1)
         if self.ballistic_xy is not None:
             bad |= np.sqrt(_sq_norm(q - self.ballistic_xy[m])) > self.accel_radius_m
         if s.M > 1:

@@ -69,6 +69,10 @@ class PositionSubproblem:
             cp.sum(cp.multiply(self.target_normal, select @ self.Q), axis=1) >= self.target_rhs,
             cp.norm(self.Q - self.ballistic, 2, axis=1) <= self.accel_radius,
         ]
+        # The operating area (the vehicles' geofence), shifted like everything else.
+        self.area_lo = cp.Parameter((M, 2))
+        self.area_hi = cp.Parameter((M, 2))
+        cons += [self.Q >= self.area_lo, self.Q <= self.area_hi]
         self.pairs = np.array(np.triu_indices(M, 1)).T  # [P, 2]
         if len(self.pairs):
             P = len(self.pairs)
@@ -88,8 +92,8 @@ class PositionSubproblem:
 
         Entries are listed in a fixed order (rows, cols); `_perm` maps that order to the CSC
         order, so a solve only fills A.data. Rows: 14j (eq. 23) 0..M-1 and the keep-out points
-        (the same form) M..(1+L)M-1, 14i (eq. 22) the next P, then four 3-d cones per UAV (19a
-        serving disk, eq. 21 control disk, 14h, dynamics disk).
+        (the same form) M..(1+L)M-1, 14i (eq. 22) the next P, the area box (4 per UAV), then
+        four 3-d cones per UAV (19a serving disk, eq. 21 control disk, 14h, dynamics disk).
         """
         M = self.scenario.M
         P = len(self.pairs)
@@ -105,6 +109,11 @@ class PositionSubproblem:
             rows += [pr, pr, pr, pr]
             cols += [2 * i, 2 * i + 1, 2 * j, 2 * j + 1]
             n_lin += P
+        # Area rows, per UAV: -x >= .., -y, x, y (x' >= lo' as -x' + s = -lo').
+        rows.append(n_lin + np.arange(4 * M))
+        cols.append(np.column_stack([2 * uav, 2 * uav + 1, 2 * uav, 2 * uav + 1]).ravel())
+        n_lin += 4 * M
+        self._area_data = np.tile([-1.0, -1.0, 1.0, 1.0], M)
         for n in range(4):
             base = n_lin + 3 * (n * M + uav)  # first row of each UAV's cone
             rows += [base + 1, base + 2]
@@ -153,6 +162,9 @@ class PositionSubproblem:
         else:
             v["ballistic"] = origin.ballistic_xy - c
             v["accel_radius"] = np.full(s.M, max(origin.accel_radius_m - SOLVER_MARGIN_M, 0.0))
+        lo, hi = origin.area_bounds()
+        v["area_lo"] = np.tile(lo - c, (s.M, 1))
+        v["area_hi"] = np.tile(hi - c, (s.M, 1))
         lin = lin_xy - c
         points = origin.target_xy[None]
         if self.n_keep_out:
@@ -204,6 +216,8 @@ class PositionSubproblem:
             normal = v["pair_normal"]
             data += [-normal[:, 0], -normal[:, 1], normal[:, 0], normal[:, 1]]
             b_parts.append(-v["pair_rhs"])
+        data.append(self._area_data)
+        b_parts.append(np.column_stack([-v["area_lo"], v["area_hi"]]).ravel())
         disks = [
             (v["serving"], v["radius"]),
             (v["control_bs"], np.full(M, max(s.d_th - SOLVER_MARGIN_M, 0.0))),

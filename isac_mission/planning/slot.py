@@ -171,6 +171,7 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         # planner respects their dynamics; either way away from the target first.
         best = comm.uav_xy if ballistic is None else ballistic
         xy = evade_target(best, inp.prev_xy, inp.x_pred[:2], s.d_safe, step)
+        xy = np.clip(xy, *cons.area_bounds())  # the vehicles' geofence would clamp it anyway
         report = SolveReport("infeasible", reason, solve_s=elapsed())
         return _plan(xy, assoc, comm.eta, objective, report)
 

@@ -133,3 +133,28 @@ def test_hold_needs_no_solver_and_keeps_everyone_in_place(paper: Scenario) -> No
     np.testing.assert_array_equal(plan.uav_xy_m, s.uav_start_xy)
     np.testing.assert_allclose(plan.bandwidth_share, [0.4, 0.6, 0.0])
     assert plan.report.status == "timeout" and np.isfinite(plan.pcrb_trace)
+
+
+def test_waypoints_stay_in_the_operating_area_when_the_gradient_points_out(
+    paper: Scenario,
+) -> None:
+    """A UAV 10 m inside the west edge, pushed west: the direct conic form and cvxpy agree on a
+    point on the edge; with keep_in_area off it leaves the area."""
+    s = _two_uav(paper)
+    prev = np.array([[10.0, 1500.0], [800.0, 1200.0]])
+    cons = SlotConstraints(prev, s.bs_xy[[0, 1]], s.bs_xy, np.array([600.0, 2600.0]), s)
+    grad = np.array([[1.0, 0.05], [0.3, -0.4]])  # minimising: UAV 0 moves to -x
+    eta = np.array([0.5, 0.5])
+    direct = PositionSubproblem(s, "CLARABEL", direct=True).solve(grad, prev, cons, eta)
+    via_cvxpy = PositionSubproblem(s, "CLARABEL", direct=False).solve(grad, prev, cons, eta)
+    assert direct is not None and via_cvxpy is not None
+    np.testing.assert_allclose(direct, via_cvxpy, atol=1e-3)
+    assert direct[0, 0] == pytest.approx(0.0, abs=1e-3)
+    assert not cons.position_violations(direct[None] + [[1e-3, 0.0], [0.0, 0.0]])["operating area"][
+        0
+    ]
+    off = s.with_changes(planner=s.planner.model_copy(update={"keep_in_area": False}))
+    free_cons = SlotConstraints(prev, s.bs_xy[[0, 1]], s.bs_xy, cons.target_xy, off)
+    free = PositionSubproblem(off, "CLARABEL", direct=True).solve(grad, prev, free_cons, eta)
+    assert free is not None and free[0, 0] < -5.0
+    assert cons.position_violations(free[None])["operating area"][0]
