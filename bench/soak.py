@@ -1,0 +1,109 @@
+"""Soak: a long live mission (M = 3) at high --speed in lockstep; does memory or slot time grow?
+
+Flies the paper's mission live in this process (world, MAVLink bridges, ground loop over
+loopback UDP MAVLink and Zenoh; tests/support/soak.py) for --slots slots and prints, per quarter
+of the run, the medians of the wall time and the process CPU time per slot and of the planning
+time, the resident memory at the quarter's end, and the last-over-first-quarter ratios (the soak
+test asserts CPU and RSS ratios <= 1.1). --tracemalloc lists the Python allocations that grew
+between the end of the first quarter and the end (slower).
+Run: python bench/soak.py [--slots 3600] [--speed 20] [--target loop|cv] [--tracemalloc]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from isac_mission.config import load_scenario  # noqa: E402
+from isac_mission.quiet import quiet_highs_banner  # noqa: E402
+from isac_mission.service.live import summarize_live  # noqa: E402
+from tests.support.soak import SoakSample, quarter_table, run_soak, soak_scenario  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--slots", type=int, default=3600)
+    ap.add_argument("--speed", type=float, default=20.0)
+    ap.add_argument("--no-lockstep", action="store_true")
+    ap.add_argument("--target", choices=("loop", "cv"), default="loop")
+    ap.add_argument("--config", default=str(ROOT / "config" / "paper.yaml"))
+    ap.add_argument("--tracemalloc", action="store_true")
+    ap.add_argument("--samples", type=Path, help="Write the per-slot samples here (JSON Lines).")
+    ap.add_argument("--progress", type=int, default=100, help="Print a line every N slots.")
+    args = ap.parse_args()
+    quiet_highs_banner()
+    s = soak_scenario(load_scenario(args.config), args.slots, args.target)
+    t0 = time.monotonic()
+    samples: list[SoakSample] = []
+    sink = args.samples.open("w") if args.samples is not None else None
+
+    def progress(p: SoakSample) -> None:
+        samples.append(p)
+        if sink is not None:
+            sink.write(json.dumps(p.__dict__) + "\n")
+            sink.flush()
+        if args.progress and p.slot % args.progress == 0:
+            print(
+                f"slot {p.slot:5d}/{s.N}  wall {time.monotonic() - t0:7.1f} s  "
+                f"RSS {p.rss_bytes / 2**20:7.1f} MiB  solve {p.solve_ms:6.1f} ms",
+                flush=True,
+            )
+
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            result = asyncio.run(
+                run_soak(
+                    s,
+                    Path(tmp),
+                    speed=args.speed,
+                    lockstep=not args.no_lockstep,
+                    target=args.target,
+                    trace_malloc=args.tracemalloc,
+                    on_sample=progress,
+                )
+            )
+    except BaseException:
+        if len(samples) >= 8:
+            print(f"\nFAILED after {len(samples)} slots; the table of those slots:")
+            print(quarter_table(samples).render())
+        raise
+    finally:
+        if sink is not None:
+            sink.close()
+    summary = summarize_live(result.live)
+    lockstep = "lockstep" if not args.no_lockstep else "free-running"
+    print(
+        f"\n{len(result.samples)} slots, M = {s.M}, speed {args.speed:g} ({lockstep}), target "
+        f"{args.target}; setup {result.setup_s:.1f} s, total {time.monotonic() - t0:.0f} s wall"
+    )
+    print(
+        f"location RMSE {summary.loc_rmse:.2f} m, infeasible slots {summary.infeasible}, "
+        f"counters {dict(result.live.report.counters)}"
+    )
+    print(quarter_table(result.samples).render())
+    near = [p for p in result.samples if p.target_distance_m == p.target_distance_m]
+    if near:
+        closest = min(near, key=lambda p: p.target_distance_m)
+        under = sum(p.target_distance_m < s.d_safe for p in near)
+        big = sum(p.j_max > 1e9 for p in result.samples)
+        print(
+            f"nearest UAV-target distance {closest.target_distance_m:.1f} m (slot {closest.slot}); "
+            f"{under} slots under D_s = {s.d_safe:g} m; {big} slots with max |J| > 1e9 "
+            f"(largest {max(p.j_max for p in result.samples):.3g})"
+        )
+    if result.heap_growth:
+        print("\nPython heap growth from the end of Q1 to the end (tracemalloc, by line):")
+        for site, size, count in result.heap_growth:
+            print(f"{size / 1024:10.1f} KiB {count:8d} blocks  {site}")
+
+
+if __name__ == "__main__":
+    main()

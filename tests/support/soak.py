@@ -1,0 +1,284 @@
+"""Soak harness: a long live mission in this process, sampled slot by slot.
+
+`run_soak` flies `slots` slots of the paper's mission live, as `isac-mission run` does (the
+simulated world, the MAVLink bridges and the ground loop, over loopback UDP MAVLink and a real
+Zenoh session; here the world runs as a task next to `run_serve`, so that the target can be
+chosen), and records after every slot: wall time, this process's CPU time (all threads), its
+resident set size (VmRSS) and the slot's planning time. `quarter_table` reduces the samples to
+per-quarter medians and the first-vs-last-quarter ratios the soak test asserts on.
+
+Target: by default a scripted loop (a 24-gon inscribed in a circle of radius 900 m around
+(1500, 1600) m, from the scenario's x0 position (600, 1600) m heading north at 15 m/s, lap about
+377 s), so that the four quarters of a long run are statistically the same mission, and slower
+than the UAVs, which must keep D_s from it. The scenario's own CV target
+(`target="cv"`) reflects off the area's walls, but its velocity is a random walk (kappa = 0.5
+m^2/s^3: an rms speed of about 67 m/s after 3600 s), so its later quarters are a harder problem
+and their planning time says nothing about leaks.
+
+Optionally (`trace_malloc=True`) tracemalloc starts at the end of the first quarter and the
+allocations still alive at the end are listed by line, largest growth first.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import re
+import resource
+import socket
+import statistics
+import time
+import tracemalloc
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.service.bus import BusSettings, tcp_loopback
+from isac_mission.service.ground import SlotEvent
+from isac_mission.service.live import LiveOptions, LiveResult, run_serve
+from sim.world import WorldOptions, run_world
+from tests.support.ports import free_port_block
+
+TargetKind = Literal["loop", "cv"]
+
+LOOP_CENTRE_XY_M = (1500.0, 1600.0)
+LOOP_RADIUS_M = 900.0
+LOOP_SPEED_MPS = 15.0
+LOOP_CORNERS_XY_M: tuple[tuple[float, float], ...] = tuple(
+    (
+        LOOP_CENTRE_XY_M[0] + LOOP_RADIUS_M * math.cos(math.pi - 2 * math.pi * k / 24),
+        LOOP_CENTRE_XY_M[1] + LOOP_RADIUS_M * math.sin(math.pi - 2 * math.pi * k / 24),
+    )
+    for k in range(24)
+)
+"""The scripted target's loop, clockwise from its west point (600, 1600) m, heading north."""
+
+
+@dataclass(frozen=True)
+class SoakSample:
+    """Taken right after slot `slot` was processed: wall (time.monotonic) and process CPU
+    (time.process_time) seconds, resident set size in bytes, the slot's planning time (ms), the
+    nearest UAV's distance to the true target at the slot's measurements (m; NaN without truth)
+    and the largest entry of the slot's PCRB information J."""
+
+    slot: int
+    wall_s: float
+    cpu_s: float
+    rss_bytes: int
+    solve_ms: float
+    target_distance_m: float = math.nan
+    j_max: float = math.nan
+
+
+@dataclass
+class SoakResult:
+    """Per-slot samples of one soak run, the live result and the setup time (wall s until the
+    first slot). `heap_growth` lists (site, bytes, blocks) of tracemalloc's comparison between
+    the end of the first quarter and the end, when asked for."""
+
+    samples: list[SoakSample]
+    live: LiveResult
+    setup_s: float
+    heap_growth: list[tuple[str, int, int]] = field(default_factory=list)
+
+
+def rss_bytes() -> int:
+    """This process's resident set size now (VmRSS of /proc/self/status), bytes; where /proc is
+    missing, the peak (ru_maxrss)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            m = re.search(r"^VmRSS:\s+(\d+)\s+kB", f.read(), re.MULTILINE)
+        if m is not None:
+            return int(m.group(1)) * 1024
+    except OSError:
+        pass
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+
+
+def soak_scenario(base: Scenario, slots: int, target: TargetKind = "loop") -> Scenario:
+    """`base` for `slots` slots; for the loop target, the tracker's prior is the loop's start
+    (west point, heading north) so that the first slots do not start from a wrong cue."""
+    s = base.with_changes(N=slots)
+    if target == "loop":
+        first, second = np.array(LOOP_CORNERS_XY_M[0]), np.array(LOOP_CORNERS_XY_M[1])
+        heading = (second - first) / np.linalg.norm(second - first)
+        x0 = np.array([*first, *(LOOP_SPEED_MPS * heading)])
+        s = s.with_changes(x0=x0)
+    return s
+
+
+def loop_waypoints(slots: int, dt_s: float) -> tuple[tuple[float, float], ...]:
+    """Enough laps of the rectangle to cover `slots` slots at LOOP_SPEED_MPS (plus one)."""
+    c = np.array(LOOP_CORNERS_XY_M)
+    lap_m = float(np.sum(np.linalg.norm(np.diff(np.vstack([c, c[:1]]), axis=0), axis=1)))
+    laps = math.ceil(slots * dt_s * LOOP_SPEED_MPS / lap_m) + 1
+    corners = [(float(x), float(y)) for x, y in c]
+    return tuple(corners * laps + corners[:1])
+
+
+async def run_soak(
+    s: Scenario,
+    out_dir: Path,
+    *,
+    speed: float = 20.0,
+    lockstep: bool = True,
+    target: TargetKind = "loop",
+    seed: int = 1,
+    trace_malloc: bool = False,
+    on_sample: Callable[[SoakSample], None] | None = None,
+) -> SoakResult:
+    """Fly `s` (use `soak_scenario`) live for s.N slots and sample every slot (module docstring).
+
+    Free loopback ports for Zenoh and MAVLink; `lockstep_timeout` of the world 60 wall s.
+    """
+    endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
+    mav, gcs = free_port_block(s.M), free_port_block(s.M)
+    opts = LiveOptions(
+        speed=speed,
+        lockstep=lockstep,
+        seed=seed,
+        out_dir=out_dir,
+        zenoh_endpoint=endpoint,
+        mavlink_base_port=mav,
+        gcs_base_port=gcs,
+    )
+    world_opts = WorldOptions(
+        speed=speed,
+        lockstep=lockstep,
+        lockstep_timeout_s=60.0,
+        seed=seed,
+        bus=BusSettings(connect=(endpoint,)),
+        mavlink_base_port=mav,
+        gcs_base_port=gcs,
+        start="offboard",
+        target_waypoints_xy_m=loop_waypoints(s.N, s.dt) if target == "loop" else None,
+        target_speed_mps=LOOP_SPEED_MPS if target == "loop" else None,
+    )
+    samples: list[SoakSample] = []
+    quarter = max(1, s.N // 4)
+    heap: dict[str, tracemalloc.Snapshot] = {}
+    t_start = time.monotonic()
+
+    def on_slot(ev: SlotEvent) -> None:
+        rec = ev.record
+        truth = rec.target_true
+        distance = (
+            math.nan
+            if truth is None
+            else float(np.min(np.linalg.norm(np.asarray(rec.uav_xy) - truth[:2], axis=1)))
+        )
+        sample = SoakSample(
+            rec.slot,
+            time.monotonic(),
+            time.process_time(),
+            rss_bytes(),
+            rec.solve_ms,
+            distance,
+            float(np.max(np.abs(rec.J))),
+        )
+        samples.append(sample)
+        if trace_malloc and ev.record.slot == quarter:
+            tracemalloc.start(1)
+        if trace_malloc and ev.record.slot == s.N and tracemalloc.is_tracing():
+            heap["end"] = tracemalloc.take_snapshot()
+            tracemalloc.stop()
+        if on_sample is not None:
+            on_sample(sample)
+
+    world_stop = asyncio.Event()
+    world = asyncio.create_task(run_world(s, world_opts, world_stop))
+    try:
+        live = await run_serve(s, opts, asyncio.Event(), on_slot)
+    finally:
+        world_stop.set()
+        await asyncio.wait_for(world, timeout=60.0)
+        if tracemalloc.is_tracing():
+            tracemalloc.stop()
+    growth: list[tuple[str, int, int]] = []
+    if "end" in heap:
+        stats = heap["end"].statistics("lineno")
+        for st in stats[:25]:
+            frame = st.traceback[0]
+            growth.append((f"{frame.filename}:{frame.lineno}", st.size, st.count))
+    setup_s = samples[0].wall_s - t_start if samples else math.nan
+    return SoakResult(samples, live, setup_s, growth)
+
+
+@dataclass(frozen=True)
+class QuarterRow:
+    """Medians of one quarter: wall and CPU seconds per slot, planning ms; RSS at its end."""
+
+    quarter: int
+    slots: tuple[int, int]
+    wall_ms: float
+    cpu_ms: float
+    solve_ms: float
+    rss_mib: float
+
+
+@dataclass(frozen=True)
+class QuarterTable:
+    """Per-quarter rows and the last-over-first ratios (RSS: end of Q4 over end of Q1)."""
+
+    rows: list[QuarterRow]
+    wall_ratio: float
+    cpu_ratio: float
+    solve_ratio: float
+    rss_ratio: float
+
+    def render(self) -> str:
+        """A plain-text table."""
+        head = (
+            f"{'quarter':<8} {'slots':>11} {'wall ms/slot':>13} {'CPU ms/slot':>12} "
+            f"{'solve ms':>9} {'RSS MiB at end':>15}"
+        )
+        lines = [head]
+        for r in self.rows:
+            lines.append(
+                f"Q{r.quarter:<7} {r.slots[0]:>5}-{r.slots[1]:<5} {r.wall_ms:>13.1f} "
+                f"{r.cpu_ms:>12.1f} {r.solve_ms:>9.1f} {r.rss_mib:>15.1f}"
+            )
+        lines.append(
+            f"{'Q4/Q1':<8} {'':>11} {self.wall_ratio:>13.3f} {self.cpu_ratio:>12.3f} "
+            f"{self.solve_ratio:>9.3f} {self.rss_ratio:>15.3f}"
+        )
+        return "\n".join(lines)
+
+
+def quarter_table(samples: Sequence[SoakSample]) -> QuarterTable:
+    """Split the per-slot samples into four quarters by slot order: per-slot wall and CPU time
+    are differences between consecutive samples (the first slot has none), medians per quarter;
+    RSS is the value at the quarter's last slot (so warm-up within Q1 does not count)."""
+    if len(samples) < 8:
+        raise ValueError(f"need at least 8 slots for quarters, got {len(samples)}")
+    n = len(samples)
+    bounds = [round(n * q / 4) for q in range(5)]
+    rows: list[QuarterRow] = []
+    for q in range(4):
+        part = list(samples[bounds[q] : bounds[q + 1]])
+        prev = samples[bounds[q] - 1] if bounds[q] > 0 else None
+        pairs = list(zip([prev, *part[:-1]], part, strict=True))
+        wall = [1e3 * (b.wall_s - a.wall_s) for a, b in pairs if a is not None]
+        cpu = [1e3 * (b.cpu_s - a.cpu_s) for a, b in pairs if a is not None]
+        rows.append(
+            QuarterRow(
+                quarter=q + 1,
+                slots=(part[0].slot, part[-1].slot),
+                wall_ms=statistics.median(wall),
+                cpu_ms=statistics.median(cpu),
+                solve_ms=statistics.median(p.solve_ms for p in part),
+                rss_mib=part[-1].rss_bytes / 2**20,
+            )
+        )
+    first, last = rows[0], rows[-1]
+    return QuarterTable(
+        rows=rows,
+        wall_ratio=last.wall_ms / first.wall_ms,
+        cpu_ratio=last.cpu_ms / first.cpu_ms,
+        solve_ratio=last.solve_ms / first.solve_ms,
+        rss_ratio=last.rss_mib / first.rss_mib,
+    )
