@@ -16,7 +16,7 @@ import contextlib
 import logging
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -95,16 +95,46 @@ class SlotEvent:
     links: dict[int, str]
 
 
+SLOTS_KEPT = 3600
+"""Per-slot figures the ground loop keeps in memory (one simulated hour at dt = 1 s); the trace
+keeps every slot, and `MissionTotals` sums the whole run."""
+
+
+@dataclass
+class MissionTotals:
+    """Running sums over every slot of the run, for end-of-run figures that do not need the
+    slots themselves (so that a long-lived service does not grow)."""
+
+    slots: int = 0
+    with_truth: int = 0
+    position_sq_error_m2: float = 0.0
+    velocity_sq_error_m2ps2: float = 0.0
+    pcrb_trace_sum: float = 0.0
+    not_ok: int = 0
+
+    def add(self, record: SlotRecord) -> None:
+        self.slots += 1
+        self.pcrb_trace_sum += float(record.pcrb_trace)
+        self.not_ok += record.status != "ok"
+        if record.target_true is not None:
+            err = np.asarray(record.target_est) - np.asarray(record.target_true)
+            self.with_truth += 1
+            self.position_sq_error_m2 += float(np.sum(err[:2] ** 2))
+            self.velocity_sq_error_m2ps2 += float(np.sum(err[2:] ** 2))
+
+
 @dataclass
 class GroundReport:
-    """Counters and per-slot figures of one run of the loop."""
+    """Counters and per-slot figures of one run of the loop: the last SLOTS_KEPT slots' records,
+    planning latencies and detection times, and totals over the whole run."""
 
     counters: Counter[str] = field(default_factory=Counter)
-    records: list[SlotRecord] = field(default_factory=list)
-    latencies_s: list[float] = field(default_factory=list)
+    records: deque[SlotRecord] = field(default_factory=lambda: deque(maxlen=SLOTS_KEPT))
+    latencies_s: deque[float] = field(default_factory=lambda: deque(maxlen=SLOTS_KEPT))
     last_detection_wall_s: dict[int, float] = field(default_factory=dict)
-    """Slot -> wall time (time.monotonic) its last detection arrived."""
+    """Slot -> wall time (time.monotonic) its last detection arrived (the last SLOTS_KEPT)."""
     last_error: str = ""
+    totals: MissionTotals = field(default_factory=MissionTotals)
 
 
 class GroundLoop:
@@ -393,6 +423,7 @@ class GroundLoop:
         latency_from = self.last_detection_wall if msgs else None
         if latency_from is not None:
             self.report.last_detection_wall_s[n] = latency_from
+            self.report.last_detection_wall_s.pop(n - SLOTS_KEPT, None)
         self._publish(
             self.keys.track,
             lambda: encode_track(
@@ -422,6 +453,7 @@ class GroundLoop:
         if self.writer is not None:
             self.writer.write_slot(record)
         self.report.records.append(record)
+        self.report.totals.add(record)
         self.report.counters["slots"] += 1
         if record.status != "ok":
             self.report.counters[f"slots {record.status}"] += 1

@@ -284,24 +284,25 @@ class LiveSummary:
 
 
 def summarize_live(result: LiveResult) -> LiveSummary:
-    """RMSE against the world's truth, mean bound, planning and detection-to-plan times."""
+    """RMSE against the world's truth and mean bound over the whole run; planning and
+    detection-to-plan times over the slots the report keeps (the last SLOTS_KEPT)."""
+    tot = result.report.totals
     recs = result.report.records
-    with_truth = [r for r in recs if r.target_true is not None]
-    err = np.array([np.asarray(r.target_est) - np.asarray(r.target_true) for r in with_truth])
     solve = np.array([r.solve_ms for r in recs]) if recs else np.array([math.nan])
     lat = (
         np.array(result.report.latencies_s) * 1e3
         if result.report.latencies_s
         else np.array([math.nan])
     )
+    n_truth = tot.with_truth
     return LiveSummary(
-        slots=len(recs),
-        loc_rmse=float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))) if len(err) else math.nan,
-        vel_rmse=float(np.sqrt(np.mean(np.sum(err[:, 2:] ** 2, axis=1)))) if len(err) else math.nan,
-        pcrb_mean=float(np.mean([r.pcrb_trace for r in recs])) if recs else math.nan,
+        slots=tot.slots,
+        loc_rmse=math.sqrt(tot.position_sq_error_m2 / n_truth) if n_truth else math.nan,
+        vel_rmse=math.sqrt(tot.velocity_sq_error_m2ps2 / n_truth) if n_truth else math.nan,
+        pcrb_mean=tot.pcrb_trace_sum / tot.slots if tot.slots else math.nan,
         solve_median_ms=float(np.median(solve)),
         solve_p95_ms=float(np.percentile(solve, 95)),
         latency_median_ms=float(np.median(lat)),
         latency_p99_ms=float(np.percentile(lat, 99)),
-        infeasible=sum(r.status != "ok" for r in recs),
+        infeasible=tot.not_ok,
     )
