@@ -7,6 +7,10 @@ size at the quarter's end; the issue's criterion is last-over-first-quarter rati
 time rather than wall time, because on a shared machine the wall time of a slot measures the
 neighbours as much as the service (wall time and planning time are printed beside it).
 Default 240 slots at speed 5 (about 75 s here); `--soak-slots N` or `--full` (3600, 15 min).
+The quarters start after 60 slots (the UAVs' flight from their start points to the target), and
+the target's loop takes one quarter per lap (at most the 900 m default loop), so that every
+quarter flies the same geometry; a CPU ratio over 1.1 is measured once more before failing (a
+neighbour on the other hyperthread raises CPU time per slot too).
 """
 
 from __future__ import annotations
@@ -21,13 +25,23 @@ from isac_mission.config import load_scenario
 from isac_mission.service.bridge import TIMESTAMPS_KEPT
 from isac_mission.service.codec import TrackMsg, decode_track, encode_track
 from isac_mission.service.live import summarize_live
-from tests.support.soak import SoakSample, quarter_table, run_soak, soak_scenario
+from tests.support.soak import (
+    LOOP_RADIUS_M,
+    SoakSample,
+    loop_radius_for_lap,
+    quarter_table,
+    run_soak,
+    soak_scenario,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 SOAK_SPEED = 5.0
 """Simulation seconds per wall second: fast, yet below the point where the process is CPU-bound
 (about 150 ms of CPU per simulated second here), so that the work per slot is the slot's own."""
 MAX_RATIO = 1.1
+WARMUP_SLOTS = 60
+"""Slots left out before the quarters: the UAVs fly from their start points to the target (up to
+900 m at 22.5 m/s), a different problem from the rest of the mission."""
 
 
 def _growing(n: int, cpu_growth: float, rss_growth: float) -> list[SoakSample]:
@@ -58,16 +72,31 @@ async def test_long_live_mission_keeps_memory_and_slot_time_flat(
     cfg["uavs"]["altitude_m"] = 50  # take-off and landing in seconds; the planar problem is alike
     config = tmp_path / "soak.yaml"
     config.write_text(yaml.safe_dump(cfg))
-    s = soak_scenario(load_scenario(config), soak_slots)
-    result = await run_soak(s, tmp_path / "out", speed=SOAK_SPEED, lockstep=True)
-    table = quarter_table(result.samples)
-    print(f"\nsoak: {soak_slots} slots at speed {SOAK_SPEED:g} (lockstep)\n{table.render()}")
-    summary = summarize_live(result.live)
-    assert summary.slots == soak_slots
-    assert [p.slot for p in result.samples] == list(range(1, soak_slots + 1))
-    assert result.live.fleet_counters["vehicles landed"] == s.M
+    # A lap of the target's loop lasts one quarter (or the default loop, several laps a quarter,
+    # for long runs), so that every quarter flies the same geometry.
+    quarter_s = (soak_slots - WARMUP_SLOTS) / 4 * 1.0
+    radius = min(LOOP_RADIUS_M, loop_radius_for_lap(quarter_s))
+    s = soak_scenario(load_scenario(config), soak_slots, loop_radius_m=radius)
+    # CPU time per slot also rises when a neighbour loads the other hyperthread, so a quarter
+    # that fails is flown once more: growth of the service's own shows in both runs, a
+    # neighbour's burst rarely does.
+    for attempt in (1, 2):
+        result = await run_soak(
+            s, tmp_path / f"out{attempt}", speed=SOAK_SPEED, lockstep=True, loop_radius_m=radius
+        )
+        table = quarter_table(result.samples, warmup=WARMUP_SLOTS)
+        print(
+            f"\nsoak {attempt}: {soak_slots} slots at speed {SOAK_SPEED:g} (lockstep), loop "
+            f"radius {radius:.0f} m, quarters after {WARMUP_SLOTS} slots\n{table.render()}"
+        )
+        summary = summarize_live(result.live)
+        assert summary.slots == soak_slots
+        assert [p.slot for p in result.samples] == list(range(1, soak_slots + 1))
+        assert result.live.fleet_counters["vehicles landed"] == s.M
+        assert table.rss_ratio <= MAX_RATIO, table.render()
+        if table.cpu_ratio <= MAX_RATIO:
+            break
     assert table.cpu_ratio <= MAX_RATIO, table.render()
-    assert table.rss_ratio <= MAX_RATIO, table.render()
     # The bridges' timing buffers are bounded whatever the mission's length.
     assert all(
         len(periods) < TIMESTAMPS_KEPT for periods in result.live.setpoint_periods_s.values()

@@ -48,14 +48,27 @@ TargetKind = Literal["loop", "cv"]
 LOOP_CENTRE_XY_M = (1500.0, 1600.0)
 LOOP_RADIUS_M = 900.0
 LOOP_SPEED_MPS = 15.0
-LOOP_CORNERS_XY_M: tuple[tuple[float, float], ...] = tuple(
-    (
-        LOOP_CENTRE_XY_M[0] + LOOP_RADIUS_M * math.cos(math.pi - 2 * math.pi * k / 24),
-        LOOP_CENTRE_XY_M[1] + LOOP_RADIUS_M * math.sin(math.pi - 2 * math.pi * k / 24),
+
+
+def loop_corners(radius_m: float = LOOP_RADIUS_M) -> tuple[tuple[float, float], ...]:
+    """The scripted target's loop: a 24-gon of circumradius `radius_m` around LOOP_CENTRE_XY_M,
+    clockwise from its west point (for the default radius (600, 1600) m), heading north."""
+    cx, cy = LOOP_CENTRE_XY_M
+    return tuple(
+        (
+            cx + radius_m * math.cos(math.pi - 2 * math.pi * k / 24),
+            cy + radius_m * math.sin(math.pi - 2 * math.pi * k / 24),
+        )
+        for k in range(24)
     )
-    for k in range(24)
-)
-"""The scripted target's loop, clockwise from its west point (600, 1600) m, heading north."""
+
+
+def loop_radius_for_lap(lap_s: float) -> float:
+    """The circumradius whose 24-gon takes `lap_s` seconds at LOOP_SPEED_MPS."""
+    return LOOP_SPEED_MPS * lap_s / (48.0 * math.sin(math.pi / 24))
+
+
+LOOP_CORNERS_XY_M = loop_corners()
 
 
 @dataclass(frozen=True)
@@ -99,21 +112,26 @@ def rss_bytes() -> int:
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
 
-def soak_scenario(base: Scenario, slots: int, target: TargetKind = "loop") -> Scenario:
+def soak_scenario(
+    base: Scenario, slots: int, target: TargetKind = "loop", loop_radius_m: float = LOOP_RADIUS_M
+) -> Scenario:
     """`base` for `slots` slots; for the loop target, the tracker's prior is the loop's start
     (west point, heading north) so that the first slots do not start from a wrong cue."""
     s = base.with_changes(N=slots)
     if target == "loop":
-        first, second = np.array(LOOP_CORNERS_XY_M[0]), np.array(LOOP_CORNERS_XY_M[1])
+        corners = loop_corners(loop_radius_m)
+        first, second = np.array(corners[0]), np.array(corners[1])
         heading = (second - first) / np.linalg.norm(second - first)
         x0 = np.array([*first, *(LOOP_SPEED_MPS * heading)])
         s = s.with_changes(x0=x0)
     return s
 
 
-def loop_waypoints(slots: int, dt_s: float) -> tuple[tuple[float, float], ...]:
-    """Enough laps of the rectangle to cover `slots` slots at LOOP_SPEED_MPS (plus one)."""
-    c = np.array(LOOP_CORNERS_XY_M)
+def loop_waypoints(
+    slots: int, dt_s: float, radius_m: float = LOOP_RADIUS_M
+) -> tuple[tuple[float, float], ...]:
+    """Enough laps of the loop to cover `slots` slots at LOOP_SPEED_MPS (plus one)."""
+    c = np.array(loop_corners(radius_m))
     lap_m = float(np.sum(np.linalg.norm(np.diff(np.vstack([c, c[:1]]), axis=0), axis=1)))
     laps = math.ceil(slots * dt_s * LOOP_SPEED_MPS / lap_m) + 1
     corners = [(float(x), float(y)) for x, y in c]
@@ -127,6 +145,7 @@ async def run_soak(
     speed: float = 20.0,
     lockstep: bool = True,
     target: TargetKind = "loop",
+    loop_radius_m: float = LOOP_RADIUS_M,
     seed: int = 1,
     trace_malloc: bool = False,
     on_sample: Callable[[SoakSample], None] | None = None,
@@ -134,6 +153,7 @@ async def run_soak(
     """Fly `s` (use `soak_scenario`) live for s.N slots and sample every slot (module docstring).
 
     Free loopback ports for Zenoh and MAVLink; `lockstep_timeout` of the world 60 wall s.
+    Give `soak_scenario` and `run_soak` the same `loop_radius_m`.
     """
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
     mav, gcs = free_port_block(s.M), free_port_block(s.M)
@@ -155,7 +175,9 @@ async def run_soak(
         mavlink_base_port=mav,
         gcs_base_port=gcs,
         start="offboard",
-        target_waypoints_xy_m=loop_waypoints(s.N, s.dt) if target == "loop" else None,
+        target_waypoints_xy_m=loop_waypoints(s.N, s.dt, loop_radius_m)
+        if target == "loop"
+        else None,
         target_speed_mps=LOOP_SPEED_MPS if target == "loop" else None,
     )
     samples: list[SoakSample] = []
@@ -249,14 +271,15 @@ class QuarterTable:
         return "\n".join(lines)
 
 
-def quarter_table(samples: Sequence[SoakSample]) -> QuarterTable:
-    """Split the per-slot samples into four quarters by slot order: per-slot wall and CPU time
-    are differences between consecutive samples (the first slot has none), medians per quarter;
-    RSS is the value at the quarter's last slot (so warm-up within Q1 does not count)."""
-    if len(samples) < 8:
-        raise ValueError(f"need at least 8 slots for quarters, got {len(samples)}")
+def quarter_table(samples: Sequence[SoakSample], warmup: int = 0) -> QuarterTable:
+    """Split the per-slot samples after the first `warmup` into four quarters by slot order:
+    per-slot wall and CPU time are differences between consecutive samples (the first slot has
+    none), medians per quarter; RSS is the value at the quarter's last slot (so warm-up within
+    Q1 does not count)."""
     n = len(samples)
-    bounds = [round(n * q / 4) for q in range(5)]
+    if n - warmup < 8 or warmup < 0:
+        raise ValueError(f"need at least 8 slots after {warmup} of warm-up, got {n}")
+    bounds = [warmup + round((n - warmup) * q / 4) for q in range(5)]
     rows: list[QuarterRow] = []
     for q in range(4):
         part = list(samples[bounds[q] : bounds[q + 1]])
