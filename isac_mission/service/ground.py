@@ -59,7 +59,8 @@ class GroundSettings:
     """method: planning strategy; trace_path: JSON Lines trace (None: no trace); resume: continue
     an existing trace from its last complete slot; detection_wait_s: simulation seconds after a
     slot boundary before a partial update; detection_wall_wait_s: the same bound in wall seconds,
-    counted from the first detection of the slot (for a held or stalled clock);
+    counted from the first detection of the slot or from the clock reaching the slot's end,
+    whichever comes first (for a held or stalled clock);
     telemetry_max_age_s: older telemetry is not used as a UAV position; trace_config: entries
     that override or extend the trace's config line.
 
@@ -172,6 +173,8 @@ class GroundLoop:
         self.telemetry_fresh_wall: dict[int, float] = {}
         """Vehicle -> wall time (time.monotonic) its telemetry position last advanced."""
         self.planning: asyncio.Task[None] | None = None
+        self.resumed_xy: FloatArray | None = None
+        """UAV positions of the last traced slot, after a resume (until telemetry is fresh)."""
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -180,13 +183,16 @@ class GroundLoop:
         if path is None:
             return
         path.parent.mkdir(parents=True, exist_ok=True)
-        if self.settings.resume and path.exists():
+        if self.settings.resume and path.exists() and b"\n" not in path.read_bytes():
+            # Killed before its config line was complete: no slot to lose, start afresh.
+            log.warning("%s has no complete line; starting a new trace", path)
+        elif self.settings.resume and path.exists():
             trace = read_trace(path)
             self.writer = TraceWriter.resume(path, fsync=True)
             if trace.slots:
-                self.state = MissionState.resumed(
-                    self.s, self.kit, self.settings.method, trace.slots[-1]
-                )
+                last = trace.slots[-1]
+                self.state = MissionState.resumed(self.s, self.kit, self.settings.method, last)
+                self.resumed_xy = np.asarray(last.uav_xy, dtype=float)
                 log.info("resuming after slot %d from %s", self.state.slot, path)
             return
         config = (
@@ -363,15 +369,14 @@ class GroundLoop:
                 xy[m] = tel.position_xy_m  # an excluded vehicle holds where it was last seen
         if np.any(~np.isfinite(xy)):
             last = self.state.pending.plan.uav_xy_m if self.state.pending else None
-            fallback = (
-                last
-                if last is not None
-                else (
-                    np.asarray(self.report.records[-1].uav_xy)
-                    if self.report.records
-                    else self.s.uav_start_xy
-                )
-            )
+            if last is not None:
+                fallback = last
+            elif self.report.records:
+                fallback = np.asarray(self.report.records[-1].uav_xy)
+            elif self.resumed_xy is not None:
+                fallback = self.resumed_xy
+            else:
+                fallback = self.s.uav_start_xy
             xy = np.where(np.isfinite(xy), xy, fallback)
         return xy
 
@@ -396,13 +401,17 @@ class GroundLoop:
         got = self.buffer.get(n, {})
         if len(got) == self.s.M:
             return True
-        if (
-            self.mission_t0_s is not None
-            and self.t_s >= self.mission_t0_s + n * self.s.dt + self.settings.detection_wait_s
-        ):
-            return True
+        now = time.monotonic()
+        if self.mission_t0_s is not None:
+            boundary = self.mission_t0_s + n * self.s.dt
+            if self.t_s >= boundary + self.settings.detection_wait_s:
+                return True
+            if self.t_s >= boundary:
+                # The wall wait also runs from the clock reaching the slot's end, so that a slot
+                # whose detections were all lost does not wait for a held (lockstep) clock.
+                self.first_seen_wall.setdefault(n, now)
         first = self.first_seen_wall.get(n)
-        return first is not None and time.monotonic() - first > self.settings.detection_wall_wait_s
+        return first is not None and now - first > self.settings.detection_wall_wait_s
 
     def _process_slot(self, n: int) -> None:
         msgs = self.buffer.pop(n, {})

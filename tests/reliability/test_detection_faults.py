@@ -379,3 +379,28 @@ async def test_a_gap_of_slots_is_predicted_through_with_growing_covariance(
     assert report.counters["slots"] == N_SLOTS
     assert report.counters["slots with missing detections"] == 5
     assert report.counters["detections missing"] == 5 * s.M
+
+
+async def test_a_slot_without_detections_under_a_held_clock_goes_on_by_the_wall_wait(
+    ground_rig: tuple[GroundRig, asyncio.Task[GroundReport]],
+) -> None:
+    """The world holds its clock exactly at slot 2's end (lockstep, waiting for plan 3) and every
+    detection of slot 2 is lost: the ground processes slot 2 without them once
+    detection_wall_wait_s of wall time has passed since the clock reached the boundary (it used
+    to wait for a first detection that never came, i.e. for the world's lockstep timeout)."""
+    rig, _run = ground_rig
+    s = rig.s
+    rng = np.random.default_rng(SEED + 2)
+    rig.publish_clock(0.0)
+    plan = await rig.plan(1)
+    for d in _detections(s, 1, plan.plan.bandwidth_share, rng):
+        rig.publish_detection(d)
+    await rig.plan(2)
+    rig.publish_clock(2 * s.dt)  # held here: never past the simulation-time deadline
+    t0 = asyncio.get_running_loop().time()
+    track = await rig.track(2)
+    waited = asyncio.get_running_loop().time() - t0
+    assert waited >= rig.loop.settings.detection_wall_wait_s * 0.9
+    assert rig.loop.report.counters["detections missing"] == s.M
+    assert np.trace(track.P) > np.trace(rig.tracks[1].P)  # a prediction-only update
+    await rig.plan(3)

@@ -30,6 +30,7 @@ import yaml
 
 import isac_mission.experiment.trace as trace_mod
 from isac_mission.config import Scenario
+from isac_mission.errors import MessageError
 from isac_mission.experiment.trace import SlotRecord, Trace, TraceWriter, read_trace
 from isac_mission.planning.slot import SolverKit
 from isac_mission.service.bus import BusSettings, ZenohBus, tcp_loopback
@@ -344,3 +345,35 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(tmp_path: P
     assert re.search(r"vehicles landed\s*│\s*3\s*│", out_text), out_text[-2000:]
     # Back to measuring: the last slots got every detection.
     assert all(r.extra.get("received") == 3 for r in trace.slots[-3:])
+
+
+@pytest.mark.parametrize("torn_header", [b"", b'{"config": {"M": 3, "K"'])
+def test_resume_of_a_trace_killed_before_its_config_line_starts_afresh(
+    paper: Scenario, tmp_path: Path, torn_header: bytes
+) -> None:
+    """Killed before the config line was complete: no slot can be lost, so `--resume` starts a
+    new trace (it used to raise, and the restarted service did not run)."""
+    path = tmp_path / "trace_proposed.jsonl"
+    path.write_bytes(torn_header)
+    loop = GroundLoop(
+        paper,
+        None,  # type: ignore[arg-type]  # _open_trace does not touch the bus
+        GroundSettings(trace_path=path, resume=True),
+        SolverKit(paper),
+    )
+    loop._open_trace()
+    assert loop.writer is not None
+    loop.writer.write_slot(_record(1))
+    loop.writer.close()
+    assert loop.state.slot == 0
+    trace = read_trace(path)
+    assert trace.config["method"] == "proposed" and [r.slot for r in trace.slots] == [1]
+    # A trace with a complete but corrupt first line is not overwritten.
+    path.write_bytes(b"not json\n")
+    with pytest.raises(MessageError):
+        GroundLoop(
+            paper,
+            None,  # type: ignore[arg-type]
+            GroundSettings(trace_path=path, resume=True),
+            SolverKit(paper),
+        )._open_trace()
