@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator
 
 import pytest
 
+from isac_mission.service.bus import BusSettings, ZenohBus, tcp_loopback
 from sim.autopilot import AutopilotSettings
 from tests.support.sim_harness import SIM_SPEED, SimRunner
 
@@ -23,3 +24,14 @@ def sim_runner() -> Iterator[Callable[..., SimRunner]]:
     yield make
     for runner in runners:
         runner.stop()
+
+
+@pytest.fixture
+async def hub(free_tcp_port: int) -> AsyncIterator[ZenohBus]:
+    """A Zenoh session listening on loopback (the bridges' and the world's bus, and the test's
+    observer)."""
+    bus = await ZenohBus.open_async(BusSettings.hub(tcp_loopback(free_tcp_port)))
+    try:
+        yield bus
+    finally:
+        bus.close()

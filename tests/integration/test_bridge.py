@@ -18,7 +18,7 @@ import random
 import socket
 import threading
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,7 +27,7 @@ import pytest
 
 from isac_mission.config import Scenario
 from isac_mission.service.bridge import BridgeFleet, BridgeSettings, ClockSimTime, VehicleBridge
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
+from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.service.codec import (
     ClockMsg,
     PlanMsg,
@@ -155,16 +155,6 @@ class Rig:
         rec = BoundaryRecorder(self.runner, self.bridges)
         self.runner.call(lambda: self.runner.clock.add_tick_callback(rec))
         return rec
-
-
-@pytest.fixture
-async def hub(free_tcp_port: int) -> AsyncIterator[ZenohBus]:
-    """The Zenoh session the test observes on (and the bridges share): listens on loopback."""
-    bus = await ZenohBus.open_async(BusSettings.hub(tcp_loopback(free_tcp_port)))
-    try:
-        yield bus
-    finally:
-        bus.close()
 
 
 @pytest.fixture

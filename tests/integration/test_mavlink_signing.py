@@ -16,7 +16,7 @@ import math
 import os
 import socket
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +43,7 @@ from isac_mission.service.bridge import (
     VehicleBridge,
     WallTime,
 )
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
+from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.service.mavlink import (
     Target,
     arm_command,
@@ -250,16 +250,6 @@ def test_vehicle_without_signing_accepts_unsigned_commands(
 
 
 # --------------------------------------------------------------------------- 2. the bridge
-
-
-@pytest.fixture
-async def hub(free_tcp_port: int) -> AsyncIterator[ZenohBus]:
-    """A Zenoh session listening on loopback (the bridges' and the world's bus)."""
-    bus = await ZenohBus.open_async(BusSettings.hub(tcp_loopback(free_tcp_port)))
-    try:
-        yield bus
-    finally:
-        bus.close()
 
 
 def one_uav_scenario(**security: Any) -> Scenario:

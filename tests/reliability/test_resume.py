@@ -170,13 +170,7 @@ def test_resumed_ground_loop_starts_from_the_last_complete_slot(
     with path.open("ab") as f:
         f.write(json.dumps(_record(8).to_dict()).encode()[:200])
     size_torn = path.stat().st_size
-    loop = GroundLoop(
-        paper,
-        None,  # type: ignore[arg-type]  # _open_trace does not touch the bus
-        GroundSettings(trace_path=path, resume=True),
-        SolverKit(paper),
-    )
-    loop._open_trace()
+    loop = _resumed_loop(paper, path)
     try:
         last = records[-1]
         st = loop.state
@@ -355,13 +349,7 @@ def test_resume_of_a_trace_killed_before_its_config_line_starts_afresh(
     new trace (it used to raise, and the restarted service did not run)."""
     path = tmp_path / "trace_proposed.jsonl"
     path.write_bytes(torn_header)
-    loop = GroundLoop(
-        paper,
-        None,  # type: ignore[arg-type]  # _open_trace does not touch the bus
-        GroundSettings(trace_path=path, resume=True),
-        SolverKit(paper),
-    )
-    loop._open_trace()
+    loop = _resumed_loop(paper, path)
     assert loop.writer is not None
     loop.writer.write_slot(_record(1))
     loop.writer.close()
@@ -371,9 +359,17 @@ def test_resume_of_a_trace_killed_before_its_config_line_starts_afresh(
     # A trace with a complete but corrupt first line is not overwritten.
     path.write_bytes(b"not json\n")
     with pytest.raises(MessageError):
-        GroundLoop(
-            paper,
-            None,  # type: ignore[arg-type]
-            GroundSettings(trace_path=path, resume=True),
-            SolverKit(paper),
-        )._open_trace()
+        _resumed_loop(paper, path)
+
+
+def _resumed_loop(s: Scenario, path: Path) -> GroundLoop:
+    """A GroundLoop(resume=True) on `path` with its trace opened (no bus: _open_trace does not
+    use it)."""
+    loop = GroundLoop(
+        s,
+        None,  # type: ignore[arg-type]
+        GroundSettings(trace_path=path, resume=True),
+        SolverKit(s),
+    )
+    loop._open_trace()
+    return loop
