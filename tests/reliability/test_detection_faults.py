@@ -15,6 +15,7 @@ for the ground's own messages (plans, tracks, health) with generous bounds.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import random
 from collections.abc import AsyncIterator
@@ -78,6 +79,17 @@ class GroundRig:
         slot = int(np.floor(t_s / self.s.dt + 1e-9))
         msg = ClockMsg(slot=slot, t_s=t_s, slot_s=self.s.dt, speed=1.0, mission_t0_s=0.0)
         self.world.publish(self.keys.clock, encode_clock(msg))
+
+    async def start_mission(self) -> PlanMsg:
+        """Announce mission start (t0 = 0) until plan 1 arrives, as the world's 10 Hz clock
+        does: a single clock message could go out before the ground loop has subscribed (the
+        world session's own collector already matches `clock`, so waiting for a subscriber
+        does not tell)."""
+        for _ in range(int(WAIT_S / 0.1)):
+            self.publish_clock(0.0)
+            with contextlib.suppress(TimeoutError):
+                return await asyncio.wait_for(self.plan(1), 0.1)
+        raise AssertionError(f"no plan 1 within {WAIT_S} s of announcing the mission start")
 
     async def plan(self, n: int) -> PlanMsg:
         await async_wait_until(lambda: n in self.plans, WAIT_S, f"plan {n}")
@@ -222,10 +234,8 @@ async def test_detection_faults_are_counted_and_never_used_twice(
         """Clock just past slot n's detection deadline (and before slot n + 1's)."""
         rig.publish_clock(n * s.dt + rig.loop.settings.detection_wait_s + 0.1 * s.dt)
 
-    rig.publish_clock(0.0)  # mission starts at t0 = 0: the ground plans slot 1
-
-    # Slot 1: all M detections, UAVs shuffled.
-    plan = await rig.plan(1)
+    # Slot 1: mission start at t0 = 0, then all M detections, UAVs shuffled.
+    plan = await rig.start_mission()
     det1 = _detections(s, 1, plan.plan.bandwidth_share, rng)
     shuffle(det1)
     for d in det1:
@@ -351,8 +361,7 @@ async def test_a_gap_of_slots_is_predicted_through_with_growing_covariance(
     rng = np.random.default_rng(SEED + 1)
     ref = Reference.start(s)
     F, W = ref.F, ref.W
-    rig.publish_clock(0.0)
-    plan = await rig.plan(1)
+    plan = await rig.start_mission()
     det = _detections(s, 1, plan.plan.bandwidth_share, rng)
     for d in det:
         rig.publish_detection(d)
@@ -391,8 +400,7 @@ async def test_a_slot_without_detections_under_a_held_clock_goes_on_by_the_wall_
     rig, _run = ground_rig
     s = rig.s
     rng = np.random.default_rng(SEED + 2)
-    rig.publish_clock(0.0)
-    plan = await rig.plan(1)
+    plan = await rig.start_mission()
     for d in _detections(s, 1, plan.plan.bandwidth_share, rng):
         rig.publish_detection(d)
     await rig.plan(2)
