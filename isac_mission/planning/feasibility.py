@@ -37,12 +37,8 @@ class SlotConstraints:
     keep_out_xy: FloatArray | None = None
 
     def area_bounds(self) -> tuple[FloatArray, FloatArray]:
-        """(lower [2], upper [2]) corners of the box every UAV stays in, m: the operating area
-        when planner.keep_in_area is set, else unbounded."""
-        s = self.scenario
-        if not s.planner.keep_in_area:
-            return np.full(2, -np.inf), np.full(2, np.inf)
-        return np.zeros(2), np.asarray(s.area, dtype=float)
+        """operating_area(scenario)."""
+        return operating_area(self.scenario)
 
     def full_rates(self, uav_xy: FloatArray) -> FloatArray:
         """R~ [..., M] of each UAV on its serving BS, bit/s."""
@@ -133,6 +129,14 @@ class SlotConstraints:
         if abs(float(np.sum(eta)) - 1.0) > 1e-9 or np.any(np.asarray(eta) < 0):
             names.append("14c/14d shares")
         return names
+
+
+def operating_area(s: Scenario) -> tuple[FloatArray, FloatArray]:
+    """(lower [2], upper [2]) corners of the box every UAV stays in, m: the operating area when
+    planner.keep_in_area is set, else unbounded."""
+    if not s.planner.keep_in_area:
+        return np.full(2, -np.inf), np.full(2, np.inf)
+    return np.zeros(2), np.asarray(s.area, dtype=float)
 
 
 def _sq_norm(v: FloatArray) -> FloatArray:

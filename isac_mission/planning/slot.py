@@ -23,7 +23,7 @@ from isac_mission.config import Scenario
 from isac_mission.planning.association import AssociationLP, associate
 from isac_mission.planning.bandwidth import BandwidthSubproblem, optimise_shares
 from isac_mission.planning.communication import communication_optimal, lemma1_shares
-from isac_mission.planning.feasibility import SlotConstraints, capacity_ok
+from isac_mission.planning.feasibility import SlotConstraints, capacity_ok, operating_area
 from isac_mission.planning.positions import PositionSubproblem, optimise_positions
 from isac_mission.tracking.pcrb import PlanningObjective, SensingParams
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
@@ -143,7 +143,8 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         coast = inp.prev_velocity * s.dt
         norm = np.linalg.norm(coast, axis=1, keepdims=True)
         coast = coast * np.minimum(1.0, s.v_max * s.dt * (1 - 1e-9) / np.maximum(norm, 1e-12))
-        ballistic = inp.prev_xy + coast
+        # ... and inside the operating area: a vehicle heading out at the edge must stop too.
+        ballistic = np.clip(inp.prev_xy + coast, *operating_area(s))
     cons = SlotConstraints(
         inp.prev_xy,
         serving,
