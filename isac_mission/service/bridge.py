@@ -64,6 +64,18 @@ import numpy as np
 
 from isac_mission.config import MavlinkSigningKey, Scenario
 from isac_mission.errors import IsacError, LinkError, MessageError
+from isac_mission.mavwire.builders import (
+    arm_command,
+    gcs_heartbeat,
+    hold_mode_command,
+    land_command,
+    offboard_mode_command,
+    position_target_local_ned,
+    takeoff_command,
+)
+from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
+from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus
 from isac_mission.service.codec import (
     TELEMETRY_MODES,
@@ -73,18 +85,6 @@ from isac_mission.service.codec import (
     decode_clock,
     decode_plan,
     encode_telemetry,
-)
-from isac_mission.service.mavlink import (
-    OFFBOARD_BASE_PORT,
-    MavlinkLink,
-    VehicleStatus,
-    arm_command,
-    gcs_heartbeat,
-    hold_mode_command,
-    land_command,
-    offboard_mode_command,
-    position_target_local_ned,
-    takeoff_command,
 )
 from isac_mission.types import FloatArray
 
