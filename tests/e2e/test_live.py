@@ -17,7 +17,7 @@ import yaml
 
 from isac_mission.config import Scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo
-from isac_mission.experiment.trace import read_trace
+from isac_mission.records import read_trace
 from isac_mission.service.bus import tcp_loopback
 from isac_mission.service.live import LiveOptions, planning_scenario, run_embedded, summarize_live
 from tests.support.independent_check import check_constraints, compare_pcrb
