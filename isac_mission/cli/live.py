@@ -160,7 +160,7 @@ def _live(
             plot_performance,
             plot_trajectories,
         )
-        from isac_mission.experiment.trace import read_trace
+        from isac_mission.records import read_trace
 
         trace = read_trace(result.trace_path)
         written = [

@@ -19,7 +19,7 @@ from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions, planning_scenario, summarize_live
 from isac_mission.config import Scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo
-from isac_mission.experiment.trace import read_trace
+from isac_mission.records import read_trace
 from isac_mission.service.bus import tcp_loopback
 from tests.support.independent_check import check_constraints, compare_pcrb
 from tests.support.live_cli import cli, serve_argv, sim_argv, start

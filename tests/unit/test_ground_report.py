@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from isac_mission.cli.mission import LiveResult, summarize_live
-from isac_mission.experiment.trace import SlotRecord
+from isac_mission.records import SlotRecord
 from isac_mission.service.ground import SLOTS_KEPT, GroundReport
 
 
