@@ -26,8 +26,8 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
-from isac_mission.experiment.trace import SlotRecord, TraceWriter, read_trace
 from isac_mission.planning.slot import Method, SolverKit, plan_slot
+from isac_mission.records import SlotRecord, TraceWriter, read_trace
 from isac_mission.service.bus import Keys, Subscription, ZenohBus
 from isac_mission.service.codec import (
     MAX_REASON_CHARS,

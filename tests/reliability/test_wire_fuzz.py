@@ -47,6 +47,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
 
+from isac_mission.cli.embedded import run_embedded
+from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.service import codec
@@ -61,7 +63,6 @@ from isac_mission.service.codec import (
     rejection_reason,
 )
 from isac_mission.service.ground import SlotEvent
-from isac_mission.service.live import LiveOptions, run_embedded
 from isac_mission.service.mavlink import (
     MavlinkLink,
     gcs_heartbeat,
