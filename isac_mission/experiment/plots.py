@@ -3,7 +3,7 @@
 Everything is drawn on a `matplotlib.figure.Figure` with the Agg canvas: no pyplot, no global
 backend switch, no display, safe to call from any thread. Each function writes one PNG of a fixed
 size (the *_SIZE_IN constants times `dpi`) and returns its path. Inputs are traces as read by
-`isac_mission.experiment.trace.read_trace`; the config keys used are bs_xy, d_th, area and
+`isac_mission.records.read_trace`; the config keys used are bs_xy, d_th, area and
 uav_start_xy (all optional except bs_xy for the trajectory plot).
 """
 
@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
 
-from isac_mission.experiment.trace import Trace
+from isac_mission.records import Trace
 from isac_mission.types import FloatArray
 
 TRAJECTORY_SIZE_IN: Final[tuple[float, float]] = (9.5, 6.5)

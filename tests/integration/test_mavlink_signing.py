@@ -42,9 +42,9 @@ from isac_mission.service.bridge import (
     BridgeSettings,
     ClockSimTime,
     VehicleBridge,
-    WallTime,
 )
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
+from isac_mission.timebase import WallTime
 from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
 from sim.world import World, WorldOptions
 from tests.support.ports import free_port_block
