@@ -24,8 +24,8 @@ from isac_mission.experiment.closed_loop import (
     draw_run_noise,
     run_closed_loop,
 )
-from isac_mission.experiment.trace import SlotRecord, TraceWriter
 from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.records import SlotRecord, TraceWriter
 
 # The paper's Section IV: % reduction of the proposed method's location and velocity error
 # against SD, ABA and CRB-criterion.

@@ -6,7 +6,7 @@ with an Agg canvas, and returns the Figure. Nothing here calls pyplot or switche
 (`matplotlib.use`), so inline notebook plots keep working, and drawing is safe from any thread.
 Nothing here writes a file unless asked: `save_png(fig, path, dpi=...)` does, at size_in x dpi
 pixels (the CLI's commands call it). Inputs are traces as read by
-`isac_mission.experiment.trace.read_trace`; the config keys used are bs_xy, d_th, area and
+`isac_mission.records.read_trace`; the config keys used are bs_xy, d_th, area and
 uav_start_xy (all optional except bs_xy for the trajectory plot).
 """
 
@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
 
-from isac_mission.experiment.trace import Trace
+from isac_mission.records import Trace
 from isac_mission.types import FloatArray
 
 TRAJECTORY_SIZE_IN: Final[tuple[float, float]] = (9.5, 6.5)

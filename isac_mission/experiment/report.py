@@ -187,7 +187,7 @@ def simulate_report(
             plot_trajectories,
             save_png,
         )
-        from isac_mission.experiment.trace import read_trace
+        from isac_mission.records import read_trace
 
         first = "proposed" if "proposed" in methods else methods[0]
         run0 = read_trace(trace_path(trace_dir, first, 0))

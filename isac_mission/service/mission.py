@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.experiment.trace import SlotRecord
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.records import SlotRecord
 from isac_mission.service.fleet_plan import KitCache, PlanningJob
 from isac_mission.tracking.ekf import ekf_predict, ekf_update
 from isac_mission.tracking.pcrb import Bound, bound_step, predict_information, scaled_inverse

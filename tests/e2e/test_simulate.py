@@ -17,7 +17,7 @@ import pytest
 
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo, summarize
-from isac_mission.experiment.trace import read_trace
+from isac_mission.records import read_trace
 from tests.support.independent_check import check_constraints, compare_pcrb
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -29,7 +29,7 @@ def _simulate(config: str, out: Path, *args: str) -> subprocess.CompletedProcess
         [
             sys.executable,
             "-m",
-            "isac_mission.service.cli",
+            "isac_mission.cli",
             "simulate",
             config,
             "--out",

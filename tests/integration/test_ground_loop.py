@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.experiment.trace import read_trace
+from isac_mission.records import read_trace
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.codec import decode_health, decode_plan, decode_track
 from isac_mission.service.ground import GroundLoop, GroundSettings

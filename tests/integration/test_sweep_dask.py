@@ -97,7 +97,7 @@ def test_dask_sweep_equals_serial_and_binds_loopback() -> None:
 def test_cli_sweep_serial_writes_csv_and_plots(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
-    from isac_mission.service.cli import app
+    from isac_mission.cli import app
 
     grid = tmp_path / "grid.yaml"
     grid.write_text("radio.rate_min_bps: [1.0e7, 2.0e7]\nmethods: [sd]\nruns: 2\nslots: 3\n")
@@ -116,7 +116,7 @@ def test_cli_sweep_serial_writes_csv_and_plots(tmp_path: Path) -> None:
 def test_cli_sweep_rejects_a_bad_point_before_any_work(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
-    from isac_mission.service.cli import app
+    from isac_mission.cli import app
 
     grid = tmp_path / "grid.yaml"
     grid.write_text("uavs.max_speed_mps: [25, 0]\nslots: 3\n")
@@ -137,7 +137,7 @@ def test_cli_sweep_without_dask_names_the_extra_and_serial_still_runs(
 
     from typer.testing import CliRunner
 
-    from isac_mission.service.cli import app
+    from isac_mission.cli import app
 
     for name in ("dask", "distributed"):
         monkeypatch.setitem(sys.modules, name, None)  # as if the extra were not installed

@@ -26,9 +26,9 @@ import numpy as np
 import pytest
 
 from isac_mission.config import Scenario
-from isac_mission.experiment.trace import read_trace
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.radar import measure
+from isac_mission.records import read_trace
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.codec import (
     ClockMsg,

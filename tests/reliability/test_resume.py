@@ -28,11 +28,11 @@ import numpy as np
 import pytest
 import yaml
 
-import isac_mission.experiment.trace as trace_mod
+import isac_mission.records.writer as trace_mod
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
-from isac_mission.experiment.trace import SlotRecord, Trace, TraceWriter, read_trace
 from isac_mission.planning.slot import SolverKit
+from isac_mission.records import SlotRecord, Trace, TraceWriter, read_trace
 from isac_mission.service.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.service.ground import GroundLoop, GroundSettings
 from sim.world import WorldOptions, run_world

@@ -18,8 +18,8 @@ import cvxpy as cp
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.experiment.trace import read_trace
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.records import read_trace
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.codec import ControlMsg, decode_plan, encode_control
 from isac_mission.service.ground import GroundLoop, GroundSettings

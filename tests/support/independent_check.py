@@ -4,7 +4,7 @@ Written from the paper (eq. 1-14) and DESIGN.md with numpy only. It deliberately
 isac_mission.model, isac_mission.tracking or isac_mission.planning: its point is to catch the
 library's own mistakes, so every formula here is re-derived and coded independently (in a
 different style: per-UAV loops, a square-root information update instead of the library's
-scaled inverse). It reads the trace through `isac_mission.experiment.trace.read_trace` only when
+scaled inverse). It reads the trace through `isac_mission.records.read_trace` only when
 given a path; otherwise any object with `.config` (dict) and `.slots` (records with the trace's
 field names, see DESIGN.md "Trace") will do.
 
@@ -40,7 +40,7 @@ class _TraceLike(Protocol):
 
 def _as_trace(trace: Any) -> _TraceLike:
     if isinstance(trace, str | Path):
-        from isac_mission.experiment.trace import read_trace  # the file format only
+        from isac_mission.records import read_trace  # the file format only
 
         return read_trace(trace)
     return trace  # type: ignore[no-any-return]

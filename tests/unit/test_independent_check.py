@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from isac_mission.experiment.trace import SlotRecord, Trace, TraceWriter
+from isac_mission.records import SlotRecord, Trace, TraceWriter
 from tests.support.independent_check import (
     bound_update,
     check_constraints,
@@ -250,7 +250,7 @@ def test_checker_does_not_import_the_library_it_checks() -> None:
     forbidden = ("isac_mission.model", "isac_mission.tracking", "isac_mission.planning")
     assert not [m for m in imported if m.startswith(forbidden)]
     assert {m for m in imported if m.startswith("isac_mission")} <= {
-        "isac_mission.experiment.trace"
+        "isac_mission.records"
     }
 
 

@@ -21,7 +21,7 @@ from isac_mission.experiment.plots import (
     plot_trajectories,
     save_png,
 )
-from isac_mission.experiment.trace import SlotRecord, Trace
+from isac_mission.records import SlotRecord, Trace
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 DPI = 80

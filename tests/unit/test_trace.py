@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import isac_mission.records.writer as trace_mod
 from isac_mission.errors import MessageError
-from isac_mission.experiment import trace as trace_mod
-from isac_mission.experiment.trace import (
+from isac_mission.records import (
     CONTRACT_KEYS,
     SlotRecord,
     TraceWriter,

@@ -1,0 +1,83 @@
+"""Reading a trace file (docs/trace.md): line 1 the config, then one slot line each.
+
+An incomplete final line (the one a killed writer was in the middle of) is dropped and flagged
+with `Trace.truncated`; any other line that does not parse, or breaks the slot order, raises
+MessageError naming the file and the 1-based line number.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from isac_mission.errors import MessageError
+from isac_mission.records.jsonlines import loads_line
+from isac_mission.records.slot import SlotRecord, Trace, check_sequence
+
+
+@dataclass(frozen=True)
+class Scan:
+    """A read trace and where its good bytes end (for `TraceWriter.resume`)."""
+
+    trace: Trace
+    good_end: int  # byte offset just past the last line that parsed
+    tail_unterminated_ok: bool  # the last line parsed but has no newline
+
+
+def _parse_config_line(text: str) -> dict[str, Any]:
+    obj = loads_line(text)
+    if not (isinstance(obj, dict) and set(obj) == {"config"} and isinstance(obj["config"], dict)):
+        raise MessageError('the first line must be {"config": {...}}')
+    config: dict[str, Any] = obj["config"]
+    return config
+
+
+def scan_trace(path: Path) -> Scan:
+    """Read and validate the whole file (see the module doc)."""
+    try:
+        data = path.read_bytes()
+    except OSError as err:
+        raise MessageError(f"{path}: cannot read: {err.strerror}") from None
+    pieces = data.split(b"\n")
+    # pieces[-1] is b"" when the file ends with a newline, else the unterminated last line.
+    config: dict[str, Any] | None = None
+    slots: list[SlotRecord] = []
+    offset = good_end = 0
+    truncated = tail_ok = False
+    n_lines = len(pieces) if pieces[-1] else len(pieces) - 1
+    for lineno, raw in enumerate(pieces[:n_lines], start=1):
+        terminated = lineno < len(pieces)
+        end = offset + len(raw) + (1 if terminated else 0)
+        is_last_unterminated = not terminated
+        try:
+            text = raw.decode("utf-8")
+            if not text.strip():
+                offset = good_end = end
+                continue
+            if config is None:
+                config = _parse_config_line(text)
+            else:
+                obj = loads_line(text)
+                rec = SlotRecord.from_dict(obj)
+                check_sequence(rec, slots[-1] if slots else None, config.get("M"))
+                slots.append(rec)
+        except (MessageError, UnicodeDecodeError) as err:
+            if is_last_unterminated and config is not None:
+                truncated = True
+                break
+            what = "incomplete config line" if is_last_unterminated else str(err)
+            raise MessageError(f"{path}: line {lineno}: {what}") from None
+        tail_ok = is_last_unterminated
+        offset = good_end = end
+    if config is None:
+        raise MessageError(f"{path}: empty trace: no config line")
+    trace = Trace(config=config, slots=slots, path=path, truncated=truncated)
+    return Scan(trace=trace, good_end=good_end, tail_unterminated_ok=tail_ok)
+
+
+def read_trace(path: str | Path) -> Trace:
+    """Read a trace file. An incomplete final line (a killed writer's) is dropped and flagged
+    with `Trace.truncated`; any other line that does not parse, or breaks the slot order, raises
+    MessageError naming the file and the 1-based line number."""
+    return scan_trace(Path(path)).trace

@@ -1,0 +1,205 @@
+"""Trace records in memory: one slot's `SlotRecord` and a whole `Trace` (format: docs/trace.md).
+
+Shapes: M UAVs; uav_xy, plan_xy [M, 2] m; eta [M]; assoc [M] 0-based BS index (-1 = none);
+target_* [4] = [x, y, vx, vy] in m and m/s; r_diag [2M] = range variances (m^2) then
+radial-velocity variances (m^2/s^2), NaN for a measurement that did not arrive; P, J [4, 4].
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+
+from isac_mission.errors import MessageError
+from isac_mission.records.fields import as_float, as_int, as_str, float_array, int_array
+from isac_mission.records.jsonlines import to_jsonable
+from isac_mission.types import FloatArray, IntArray
+
+CONTRACT_KEYS: Final[tuple[str, ...]] = (
+    "slot",
+    "method",
+    "status",
+    "uav_xy",
+    "eta",
+    "assoc",
+    "target_true",
+    "target_est",
+    "target_pred",
+    "r_diag",
+    "pcrb_trace",
+    "solve_ms",
+    "P",
+    "J",
+)
+"""The fields every slot line carries (docs/trace.md), in the order they are written."""
+
+OPTIONAL_KEYS: Final[tuple[str, ...]] = ("plan_xy", "plan_pcrb_trace", "reason")
+"""Named optional fields; written only when set."""
+
+_RESERVED: Final[frozenset[str]] = frozenset((*CONTRACT_KEYS, *OPTIONAL_KEYS, "config"))
+
+
+@dataclass(frozen=True, eq=False)
+class SlotRecord:
+    """One slot of a run, as logged (docs/trace.md). Arrays are read-only numpy copies.
+
+    slot: slot index n; method: planning method; status: "ok", "infeasible", ...;
+    uav_xy [M, 2] m: where this slot's measurements were taken; eta [M]: bandwidth shares;
+    assoc [M]: 0-based BS index per UAV (-1 = none); target_true [4] or None (unknown);
+    target_est [4]: EKF posterior mean; target_pred [4]: EKF prediction (the bound's
+    linearisation point); r_diag [2M]: measurement variances used for the bound (m^2 then
+    m^2/s^2; NaN = measurement did not arrive); pcrb_trace: tr(J^-1) (m^2 + m^2/s^2);
+    solve_ms: planner wall time (ms); P [4, 4]: EKF covariance; J [4, 4]: PCRB information.
+    Optional: plan_xy [M, 2] planned waypoints; plan_pcrb_trace: the planner's objective;
+    reason: why status is not "ok"; extra: further JSON-ready fields, written at the top level.
+
+    Construction checks shapes and types and raises MessageError naming the field. Two records
+    are equal when their JSON forms are (so NaN equals NaN).
+    """
+
+    slot: int
+    method: str
+    status: str
+    uav_xy: FloatArray
+    eta: FloatArray
+    assoc: IntArray
+    target_true: FloatArray | None
+    target_est: FloatArray
+    target_pred: FloatArray
+    r_diag: FloatArray
+    pcrb_trace: float
+    solve_ms: float
+    P: FloatArray
+    J: FloatArray
+    plan_xy: FloatArray | None = None
+    plan_pcrb_trace: float | None = None
+    reason: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        put(self, "slot", as_int(self.slot, "slot"))
+        put(self, "method", as_str(self.method, "method"))
+        put(self, "status", as_str(self.status, "status"))
+        uav_xy = float_array(self.uav_xy, "uav_xy", (None, 2))
+        m = uav_xy.shape[0]
+        put(self, "uav_xy", uav_xy)
+        put(self, "eta", float_array(self.eta, "eta", (m,)))
+        assoc = int_array(self.assoc, "assoc")
+        if assoc.shape != (m,):
+            raise MessageError(f"assoc: expected {m} BS indices (one per UAV), got {assoc.size}")
+        put(self, "assoc", assoc)
+        if self.target_true is not None:
+            put(self, "target_true", float_array(self.target_true, "target_true", (4,)))
+        put(self, "target_est", float_array(self.target_est, "target_est", (4,)))
+        put(self, "target_pred", float_array(self.target_pred, "target_pred", (4,)))
+        put(self, "r_diag", float_array(self.r_diag, "r_diag", (2 * m,)))
+        put(self, "pcrb_trace", as_float(self.pcrb_trace, "pcrb_trace"))
+        put(self, "solve_ms", as_float(self.solve_ms, "solve_ms"))
+        put(self, "P", float_array(self.P, "P", (4, 4)))
+        put(self, "J", float_array(self.J, "J", (4, 4)))
+        if self.plan_xy is not None:
+            put(self, "plan_xy", float_array(self.plan_xy, "plan_xy", (m, 2)))
+        if self.plan_pcrb_trace is not None:
+            put(self, "plan_pcrb_trace", as_float(self.plan_pcrb_trace, "plan_pcrb_trace"))
+        if self.reason is not None:
+            put(self, "reason", as_str(self.reason, "reason"))
+        if not isinstance(self.extra, Mapping):
+            raise MessageError(f"extra: expected a mapping (got {self.extra!r})")
+        clash = sorted(_RESERVED.intersection(self.extra))
+        if clash:
+            raise MessageError(f"extra: keys {clash} are reserved for the trace's named fields")
+        put(self, "extra", to_jsonable(dict(self.extra), "extra"))
+
+    @property
+    def n_uavs(self) -> int:
+        """M, the number of UAVs."""
+        return int(self.uav_xy.shape[0])
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON-ready line: contract fields in docs/trace.md order, set optionals, then extras."""
+        out: dict[str, Any] = {key: to_jsonable(getattr(self, key), key) for key in CONTRACT_KEYS}
+        for key in OPTIONAL_KEYS:
+            value = getattr(self, key)
+            if value is not None:
+                out[key] = to_jsonable(value, key)
+        out.update(self.extra)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SlotRecord:
+        """Parse one slot line's object; unknown keys go to `extra`. Raises MessageError."""
+        if not isinstance(data, Mapping):
+            raise MessageError(f"a slot line must be a JSON object (got {type(data).__name__})")
+        missing = [key for key in CONTRACT_KEYS if key not in data]
+        if missing:
+            raise MessageError(f"missing fields {missing}")
+        if "config" in data:
+            raise MessageError("a second config object after line 1")
+        named = {key: data[key] for key in CONTRACT_KEYS}
+        optional = {key: data[key] for key in OPTIONAL_KEYS if data.get(key) is not None}
+        extra = {key: value for key, value in data.items() if key not in _RESERVED}
+        return cls(**named, **optional, extra=extra)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, SlotRecord):
+            return NotImplemented
+        return self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True)
+class Trace:
+    """A trace read from disk: the config mapping and the slot records in file order.
+
+    truncated is True when an incomplete final line (a killed writer's) was dropped.
+    """
+
+    config: dict[str, Any]
+    slots: list[SlotRecord]
+    path: Path | None = None
+    truncated: bool = False
+
+    @property
+    def method(self) -> str:
+        """The run's method: config["method"], else the first slot's, else ""."""
+        named = self.config.get("method")
+        if isinstance(named, str):
+            return named
+        return self.slots[0].method if self.slots else ""
+
+    def stack(self, name: str) -> FloatArray:
+        """One array field stacked over slots: e.g. "uav_xy" -> [N, M, 2]; "pcrb_trace" -> [N].
+
+        Fields that are None in a slot (target_true, plan_xy) become NaN of the right shape.
+        """
+        values = [getattr(rec, name) for rec in self.slots]
+        default: tuple[int, ...] = ()
+        if name == "target_true":
+            default = (4,)
+        elif name == "plan_xy" and self.slots:
+            default = (self.slots[0].n_uavs, 2)
+        shape = next((np.shape(v) for v in values if v is not None), default)
+        return np.array(
+            [np.full(shape, np.nan) if v is None else np.asarray(v, dtype=float) for v in values],
+            dtype=np.float64,
+        ).reshape((len(values), *shape))
+
+    def __iter__(self) -> Iterator[SlotRecord]:
+        return iter(self.slots)
+
+    def __len__(self) -> int:
+        return len(self.slots)
+
+
+def check_sequence(rec: SlotRecord, prev: SlotRecord | None, m_config: Any) -> None:
+    """Raise MessageError unless rec follows prev (append-only) with config["M"] UAVs."""
+    if isinstance(m_config, int) and not isinstance(m_config, bool) and rec.n_uavs != m_config:
+        raise MessageError(f"slot {rec.slot} has {rec.n_uavs} UAVs but config M is {m_config}")
+    if prev is not None and rec.slot <= prev.slot:
+        raise MessageError(f"slot {rec.slot} does not follow slot {prev.slot} (append-only)")
