@@ -43,19 +43,15 @@ from typing import Literal
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.frames import PX4_SITL_ORIGIN, GeoPoint
+from isac_mission.mavwire.modes import FlightMode
+from isac_mission.mavwire.ports import GCS_BASE_PORT, OFFBOARD_BASE_PORT
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.service.codec import ClockMsg, TruthMsg, encode_clock, encode_truth
 from isac_mission.timebase import UNPACED_SPEED, SlotTimeline, reached
 from isac_mission.types import FloatArray
-from sim.autopilot import (
-    GCS_BASE_PORT,
-    OFFBOARD_BASE_PORT,
-    PX4_SITL_ORIGIN,
-    Autopilot,
-    AutopilotSettings,
-    FlightMode,
-    GeoPoint,
-)
+from sim.autopilot.endpoint import Autopilot
+from sim.autopilot.settings import AutopilotSettings
 from sim.clock import SimClock
 from sim.emulator import SensingEmulator
 from sim.sensing import SensingModel, Sensor

@@ -27,6 +27,7 @@ import pytest
 
 from isac_mission.config import Scenario
 from isac_mission.mavwire.builders import Target, hold_mode_command, message_interval_command
+from isac_mission.mavwire.modes import FlightMode
 from isac_mission.mavwire.signing import new_encoder, pack
 from isac_mission.service.bridge import BridgeFleet, BridgeSettings, ClockSimTime, VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
@@ -40,7 +41,8 @@ from isac_mission.service.codec import (
     encode_plan,
 )
 from isac_mission.types import SlotPlan, SolveReport
-from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
+from sim.autopilot.endpoint import Autopilot
+from sim.autopilot.settings import AutopilotSettings
 from sim.world import World, WorldOptions
 from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports
 

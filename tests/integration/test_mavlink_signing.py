@@ -36,6 +36,7 @@ from isac_mission.config import (
 from isac_mission.errors import LinkError
 from isac_mission.mavwire.builders import Target, arm_command, takeoff_command
 from isac_mission.mavwire.dialect import mavlink2
+from isac_mission.mavwire.modes import FlightMode
 from isac_mission.mavwire.signing import signing_timestamp
 from isac_mission.service.bridge import (
     BridgeFleet,
@@ -45,7 +46,8 @@ from isac_mission.service.bridge import (
 )
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.timebase import WallTime
-from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
+from sim.autopilot.endpoint import Autopilot
+from sim.autopilot.settings import AutopilotSettings
 from sim.world import World, WorldOptions
 from tests.support.ports import free_port_block
 from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports, wait_until
