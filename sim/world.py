@@ -44,8 +44,8 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
-from isac_mission.service.codec import ClockMsg, TruthMsg, encode_clock, encode_truth
 from isac_mission.types import FloatArray
+from isac_mission.wire import ClockMsg, TruthMsg, encode_clock, encode_truth
 from sim.autopilot import (
     GCS_BASE_PORT,
     OFFBOARD_BASE_PORT,

@@ -65,15 +65,6 @@ import numpy as np
 from isac_mission.config import MavlinkSigningKey, Scenario
 from isac_mission.errors import IsacError, LinkError, MessageError
 from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus
-from isac_mission.service.codec import (
-    TELEMETRY_MODES,
-    ClockMsg,
-    PlanMsg,
-    TelemetryMsg,
-    decode_clock,
-    decode_plan,
-    encode_telemetry,
-)
 from isac_mission.service.mavlink import (
     OFFBOARD_BASE_PORT,
     MavlinkLink,
@@ -87,6 +78,15 @@ from isac_mission.service.mavlink import (
     takeoff_command,
 )
 from isac_mission.types import FloatArray
+from isac_mission.wire import (
+    TELEMETRY_MODES,
+    ClockMsg,
+    PlanMsg,
+    TelemetryMsg,
+    decode_clock,
+    decode_plan,
+    encode_telemetry,
+)
 
 log = logging.getLogger(__name__)
 
@@ -323,7 +323,7 @@ def scenario_to_ned(
 
 
 def telemetry_mode(px4_mode: str) -> str:
-    """The telemetry mode name (codec.TELEMETRY_MODES) of a PX4 mode name."""
+    """The telemetry mode name (wire.TELEMETRY_MODES) of a PX4 mode name."""
     if px4_mode in TELEMETRY_MODES:
         return px4_mode
     if px4_mode in _MANUAL_MODES:

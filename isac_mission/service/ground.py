@@ -29,7 +29,10 @@ from isac_mission.errors import MessageError
 from isac_mission.planning.slot import Method, SolverKit, plan_slot
 from isac_mission.records import SlotRecord, TraceWriter, read_trace
 from isac_mission.service.bus import Keys, Subscription, ZenohBus
-from isac_mission.service.codec import (
+from isac_mission.service.fleet_plan import Planner, PlanningJob
+from isac_mission.service.mission import MissionState
+from isac_mission.types import FloatArray, Gaussian, SlotPlan
+from isac_mission.wire import (
     MAX_REASON_CHARS,
     DetectionMsg,
     HealthMsg,
@@ -47,9 +50,6 @@ from isac_mission.service.codec import (
     encode_track,
     rejection_reason,
 )
-from isac_mission.service.fleet_plan import Planner, PlanningJob
-from isac_mission.service.mission import MissionState
-from isac_mission.types import FloatArray, Gaussian, SlotPlan
 
 log = logging.getLogger(__name__)
 
@@ -269,7 +269,7 @@ class GroundLoop:
         log.exception("ground loop: internal error (the loop goes on)")
 
     def _reject(self, err: MessageError) -> None:
-        """Count an invalid payload under "rejected <reason>" (codec.rejection_reason), keep its
+        """Count an invalid payload under "rejected <reason>" (wire.rejection_reason), keep its
         message as the last error, and log it (the first few of each reason, then every 100th:
         a flood of garbage must not turn into a flood of log lines)."""
         name = f"rejected {rejection_reason(err)}"

@@ -28,15 +28,6 @@ import pytest
 from isac_mission.config import Scenario
 from isac_mission.service.bridge import BridgeFleet, BridgeSettings, ClockSimTime, VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
-from isac_mission.service.codec import (
-    ClockMsg,
-    PlanMsg,
-    TelemetryMsg,
-    decode_detection,
-    decode_telemetry,
-    encode_clock,
-    encode_plan,
-)
 from isac_mission.service.mavlink import (
     Target,
     hold_mode_command,
@@ -45,6 +36,15 @@ from isac_mission.service.mavlink import (
     pack,
 )
 from isac_mission.types import SlotPlan, SolveReport
+from isac_mission.wire import (
+    ClockMsg,
+    PlanMsg,
+    TelemetryMsg,
+    decode_detection,
+    decode_telemetry,
+    encode_clock,
+    encode_plan,
+)
 from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
 from sim.world import World, WorldOptions
 from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports

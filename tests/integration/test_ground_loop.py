@@ -12,8 +12,8 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.records import read_trace
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
-from isac_mission.service.codec import decode_health, decode_plan, decode_track
 from isac_mission.service.ground import GroundLoop, GroundSettings
+from isac_mission.wire import decode_health, decode_plan, decode_track
 from sim.world import WorldOptions, run_world
 from tests.support.independent_check import compare_pcrb
 

@@ -18,7 +18,7 @@ from isac_mission.service.bridge import (
     scenario_to_ned,
     telemetry_mode,
 )
-from isac_mission.service.codec import TELEMETRY_MODES, ClockMsg
+from isac_mission.wire import TELEMETRY_MODES, ClockMsg
 
 
 def test_ned_to_scenario_swaps_axes_adds_origin_and_negates_down() -> None:
