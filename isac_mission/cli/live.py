@@ -159,14 +159,15 @@ def _live(
             plot_bandwidth,
             plot_performance,
             plot_trajectories,
+            save_png,
         )
         from isac_mission.records import read_trace
 
         trace = read_trace(result.trace_path)
         written = [
-            plot_trajectories(trace, out_dir / "fig2a_trajectories.png"),
-            plot_bandwidth(trace, out_dir / "fig2b_bandwidth.png"),
-            plot_performance({opts.method: [trace]}, out_dir / "fig3_performance.png"),
+            save_png(plot_trajectories(trace), out_dir / "fig2a_trajectories.png"),
+            save_png(plot_bandwidth(trace), out_dir / "fig2b_bandwidth.png"),
+            save_png(plot_performance({opts.method: [trace]}), out_dir / "fig3_performance.png"),
         ]
         console.print("plots: " + ", ".join(str(p) for p in written))
     console.print(f"trace: {result.trace_path}")

@@ -49,6 +49,7 @@ from isac_mission.service.codec import (
 )
 from isac_mission.service.fleet_plan import Planner, PlanningJob
 from isac_mission.service.mission import MissionState
+from isac_mission.timebase import SlotTimeline, reached
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
 
 log = logging.getLogger(__name__)
@@ -403,10 +404,10 @@ class GroundLoop:
             return True
         now = time.monotonic()
         if self.mission_t0_s is not None:
-            boundary = self.mission_t0_s + n * self.s.dt
-            if self.t_s >= boundary + self.settings.detection_wait_s:
+            boundary = SlotTimeline(self.mission_t0_s, self.s.dt).slot_end_s(n)
+            if reached(self.t_s, boundary + self.settings.detection_wait_s):
                 return True
-            if self.t_s >= boundary:
+            if reached(self.t_s, boundary):
                 # The wall wait also runs from the clock reaching the slot's end, so that a slot
                 # whose detections were all lost does not wait for a held (lockstep) clock.
                 self.first_seen_wall.setdefault(n, now)

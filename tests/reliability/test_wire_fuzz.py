@@ -52,7 +52,7 @@ from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.service import codec
-from isac_mission.service.bridge import BridgeSettings, FuncTime, VehicleBridge
+from isac_mission.service.bridge import BridgeSettings, VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.codec import (
     ClockMsg,
@@ -70,6 +70,7 @@ from isac_mission.service.mavlink import (
     new_encoder,
     pack,
 )
+from isac_mission.timebase import FuncTime
 from sim.autopilot import AutopilotSettings, FlightMode
 from tests.support.loop_calls import call_on_loop
 from tests.support.mavlink_fuzz import mavlink_frames, random_datagrams, unknown_message
