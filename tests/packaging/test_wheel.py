@@ -6,6 +6,7 @@ notebook-style example there (load "paper", plan one slot, run one closed loop, 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -20,6 +21,15 @@ ROOT = Path(__file__).resolve().parents[2]
 SOURCES = ("pyproject.toml", "README.md", "LICENSE", "isac_mission", "sim")
 """What a source distribution holds: the wheel is built from a copy of these alone."""
 TIMEOUT_S = 600.0
+
+
+def readme_example() -> str:
+    """The first Python block of the README's "From Python" section."""
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("## From Python") :]
+    match = re.search(r"```python\n(.*?)```", section, flags=re.DOTALL)
+    assert match is not None, "README: no python block under 'From Python'"
+    return match.group(1)
 
 
 def run(argv: list[str], cwd: Path, env: dict[str, str]) -> str:
@@ -98,3 +108,22 @@ def test_the_wheel_installs_with_its_version_and_scenarios(
     assert typed == "True"
     cli = run([str(python.parent / "isac-mission"), "--version"], tmp_path, env)
     assert cli.strip() == f"isac-mission {isac_mission.__version__}"
+
+
+def test_the_readme_example_runs_from_the_wheel(
+    installed: tuple[Path, dict[str, str]], tmp_path: Path
+) -> None:
+    python, env = installed
+    code = readme_example()
+    assert len(code.strip().splitlines()) <= 6
+    check = (
+        "\nfrom matplotlib.figure import Figure\n"
+        "assert isinstance(fig, Figure), type(fig)\n"
+        "assert fig.axes and fig.axes[0].lines, 'nothing drawn'\n"
+        "print(im.__file__, plan.report.status, len(run.trace), scenario.N)\n"
+    )
+    out = run([str(python), "-c", code + check], tmp_path, env)
+    where, status, slots, n = out.split()[-4:]
+    assert Path(where).is_relative_to(python.parent.parent)
+    assert status == "ok"
+    assert int(slots) == int(n) == 60
