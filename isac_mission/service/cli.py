@@ -319,7 +319,7 @@ def _live(
     from rich.live import Live
 
     from isac_mission.errors import IsacError
-    from isac_mission.service.ground import SlotEvent
+    from isac_mission.service.ground.report import SlotEvent
     from isac_mission.service.live import LiveOptions, run_embedded, run_serve, summarize_live
 
     s = load_or_exit(config)

@@ -60,7 +60,7 @@ from isac_mission.service.codec import (
     encode_clock,
     rejection_reason,
 )
-from isac_mission.service.ground import SlotEvent
+from isac_mission.service.ground.report import SlotEvent
 from isac_mission.service.live import LiveOptions, run_embedded
 from isac_mission.service.mavlink import (
     MavlinkLink,

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from isac_mission.records import SlotRecord
-from isac_mission.service.ground import SLOTS_KEPT, GroundReport
+from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport
 from isac_mission.service.live import LiveResult, summarize_live
 
 
