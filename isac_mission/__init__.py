@@ -1,1 +1,3 @@
 """ISAC multi-UAV collaborative target tracking."""
+
+__version__ = "0.1.0"

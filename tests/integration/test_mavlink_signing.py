@@ -41,7 +41,6 @@ from isac_mission.service.bridge import (
     BridgeSettings,
     ClockSimTime,
     VehicleBridge,
-    WallTime,
 )
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.service.mavlink import (
@@ -50,6 +49,7 @@ from isac_mission.service.mavlink import (
     signing_timestamp,
     takeoff_command,
 )
+from isac_mission.timebase import WallTime
 from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
 from sim.world import World, WorldOptions
 from tests.support.ports import free_port_block

@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 import yaml
 
+from isac_mission.cli.mission import summarize_live
 from isac_mission.config import load_scenario
 from isac_mission.service.bridge import TIMESTAMPS_KEPT
 from isac_mission.service.codec import TrackMsg, decode_track, encode_track
-from isac_mission.service.live import summarize_live
 from tests.support.soak import (
     LOOP_RADIUS_M,
     SoakSample,

@@ -47,10 +47,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
 
+from isac_mission.cli.embedded import run_embedded
+from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.service import codec
-from isac_mission.service.bridge import BridgeSettings, FuncTime, VehicleBridge
+from isac_mission.service.bridge import BridgeSettings, VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.codec import (
     ClockMsg,
@@ -61,7 +63,6 @@ from isac_mission.service.codec import (
     rejection_reason,
 )
 from isac_mission.service.ground.report import SlotEvent
-from isac_mission.service.live import LiveOptions, run_embedded
 from isac_mission.service.mavlink import (
     MavlinkLink,
     gcs_heartbeat,
@@ -69,6 +70,7 @@ from isac_mission.service.mavlink import (
     new_encoder,
     pack,
 )
+from isac_mission.timebase import FuncTime
 from sim.autopilot import AutopilotSettings, FlightMode
 from tests.support.loop_calls import call_on_loop
 from tests.support.mavlink_fuzz import mavlink_frames, random_datagrams, unknown_message

@@ -13,6 +13,7 @@ from collections import Counter
 
 from isac_mission.service.codec import DetectionMsg
 from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.timebase import SlotTimeline, reached
 
 
 class DetectionAssembler:
@@ -58,10 +59,10 @@ class DetectionAssembler:
             return True
         now = time.monotonic()
         if mission_t0_s is not None:
-            boundary = mission_t0_s + n * dt_s
-            if t_s >= boundary + self.settings.detection_wait_s:
+            boundary = SlotTimeline(mission_t0_s, dt_s).slot_end_s(n)
+            if reached(t_s, boundary + self.settings.detection_wait_s):
                 return True
-            if t_s >= boundary:
+            if reached(t_s, boundary):
                 # The wall wait also runs from the clock reaching the slot's end, so that a slot
                 # whose detections were all lost does not wait for a held (lockstep) clock.
                 self.first_seen_wall.setdefault(n, now)
