@@ -22,9 +22,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from isac_mission.cli.mission import summarize_live  # noqa: E402
 from isac_mission.config import load_scenario  # noqa: E402
 from isac_mission.quiet import quiet_highs_banner  # noqa: E402
-from isac_mission.service.live import summarize_live  # noqa: E402
 from tests.support.soak import SoakSample, quarter_table, run_soak, soak_scenario  # noqa: E402
 
 

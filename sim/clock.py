@@ -2,7 +2,9 @@
 
 `SimClock` advances simulation time in ticks of `1 / tick_hz` seconds and calls every registered
 tick callback with `(now_s, dt_s)` after each advance, in registration order; `now_s` is
-`start_s + k * dt_s` after the k-th tick (computed, not summed, so it does not drift).
+`start_s + k * dt_s` after the k-th tick (computed, not summed, so it does not drift): the ticks
+are the slots of an `isac_mission.timebase.SlotTimeline(start_s, dt_s)`, and every comparison of
+simulation times uses the time base's one epsilon (`timebase.reached`).
 
 Pacing: with `speed` = s, tick k is due at wall time `anchor + (k - k_anchor) * dt_s / s`. When
 the loop falls behind by more than `max_lag_s` of wall time the pace is re-anchored instead of
@@ -29,11 +31,10 @@ import math
 from collections.abc import Awaitable, Callable
 
 from isac_mission.errors import IsacError
+from isac_mission.timebase import FuncTime, SlotTimeline, reached
 
 TickCallback = Callable[[float, float], None]
 """Called as `callback(now_s, dt_s)` after each tick: advance your state from now_s - dt_s."""
-
-_EPS_S = 1e-9
 
 
 class SimClock:
@@ -60,8 +61,8 @@ class SimClock:
         if not (math.isfinite(tick_hz) and tick_hz > 0.0):
             raise IsacError(f"SimClock: tick_hz must be finite and > 0 (got {tick_hz})")
         self._check_speed(speed)
-        self._dt_s = 1.0 / tick_hz
-        self._start_s = float(start_s)
+        self._ticks_grid = SlotTimeline(float(start_s), 1.0 / tick_hz)
+        """Tick k ends at simulation time start_s + k dt_s: the ticks are slots of the grid."""
         self._ticks = 0
         self._speed = float(speed)
         self._max_lag_s = float(max_lag_s)
@@ -80,12 +81,12 @@ class SimClock:
     @property
     def now_s(self) -> float:
         """Current simulation time, s."""
-        return self._start_s + self._ticks * self._dt_s
+        return self._ticks_grid.slot_end_s(self._ticks)
 
     @property
     def dt_s(self) -> float:
         """Tick length, s of simulation time."""
-        return self._dt_s
+        return self._ticks_grid.dt_s
 
     @property
     def ticks(self) -> int:
@@ -103,6 +104,10 @@ class SimClock:
         self._speed = float(value)
         self._anchor = None
         self._poke()
+
+    def sim_time(self) -> FuncTime:
+        """This clock as a `SimTime` source (its now_s and speed), for the service's bridges."""
+        return FuncTime(lambda: self.now_s, lambda: self.speed)
 
     @property
     def held(self) -> bool:
@@ -147,9 +152,10 @@ class SimClock:
             return False
         self._ticks += 1
         now = self.now_s
+        dt_s = self._ticks_grid.dt_s
         for callback in list(self._callbacks):
-            callback(now, self._dt_s)
-        while self._waiters and self._waiters[0][0] <= now + _EPS_S:
+            callback(now, dt_s)
+        while self._waiters and reached(now, self._waiters[0][0]):
             _, _, fut = heapq.heappop(self._waiters)
             if not fut.done():
                 fut.set_result(None)
@@ -157,7 +163,7 @@ class SimClock:
 
     async def wait_until(self, t_s: float) -> None:
         """Return once simulation time has reached `t_s` (at once if it has)."""
-        if self.now_s + _EPS_S >= t_s:
+        if reached(self.now_s, t_s):
             return
         fut: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         heapq.heappush(self._waiters, (float(t_s), next(self._waiter_ids), fut))
@@ -183,7 +189,7 @@ class SimClock:
                 if self._anchor is None:
                     self._anchor = (now_wall, self._ticks)
                 wall0, tick0 = self._anchor
-                due = wall0 + (self._ticks + 1 - tick0) * self._dt_s / self._speed
+                due = wall0 + (self._ticks + 1 - tick0) * self._ticks_grid.dt_s / self._speed
                 delay = due - now_wall
                 if delay > 0.0:
                     # Sleep in short pieces so stop, release and speed changes are seen soon.
@@ -207,9 +213,9 @@ class SimClock:
         """The earliest hold that the next tick would pass, if any."""
         if not self._holds:
             return None
-        nxt = self._start_s + (self._ticks + 1) * self._dt_s
+        nxt = self._ticks_grid.slot_end_s(self._ticks + 1)
         first = self._holds[0]
-        return first if nxt > first + _EPS_S else None
+        return None if reached(first, nxt) else first
 
     def _poke(self) -> None:
         if self._wake is not None:

@@ -44,6 +44,7 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
+from isac_mission.timebase import UNPACED_SPEED, SlotTimeline, reached
 from isac_mission.types import FloatArray
 from isac_mission.wire import ClockMsg, TruthMsg, encode_clock, encode_truth
 from sim.autopilot import (
@@ -63,7 +64,6 @@ from sim.vehicle import VehicleLimits
 
 log = logging.getLogger(__name__)
 
-_EPS_S = 1e-9
 HELD_CLOCK_PERIOD_S = 0.5
 """Wall seconds between repeats of the clock message while the world holds in lockstep."""
 StartMode = Literal["immediate", "offboard"]
@@ -315,7 +315,7 @@ class World:
                     self.mission_t0_s + outage.start_s, outage.duration_s
                 )
         self._run_due_slots(now_s)
-        if now_s + _EPS_S >= self._next_clock_s:
+        if reached(now_s, self._next_clock_s):
             self._publish_clock(now_s)
 
     def _ready_to_start(self) -> bool:
@@ -328,14 +328,17 @@ class World:
             for v in self.vehicles
         )
 
-    def _slot_time(self, n: int) -> float:
+    def _timeline(self) -> SlotTimeline:
         assert self.mission_t0_s is not None
-        return self.mission_t0_s + n * self.scenario.dt
+        return SlotTimeline(self.mission_t0_s, self.scenario.dt)
+
+    def _slot_time(self, n: int) -> float:
+        return self._timeline().slot_end_s(n)
 
     def _run_due_slots(self, now_s: float) -> None:
         if self.mission_t0_s is None:
             return
-        while self._held_slot is None and self._slot_time(self._next_slot) <= now_s + _EPS_S:
+        while self._held_slot is None and reached(now_s, self._slot_time(self._next_slot)):
             n = self._next_slot
             self._next_slot = n + 1
             self._run_slot(n, now_s)
@@ -415,11 +418,9 @@ class World:
     # -- outputs -----------------------------------------------------------------------------
 
     def _current_slot(self, now_s: float) -> int:
-        if self.mission_t0_s is None or now_s + _EPS_S < self.mission_t0_s:
+        if self.mission_t0_s is None or not reached(now_s, self.mission_t0_s):
             return -1
-        return min(
-            self._next_slot - 1, int((now_s - self.mission_t0_s) / self.scenario.dt + _EPS_S)
-        )
+        return min(self._next_slot - 1, max(0, self._timeline().slot_of(now_s)))
 
     def _publish_clock(self, now_s: float) -> None:
         bus = self.bus
@@ -428,13 +429,14 @@ class World:
             slot=self._current_slot(now_s),
             t_s=now_s,
             slot_s=self.scenario.dt,
-            speed=self.options.speed if math.isfinite(self.options.speed) else 1e6,
+            speed=self.options.speed if math.isfinite(self.options.speed) else UNPACED_SPEED,
             mission_t0_s=self.mission_t0_s,
         )
         bus.publish(self.keys.clock, encode_clock(msg))
         self.stats.clock_published += 1
         period = 1.0 / self.options.clock_rate_hz
-        self._next_clock_s = (math.floor(now_s / period + _EPS_S) + 1) * period
+        clock_grid = SlotTimeline(0.0, period)
+        self._next_clock_s = clock_grid.slot_end_s(clock_grid.slot_of(now_s) + 1)
         self._sync_stats()
 
     def _sync_stats(self) -> None:

@@ -58,17 +58,19 @@ import time
 from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Final, Protocol
+from typing import Any, Final
 
 import numpy as np
 
 from isac_mission.config import MavlinkSigningKey, Scenario
 from isac_mission.errors import IsacError, LinkError, MessageError
-from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus
-from isac_mission.service.mavlink import (
-    OFFBOARD_BASE_PORT,
-    MavlinkLink,
-    VehicleStatus,
+from isac_mission.frames import (
+    ned_to_scenario,
+    ned_to_scenario_velocity,
+    scenario_to_ned,
+    scenario_to_ned_velocity,
+)
+from isac_mission.mavwire.builders import (
     arm_command,
     gcs_heartbeat,
     hold_mode_command,
@@ -77,6 +79,11 @@ from isac_mission.service.mavlink import (
     position_target_local_ned,
     takeoff_command,
 )
+from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
+from isac_mission.mavwire.status import VehicleStatus
+from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus
+from isac_mission.timebase import SimTime, SlotTimeline
 from isac_mission.types import FloatArray
 from isac_mission.wire import (
     TELEMETRY_MODES,
@@ -102,62 +109,6 @@ _MANUAL_MODES: Final = frozenset({"manual", "altctl", "posctl", "acro", "stabili
 
 
 # --------------------------------------------------------------------------- time sources
-
-
-class SimTime(Protocol):
-    """A source of simulation time: `now_s()` (s, non-decreasing) and `speed` (simulation
-    seconds per wall second, > 0)."""
-
-    def now_s(self) -> float:
-        """Current simulation time, s."""
-        ...
-
-    @property
-    def speed(self) -> float:
-        """Simulation seconds per wall second."""
-        ...
-
-
-class WallTime:
-    """The wall clock as simulation time, for real vehicles: Unix seconds (anchored once to
-    `time.time()` and advanced by the monotonic clock, so it never jumps), speed 1.
-
-    Args:
-        epoch_s: Subtracted from the Unix time (e.g. the mission start), s.
-    """
-
-    def __init__(self, epoch_s: float = 0.0) -> None:
-        self._offset_s = time.time() - time.monotonic() - epoch_s
-
-    def now_s(self) -> float:
-        """Wall time since `epoch_s`, s."""
-        return time.monotonic() + self._offset_s
-
-    @property
-    def speed(self) -> float:
-        """1: wall time."""
-        return 1.0
-
-
-class FuncTime:
-    """Simulation time from functions: `now()` in s, `speed()` (or a fixed number).
-
-    For an in-process clock, e.g. `FuncTime(lambda: clock.now_s, lambda: clock.speed)`.
-    """
-
-    def __init__(self, now: Callable[[], float], speed: Callable[[], float] | float = 1.0) -> None:
-        self._now = now
-        self._speed = speed
-
-    def now_s(self) -> float:
-        """`now()`."""
-        return float(self._now())
-
-    @property
-    def speed(self) -> float:
-        """`speed()` (or the fixed value); math.inf becomes 1e6."""
-        value = float(self._speed() if callable(self._speed) else self._speed)
-        return value if math.isfinite(value) and value > 0 else 1e6
 
 
 class ClockSimTime:
@@ -240,7 +191,7 @@ class ClockSimTime:
         msg = self._msg
         if msg is None or msg.mission_t0_s is None:
             return -1
-        n = math.floor((self.now_s() - msg.mission_t0_s) / msg.slot_s + 1e-9)
+        n = SlotTimeline(msg.mission_t0_s, msg.slot_s).slot_of(self.now_s())
         return max(-1, n, msg.slot)
 
     def slot_end_s(self, slot: int) -> float | None:
@@ -249,7 +200,7 @@ class ClockSimTime:
         msg = self._msg
         if msg is None or msg.mission_t0_s is None:
             return None
-        return msg.mission_t0_s + slot * msg.slot_s
+        return SlotTimeline(msg.mission_t0_s, msg.slot_s).slot_end_s(slot)
 
     async def wait_ready(self, timeout_s: float) -> None:
         """Wait for the first clock message, `timeout_s` wall seconds; IsacError after."""
@@ -301,25 +252,6 @@ def _xy(value: FloatArray | Sequence[float], name: str = "xy_m") -> FloatArray:
     if arr.shape != (2,) or not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be 2 finite numbers, got {value!r}")
     return arr
-
-
-def ned_to_scenario(
-    position_ned_m: FloatArray, origin_xy_m: FloatArray | Sequence[float]
-) -> tuple[FloatArray, float]:
-    """Scenario-plane (x east, y north) position [2], m, and altitude (-down), m, of a local
-    NED position [3] whose origin is `origin_xy_m` [2] in the scenario plane."""
-    o = np.asarray(origin_xy_m, dtype=float)
-    p = np.asarray(position_ned_m, dtype=float)
-    return np.array([p[1] + o[0], p[0] + o[1]]), -float(p[2])
-
-
-def scenario_to_ned(
-    xy_m: FloatArray | Sequence[float], altitude_m: float, origin_xy_m: FloatArray | Sequence[float]
-) -> FloatArray:
-    """Local NED position [3], m, of a scenario-plane point [2] at `altitude_m`."""
-    o = np.asarray(origin_xy_m, dtype=float)
-    xy = np.asarray(xy_m, dtype=float)
-    return np.array([xy[1] - o[1], xy[0] - o[0], -float(altitude_m)])
 
 
 def telemetry_mode(px4_mode: str) -> str:
@@ -782,7 +714,7 @@ class VehicleBridge:
             uav=self.index,
             position_xy_m=xy,
             altitude_m=alt,
-            velocity_xy_mps=np.array([v[1], v[0]]),
+            velocity_xy_mps=ned_to_scenario_velocity(v),
             mode=telemetry_mode(st.mode),
             armed=st.armed,
             landed=st.landed,
@@ -965,7 +897,7 @@ class VehicleBridge:
         msg = position_target_local_ned(
             self.link.target,
             scenario_to_ned(xy, self._altitude_m, self._origin),
-            np.array([v[1], v[0], 0.0]) if self.settings.velocity_feed_forward else None,
+            scenario_to_ned_velocity(v) if self.settings.velocity_feed_forward else None,
             self.settings.yaw_rad,
             time_boot_ms=round(now * 1000.0),
         )

@@ -78,7 +78,7 @@ async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
             proc = await asyncio.create_subprocess_exec(
                 sys.executable,
                 "-m",
-                "isac_mission.service.cli",
+                "isac_mission.cli",
                 "sim",
                 str(config_path),
                 "--speed",

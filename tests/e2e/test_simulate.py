@@ -29,7 +29,7 @@ def _simulate(config: str, out: Path, *args: str) -> subprocess.CompletedProcess
         [
             sys.executable,
             "-m",
-            "isac_mission.service.cli",
+            "isac_mission.cli",
             "simulate",
             config,
             "--out",

@@ -19,12 +19,13 @@ from pathlib import Path
 
 import pytest
 
+from isac_mission.cli.embedded import run_embedded
+from isac_mission.cli.mission import LiveOptions, summarize_live
 from isac_mission.config import Scenario, SecurityConfig, ZenohSecurityConfig, ZenohTlsConfig
 from isac_mission.errors import ConfigError
 from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus, tcp_loopback
 from isac_mission.service.bus_security import read_users_file, secured_settings
 from isac_mission.service.certs import CertFiles, generate_certs, generate_users_file
-from isac_mission.service.live import LiveOptions, run_embedded, summarize_live
 from tests.support.ports import free_port_block
 
 TIMEOUT_S = 20.0

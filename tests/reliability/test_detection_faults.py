@@ -30,7 +30,9 @@ from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.radar import measure
 from isac_mission.records import read_trace
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
-from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport
+from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.tracking.ekf import ekf_predict, ekf_update
 from isac_mission.tracking.pcrb import SensingParams
 from isac_mission.types import FloatArray, Gaussian

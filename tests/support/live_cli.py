@@ -11,8 +11,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def cli(*args: str) -> list[str]:
-    """`python -m isac_mission.service.cli ARGS` with this interpreter."""
-    return [sys.executable, "-m", "isac_mission.service.cli", *args]
+    """`python -m isac_mission.cli ARGS` with this interpreter."""
+    return [sys.executable, "-m", "isac_mission.cli", *args]
 
 
 def start(argv: list[str], stdout: int = subprocess.PIPE) -> subprocess.Popen[str]:

@@ -27,7 +27,9 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
-from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport
+from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.wire import (
     MAX_PAYLOAD_BYTES,
     ClockMsg,

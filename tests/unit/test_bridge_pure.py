@@ -1,4 +1,4 @@
-"""The bridge's pure parts: frame conversion, the carrot, time sources, settings."""
+"""The bridge's pure parts: the carrot, the Zenoh-fed clock, settings."""
 
 from __future__ import annotations
 
@@ -12,28 +12,10 @@ from isac_mission.service.bridge import (
     BridgeSettings,
     CarrotLeg,
     ClockSimTime,
-    FuncTime,
-    ned_to_scenario,
     plan_leg,
-    scenario_to_ned,
     telemetry_mode,
 )
 from isac_mission.wire import TELEMETRY_MODES, ClockMsg
-
-
-def test_ned_to_scenario_swaps_axes_adds_origin_and_negates_down() -> None:
-    xy, alt = ned_to_scenario(np.array([10.0, 20.0, -100.0]), (1000.0, 500.0))
-    np.testing.assert_allclose(xy, [1020.0, 510.0])  # x = east + x0, y = north + y0
-    assert alt == 100.0
-
-
-def test_scenario_to_ned_inverts_ned_to_scenario() -> None:
-    origin = (-30.0, 75.0)
-    ned = scenario_to_ned([12.0, -4.0], 42.0, origin)
-    np.testing.assert_allclose(ned, [-79.0, 42.0, -42.0])
-    xy, alt = ned_to_scenario(ned, origin)
-    np.testing.assert_allclose(xy, [12.0, -4.0])
-    assert alt == 42.0
 
 
 def test_telemetry_modes_are_codec_modes() -> None:
@@ -118,12 +100,6 @@ def test_clock_sim_time_slots_follow_the_mission_start() -> None:
     t.update(clock_msg(15.0, t0=11.0, slot=2))
     assert t.current_slot() == 2
     assert t.slot_end_s(3) == 17.0
-
-
-def test_func_time_maps_infinite_speed_to_a_large_number() -> None:
-    assert FuncTime(lambda: 3.0, math.inf).speed == 1e6
-    assert FuncTime(lambda: 3.0, lambda: 4.0).speed == 4.0
-    assert FuncTime(lambda: 3.0).now_s() == 3.0
 
 
 def test_bridge_settings_defaults_follow_px4_sitl_ports() -> None:

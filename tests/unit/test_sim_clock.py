@@ -13,6 +13,7 @@ import math
 import pytest
 
 from isac_mission.errors import IsacError
+from isac_mission.timebase import EPS_S, UNPACED_SPEED, SlotTimeline
 from sim.clock import SimClock
 
 pytestmark = pytest.mark.timeout(20)
@@ -175,3 +176,28 @@ def test_manual_ticks_advance_and_callbacks_can_be_removed() -> None:
     clock.remove_tick_callback(cb)
     clock.tick()
     assert calls == pytest.approx([0.1, 0.2]) and clock.ticks == 3
+
+
+def test_a_slot_boundary_that_rounds_past_a_tick_is_reached_at_that_tick() -> None:
+    # Slot 3 of 0.1 s slots ends at 3 x 0.1 = 0.30000000000000004 s; tick 15 of a 50 Hz clock
+    # is 15 x 0.02 = 0.3 s, a hair before it. With the time base's one epsilon the clock
+    # counts that tick as the boundary: a wait for it resolves there, and a hold there stops
+    # the clock at tick 15 (not one tick later, not one earlier).
+    boundary = SlotTimeline(0.0, 0.1).slot_end_s(3)
+    clock = SimClock(tick_hz=50.0)
+    assert boundary > 15 * clock.dt_s
+    clock.hold_at(boundary)
+    while clock.tick():
+        pass
+    assert clock.ticks == 15
+    assert clock.now_s + EPS_S >= boundary
+
+
+def test_sim_time_adapts_the_clock_to_the_services_time_source() -> None:
+    clock = SimClock(tick_hz=10.0, speed=math.inf)
+    t = clock.sim_time()
+    clock.tick()
+    assert t.now_s() == clock.now_s
+    assert t.speed == UNPACED_SPEED  # inf: as fast as possible
+    clock.speed = 4.0
+    assert t.speed == 4.0

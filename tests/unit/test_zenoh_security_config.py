@@ -261,7 +261,7 @@ def test_gen_users_writes_random_private_passwords(tmp_path: Path) -> None:
 def test_gen_users_command_prints_the_users_but_no_password(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
-    from isac_mission.service.cli import app
+    from isac_mission.cli import app
 
     path = tmp_path / "users.txt"
     result = CliRunner().invoke(app, ["gen-users", str(path)])

@@ -1,9 +1,10 @@
-"""The live system: `run` (world + bridges + ground loop in one process) and `serve` (bridges +
-ground loop, for vehicles and sensing that live elsewhere).
+"""The live mission on the service side: options, the bridges + ground loop runner (`serve`, and
+the service half of `run`), and the end-of-run summary. The embedded world is in
+`isac_mission.cli.embedded`, the only module that imports both `sim` and the service.
 
-Everything talks over real loopback UDP MAVLink and a real Zenoh session. Mission start follows
-DESIGN.md: the bridges arm the vehicles, take off to H, fly to the start points and enter offboard;
-the world starts slot 0 when all of them are there (`start="offboard"`); the ground loop then plans
+Everything talks over real loopback UDP MAVLink and a real Zenoh session. Mission start
+(docs/service.md): the bridges arm the vehicles, take off to H, fly to the start points and enter
+offboard; the world starts slot 0 when all of them are there (`start="offboard"`); the ground loop then plans
 slot 1, and so on to slot N. At the end, or on a stop request, the vehicles land.
 """
 
@@ -25,7 +26,9 @@ from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.service.bridge import BridgeFleet, ClockSimTime
 from isac_mission.service.bus import ZenohBus
 from isac_mission.service.bus_security import default_endpoint, secured_settings
-from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings, SlotEvent
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport, SlotEvent
+from isac_mission.service.ground.settings import GroundSettings
 
 log = logging.getLogger(__name__)
 
@@ -101,7 +104,7 @@ def planning_scenario(s: Scenario, opts: LiveOptions) -> Scenario:
     )
 
 
-async def _fly_mission(
+async def fly_mission(
     s: Scenario,
     opts: LiveOptions,
     bus: ZenohBus,
@@ -208,42 +211,6 @@ async def _until_stopped(aw: object, stop: asyncio.Event) -> None:
         await task
 
 
-async def run_embedded(
-    s: Scenario,
-    opts: LiveOptions,
-    stop: asyncio.Event,
-    on_slot: Callable[[SlotEvent], None] | None = None,
-    on_status: Callable[[str], None] | None = None,
-) -> LiveResult:
-    """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh."""
-    from sim.world import WorldOptions, parse_outages, run_world
-
-    world_stop = asyncio.Event()
-    zenoh_cfg, endpoint = s.security.zenoh, _endpoint(s, opts)
-    hub = secured_settings(zenoh_cfg, s.mission_id, "ground", listen=(endpoint,))
-    # The world logs in as the world role, with its password from the hub's own users file.
-    world_bus = secured_settings(
-        zenoh_cfg, s.mission_id, "world", connect=(endpoint,), login_from_users_file=True
-    )
-    world_opts = WorldOptions(
-        speed=opts.speed,
-        lockstep=opts.lockstep,
-        seed=opts.seed,
-        bus=world_bus,
-        mavlink_base_port=opts.mavlink_base_port,
-        gcs_base_port=opts.gcs_base_port,
-        start="offboard",
-        link_outages=parse_outages(opts.link_outages, s.M),
-    )
-    with ZenohBus.open(hub) as bus:
-        world = asyncio.create_task(run_world(s, world_opts, world_stop))
-        try:
-            return await _fly_mission(s, opts, bus, stop, on_slot, on_status)
-        finally:
-            world_stop.set()
-            await asyncio.wait_for(world, timeout=30.0)
-
-
 async def run_serve(
     s: Scenario,
     opts: LiveOptions,
@@ -256,14 +223,14 @@ async def run_serve(
         s.security.zenoh,
         s.mission_id,
         "ground",
-        listen=(_endpoint(s, opts),),
+        listen=(ground_endpoint(s, opts),),
         connect=opts.zenoh_connect,
     )
     with ZenohBus.open(settings) as bus:
-        return await _fly_mission(s, opts, bus, stop, on_slot, on_status)
+        return await fly_mission(s, opts, bus, stop, on_slot, on_status)
 
 
-def _endpoint(s: Scenario, opts: LiveOptions) -> str:
+def ground_endpoint(s: Scenario, opts: LiveOptions) -> str:
     """Where the ground loop listens: the option, else the default for the scenario's security."""
     return opts.zenoh_endpoint or default_endpoint(s.security.zenoh)
 

@@ -1,0 +1,32 @@
+"""The `isac-mission` command line, one module per command group.
+
+- `offline`: `check-config`, `simulate`
+- `sweep`: `sweep`
+- `live`: `run`, `serve` (the service side in `mission`; the embedded world in `embedded`, the
+  only module importing both `sim` and the service)
+- `world`: `sim` (the world alone)
+- `security`: `gen-certs`, `gen-users`
+
+Importing a command module registers its commands on `app`; the heavy imports stay inside the
+commands, so `isac-mission --version` and `--help` are fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+from isac_mission.cli.app import app
+
+__all__ = ["app", "main"]
+
+COMMAND_GROUPS = ("offline", "sweep", "world", "live", "security")
+"""Command modules in `--help` order; importing one registers its commands on `app`."""
+
+for _group in COMMAND_GROUPS:
+    importlib.import_module(f"isac_mission.cli.{_group}")
+
+
+def main() -> None:
+    """Console-script entry point (`isac-mission`, `python -m isac_mission.cli`)."""
+    sys.exit(app())

@@ -1,0 +1,72 @@
+"""The `isac-mission` Typer application, its consoles, and what every command group shares."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from isac_mission.config import Scenario, load_scenario
+from isac_mission.errors import ConfigError
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    help="ISAC multi-UAV collaborative target tracking (PCRB-optimal trajectories and bandwidth).",
+)
+console = Console()
+err_console = Console(stderr=True)
+
+ConfigArg = Annotated[
+    Path,
+    typer.Argument(
+        help="Scenario YAML file (e.g. config/paper.yaml), or the name of a shipped scenario "
+        "(paper, paper-literal, constrained)."
+    ),
+]
+
+PlanBudgetOpt = Annotated[
+    float,
+    typer.Option(
+        help="Wall seconds a slot's planning may take; past it the slot holds (0: no limit)."
+    ),
+]
+InjectLinkLossOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        help="Fault injection: vehicle M's MAVLink radio dies START_S into the mission for "
+        "DURATION_S, as M:START_S:DURATION_S (repeatable; docs/reliability.md)."
+    ),
+]
+
+
+def load_or_exit(path: Path) -> Scenario:
+    """Load a scenario or print its problems (one per line) and exit with status 2."""
+    try:
+        return load_scenario(path)
+    except ConfigError as err:
+        err_console.print(f"[bold red]invalid configuration[/]\n{err}", highlight=False)
+        raise typer.Exit(2) from None
+
+
+def _print_version(value: bool) -> None:
+    """Eager `--version`: print the package version and exit."""
+    if value:
+        from isac_mission import __version__
+
+        console.print(f"isac-mission {__version__}", highlight=False)
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_print_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
+    """ISAC multi-UAV collaborative target tracking (PCRB-optimal trajectories and bandwidth)."""

@@ -1,0 +1,268 @@
+"""`isac-mission run` (world, bridges and ground loop in one process) and `serve` (bridges and
+ground loop only): live progress, the end-of-run summary table and the plots."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from isac_mission.cli.app import (
+    ConfigArg,
+    InjectLinkLossOpt,
+    PlanBudgetOpt,
+    app,
+    console,
+    err_console,
+    load_or_exit,
+)
+from isac_mission.planning.slot import METHODS
+from isac_mission.quiet import quiet_highs_banner
+
+
+def _live(
+    config: Path,
+    *,
+    serve_only: bool,
+    speed: float,
+    lockstep: bool,
+    method: str,
+    seed: int | None,
+    out: Path | None,
+    zenoh_listen: str | None,
+    zenoh_connect: list[str],
+    mavlink_base_port: int,
+    gcs_base_port: int,
+    resume: bool,
+    plan_budget: float,
+    link_outages: list[str],
+) -> None:
+    """Shared body of `run` and `serve`: live progress, summary, plots; exit 0 on SIGINT/SIGTERM."""
+    import asyncio
+    import logging
+    import signal
+
+    from rich.live import Live
+
+    from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve, summarize_live
+    from isac_mission.errors import IsacError
+    from isac_mission.service.ground.report import SlotEvent
+
+    s = load_or_exit(config)
+    if method not in METHODS:
+        err_console.print(f"--method: unknown {method!r}; choose from {', '.join(METHODS)}")
+        raise typer.Exit(2)
+    quiet_highs_banner()
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    out_dir = (
+        out
+        if out is not None
+        else Path("out") / f"{'serve' if serve_only else 'run'}-{s.mission_id}"
+    )
+    if link_outages:
+        from isac_mission.cli.embedded import check_link_outages
+
+        try:
+            check_link_outages(link_outages, s.M)
+        except ValueError as err:
+            err_console.print(f"--inject-link-loss: {err}", highlight=False)
+            raise typer.Exit(2) from None
+    opts = LiveOptions(
+        speed=speed,
+        lockstep=lockstep,
+        method=method,
+        seed=seed,
+        out_dir=out_dir,
+        zenoh_endpoint=zenoh_listen,
+        zenoh_connect=tuple(zenoh_connect),
+        mavlink_base_port=mavlink_base_port,
+        gcs_base_port=gcs_base_port,
+        resume=resume,
+        plan_budget_s=plan_budget if plan_budget > 0 else None,
+        link_outages=tuple(link_outages),
+    )
+    status = {"phase": "starting", "line": ""}
+
+    def render() -> Table:
+        t = Table.grid(padding=(0, 2))
+        t.add_row(f"[bold]{s.mission_id}[/] {opts.method}", status["phase"])
+        if status["line"]:
+            t.add_row("", status["line"])
+        return t
+
+    with Live(render(), console=console, refresh_per_second=8, transient=False) as live:
+
+        def on_status(msg: str) -> None:
+            status["phase"] = msg
+            live.update(render())
+
+        def on_slot(ev: SlotEvent) -> None:
+            r = ev.record
+            err = "-" if ev.position_error_m is None else f"{ev.position_error_m:6.2f} m"
+            links = " ".join(f"{m}:{v}" for m, v in sorted(ev.links.items())) or "-"
+            status["line"] = (
+                f"slot {r.slot:3d}/{s.N}  tr(PCRB) {r.pcrb_trace:8.4f}  position error {err}  "
+                f"solve {r.solve_ms:6.1f} ms  det->plan {ev.latency_s * 1e3:6.1f} ms  "
+                f"status {r.status}  links {links}"
+            )
+            live.update(render())
+
+        async def main_task() -> object:
+            stop = asyncio.Event()
+            loop = asyncio.get_running_loop()
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.add_signal_handler(sig, stop.set)
+            try:
+                if serve_only:
+                    return await run_serve(s, opts, stop, on_slot, on_status)
+                from isac_mission.cli.embedded import run_embedded
+
+                return await run_embedded(s, opts, stop, on_slot, on_status)
+            finally:
+                for sig in (signal.SIGINT, signal.SIGTERM):
+                    loop.remove_signal_handler(sig)
+
+        try:
+            result = asyncio.run(main_task())
+        except IsacError as err:
+            err_console.print(f"[bold red]mission failed:[/] {err}")
+            raise typer.Exit(1) from None
+    console.print()
+    assert isinstance(result, LiveResult)
+    summary = summarize_live(result)
+    table = Table(title=f"{s.mission_id}: live mission summary ({opts.method})")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    for name, value in (
+        ("slots completed", f"{summary.slots}/{s.N}"),
+        ("location RMSE", f"{summary.loc_rmse:.3f} m"),
+        ("velocity RMSE", f"{summary.vel_rmse:.4f} m/s"),
+        ("mean tr(PCRB)", f"{summary.pcrb_mean:.4f}"),
+        (
+            "plan solve time median / p95",
+            f"{summary.solve_median_ms:.1f} / {summary.solve_p95_ms:.1f} ms",
+        ),
+        (
+            "detection-to-plan median / p99",
+            f"{summary.latency_median_ms:.1f} / {summary.latency_p99_ms:.1f} ms",
+        ),
+        ("infeasible slots", str(summary.infeasible)),
+        *((k, str(v)) for k, v in sorted(result.report.counters.items()) if k != "slots"),
+        *((k, str(v)) for k, v in result.fleet_counters.items()),
+    ):
+        table.add_row(name, value)
+    console.print(table)
+    if summary.slots:
+        from isac_mission.experiment.plots import (
+            plot_bandwidth,
+            plot_performance,
+            plot_trajectories,
+            save_png,
+        )
+        from isac_mission.records import read_trace
+
+        trace = read_trace(result.trace_path)
+        written = [
+            save_png(plot_trajectories(trace), out_dir / "fig2a_trajectories.png"),
+            save_png(plot_bandwidth(trace), out_dir / "fig2b_bandwidth.png"),
+            save_png(plot_performance({opts.method: [trace]}), out_dir / "fig3_performance.png"),
+        ]
+        console.print("plots: " + ", ".join(str(p) for p in written))
+    console.print(f"trace: {result.trace_path}")
+
+
+MethodOpt = Annotated[str, typer.Option(help="Planning method: proposed, sd, aba, crb, comm.")]
+SpeedOpt = Annotated[float, typer.Option(help="Simulation seconds per wall second.")]
+
+
+@app.command()
+def run(
+    config: ConfigArg,
+    speed: SpeedOpt = 1.0,
+    lockstep: Annotated[
+        bool, typer.Option(help="The world waits at each slot for its plan.")
+    ] = False,
+    method: MethodOpt = "proposed",
+    seed: Annotated[
+        int | None, typer.Option(help="World noise seed (default: the config's).")
+    ] = None,
+    out: Annotated[Path | None, typer.Option(help="Output folder (trace, plots).")] = None,
+    zenoh_listen: Annotated[
+        str | None,
+        typer.Option(
+            help="Zenoh endpoint the ground loop listens on (default tcp/127.0.0.1:7447, or "
+            "tls/127.0.0.1:7447 with security.zenoh.tls)."
+        ),
+    ] = None,
+    mavlink_base_port: Annotated[
+        int, typer.Option(help="Vehicle m's offboard port: base + m.")
+    ] = 14540,
+    gcs_base_port: Annotated[
+        int, typer.Option(help="Vehicle m's ground-station port: base + m.")
+    ] = 14550,
+    plan_budget: PlanBudgetOpt = 1.0,
+    inject_link_loss: InjectLinkLossOpt = None,
+) -> None:
+    """The live system in one process: simulated vehicles (MAVLink), target and sensing, MAVLink
+    bridges and the ground loop, over real loopback UDP and Zenoh."""
+    _live(
+        config,
+        serve_only=False,
+        speed=speed,
+        lockstep=lockstep,
+        method=method,
+        seed=seed,
+        out=out,
+        zenoh_listen=zenoh_listen,
+        zenoh_connect=[],
+        mavlink_base_port=mavlink_base_port,
+        gcs_base_port=gcs_base_port,
+        resume=False,
+        plan_budget=plan_budget,
+        link_outages=inject_link_loss or [],
+    )
+
+
+@app.command()
+def serve(
+    config: ConfigArg,
+    method: MethodOpt = "proposed",
+    out: Annotated[Path | None, typer.Option(help="Output folder (trace, plots).")] = None,
+    zenoh_listen: Annotated[
+        str | None,
+        typer.Option(
+            help="Zenoh endpoint to listen on (default tcp/127.0.0.1:7447, or "
+            "tls/127.0.0.1:7447 with security.zenoh.tls)."
+        ),
+    ] = None,
+    zenoh_connect: Annotated[
+        list[str] | None, typer.Option(help="Zenoh endpoints to connect to.")
+    ] = None,
+    mavlink_base_port: Annotated[
+        int, typer.Option(help="Vehicle m's offboard port: base + m.")
+    ] = 14540,
+    resume: Annotated[
+        bool, typer.Option(help="Continue the trace in --out after its last slot.")
+    ] = False,
+    plan_budget: PlanBudgetOpt = 1.0,
+) -> None:
+    """The ground loop and the MAVLink bridges, for vehicles and sensing that run elsewhere
+    (`isac-mission sim`, or real UAVs). The clock comes from the world over Zenoh."""
+    _live(
+        config,
+        serve_only=True,
+        speed=1.0,
+        lockstep=False,
+        method=method,
+        seed=None,
+        out=out,
+        zenoh_listen=zenoh_listen,
+        zenoh_connect=zenoh_connect or [],
+        mavlink_base_port=mavlink_base_port,
+        gcs_base_port=14550,
+        resume=resume,
+        plan_budget=plan_budget,
+        link_outages=[],
+    )
