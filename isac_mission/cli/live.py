@@ -48,7 +48,7 @@ def _live(
 
     from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve, summarize_live
     from isac_mission.errors import IsacError
-    from isac_mission.service.ground import SlotEvent
+    from isac_mission.service.ground.report import SlotEvent
 
     s = load_or_exit(config)
     if method not in METHODS:

@@ -70,6 +70,18 @@ from isac_mission.frames import (
     scenario_to_ned,
     scenario_to_ned_velocity,
 )
+from isac_mission.mavwire.builders import (
+    arm_command,
+    gcs_heartbeat,
+    hold_mode_command,
+    land_command,
+    offboard_mode_command,
+    position_target_local_ned,
+    takeoff_command,
+)
+from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
+from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus
 from isac_mission.service.codec import (
     TELEMETRY_MODES,
@@ -79,18 +91,6 @@ from isac_mission.service.codec import (
     decode_clock,
     decode_plan,
     encode_telemetry,
-)
-from isac_mission.service.mavlink import (
-    OFFBOARD_BASE_PORT,
-    MavlinkLink,
-    VehicleStatus,
-    arm_command,
-    gcs_heartbeat,
-    hold_mode_command,
-    land_command,
-    offboard_mode_command,
-    position_target_local_ned,
-    takeoff_command,
 )
 from isac_mission.timebase import SimTime, SlotTimeline
 from isac_mission.types import FloatArray

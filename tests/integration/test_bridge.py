@@ -26,6 +26,8 @@ import numpy as np
 import pytest
 
 from isac_mission.config import Scenario
+from isac_mission.mavwire.builders import Target, hold_mode_command, message_interval_command
+from isac_mission.mavwire.signing import new_encoder, pack
 from isac_mission.service.bridge import BridgeFleet, BridgeSettings, ClockSimTime, VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.service.codec import (
@@ -36,13 +38,6 @@ from isac_mission.service.codec import (
     decode_telemetry,
     encode_clock,
     encode_plan,
-)
-from isac_mission.service.mavlink import (
-    Target,
-    hold_mode_command,
-    message_interval_command,
-    new_encoder,
-    pack,
 )
 from isac_mission.types import SlotPlan, SolveReport
 from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
