@@ -41,7 +41,8 @@ from isac_mission.wire import (
     encode_plan,
 )
 from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
-from sim.world import World, WorldOptions
+from sim.world import World
+from sim.world_options import WorldOptions
 from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports
 
 pytestmark = pytest.mark.timeout(120)
