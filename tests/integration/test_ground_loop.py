@@ -16,7 +16,7 @@ from isac_mission.service.codec import decode_health, decode_plan, decode_track
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from sim.world import WorldOptions, run_world
-from tests.support.independent_check import compare_pcrb
+from tests.support.independent.pcrb import compare_pcrb
 
 
 async def _mission(

@@ -34,7 +34,7 @@ from tests.support.ground_rig import (
     detections,
     payload_with,
 )
-from tests.support.independent_check import compare_pcrb
+from tests.support.independent.pcrb import compare_pcrb
 from tests.support.sim_harness import async_wait_until
 
 pytestmark = pytest.mark.timeout(120)

@@ -37,7 +37,7 @@ from isac_mission.service.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from sim.world import WorldOptions, run_world
-from tests.support.independent_check import bound_update, compare_pcrb, cv_model, jacobian
+from tests.support.independent.pcrb import bound_update, compare_pcrb, cv_model, jacobian
 from tests.support.live_cli import serve_argv, sim_argv, start
 from tests.support.ports import free_port_block
 
