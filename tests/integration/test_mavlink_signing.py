@@ -36,12 +36,10 @@ from isac_mission.config import (
     parse_scenario,
 )
 from isac_mission.errors import LinkError
-from isac_mission.service.bridge import (
-    BridgeFleet,
-    BridgeSettings,
-    ClockSimTime,
-    VehicleBridge,
-)
+from isac_mission.service.bridge.clock_time import ClockSimTime
+from isac_mission.service.bridge.fleet import BridgeFleet
+from isac_mission.service.bridge.settings import BridgeSettings
+from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.service.mavlink import (
     Target,

@@ -52,7 +52,8 @@ from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.service import codec
-from isac_mission.service.bridge import BridgeSettings, VehicleBridge
+from isac_mission.service.bridge.settings import BridgeSettings
+from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.codec import (
     ClockMsg,
