@@ -25,20 +25,19 @@ import yaml
 from rich.console import Console
 from rich.table import Table
 
-from isac_mission.experiment import sweep as sw
-from isac_mission.experiment.sweep_dask import dask_client, run_dask
+from isac_mission.experiment.sweep.cluster import dask_client, run_dask
+from isac_mission.experiment.sweep.grid import expand_grid, parse_grid
+from isac_mission.experiment.sweep.runs import clear_kits, make_tasks, run_serial
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _clear_kits() -> None:
-    from isac_mission.experiment import sweep
-
-    sweep._KITS.clear()
+    clear_kits()
 
 
 def _warm() -> str:
-    import isac_mission.experiment.sweep  # noqa: F401  (import cvxpy & co. before timing)
+    import isac_mission.experiment.sweep.runs  # noqa: F401  (import cvxpy & co. before timing)
 
     return "ok"
 
@@ -65,7 +64,7 @@ def main() -> None:
     args = ap.parse_args()
 
     base: dict[str, Any] = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
-    grid = sw.parse_grid(
+    grid = parse_grid(
         {
             "uavs.max_speed_mps": [15, 20, 25, 30],
             "methods": ["proposed", "sd"],
@@ -73,8 +72,8 @@ def main() -> None:
             "slots": args.slots,
         }
     )
-    points = sw.expand_grid(base, grid)
-    tasks = sw.make_tasks(points, grid, seed=1)
+    points = expand_grid(base, grid)
+    tasks = make_tasks(points, grid, seed=1)
     console = Console()
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     console.print(f"load average before the run (1, 5, 15 min): {load} on {os.cpu_count()} cores")
@@ -84,7 +83,7 @@ def main() -> None:
     )
 
     _clear_kits()
-    sw.run_serial(tasks[:1])  # import and first-solve warm-up of this process
+    run_serial(tasks[:1])  # import and first-solve warm-up of this process
     names = ("serial (no Dask)", "Dask, 1 worker(s)", "Dask, 2 worker(s)")
     times: dict[str, list[float]] = {n: [] for n in names}
     cpu_s: dict[str, list[float]] = {n: [] for n in names}
@@ -100,7 +99,7 @@ def main() -> None:
         for _ in range(args.repeats):
             _clear_kits()
             c0, t0 = _cpu_s(), time.perf_counter()
-            reference = sw.run_serial(tasks)
+            reference = run_serial(tasks)
             times[names[0]].append(time.perf_counter() - t0)
             cpu_s[names[0]].append(_cpu_s() - c0)
             for workers, name in ((1, names[1]), (2, names[2])):

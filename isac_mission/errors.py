@@ -19,3 +19,7 @@ class LinkError(IsacError):
 
 class SolverError(IsacError):
     """A convex solver failed or returned a non-optimal status."""
+
+
+class MissingDependencyError(IsacError):
+    """An optional dependency is not installed. The message names the pip extra that brings it."""

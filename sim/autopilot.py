@@ -39,7 +39,7 @@ handle) are counted in `ignored`. Nothing a client sends stops the vehicle from 
 
 MAVLink 2 signing (`AutopilotSettings.signing`, a key): both links sign everything they send and
 drop every packet without a valid signature, counted in `rejected` as `unsigned`,
-`bad_signature` or `replayed` (see isac_mission/service/mavlink.py); the vehicle neither obeys
+`bad_signature` or `replayed` (see isac_mission/mavwire/signing.py); the vehicle neither obeys
 nor answers such a packet, and its sender does not become a peer. Off by default, as in PX4 SITL.
 
 Frames: local NED (north, east, down) around the scenario-plane point `local_origin_xy_m` on the
@@ -70,12 +70,12 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from isac_mission.config import MavlinkSigningKey
 from isac_mission.errors import ConfigError
-from isac_mission.service.mavlink import (
+from isac_mission.mavwire.parsing import packet_origin
+from isac_mission.mavwire.signing import (
     enable_signing,
     new_encoder,
     new_parser,
     pack,
-    packet_origin,
     refresh_signing_clock,
     signature_failure,
 )

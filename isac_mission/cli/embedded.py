@@ -14,7 +14,7 @@ from isac_mission.cli.mission import LiveOptions, LiveResult, fly_mission, groun
 from isac_mission.config import Scenario
 from isac_mission.service.bus import ZenohBus
 from isac_mission.service.bus_security import secured_settings
-from isac_mission.service.ground import SlotEvent
+from isac_mission.service.ground.report import SlotEvent
 from sim.world import WorldOptions, parse_outages, run_world
 
 

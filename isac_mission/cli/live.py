@@ -48,7 +48,7 @@ def _live(
 
     from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve, summarize_live
     from isac_mission.errors import IsacError
-    from isac_mission.service.ground import SlotEvent
+    from isac_mission.service.ground.report import SlotEvent
 
     s = load_or_exit(config)
     if method not in METHODS:
@@ -159,14 +159,15 @@ def _live(
             plot_bandwidth,
             plot_performance,
             plot_trajectories,
+            save_png,
         )
         from isac_mission.records import read_trace
 
         trace = read_trace(result.trace_path)
         written = [
-            plot_trajectories(trace, out_dir / "fig2a_trajectories.png"),
-            plot_bandwidth(trace, out_dir / "fig2b_bandwidth.png"),
-            plot_performance({opts.method: [trace]}, out_dir / "fig3_performance.png"),
+            save_png(plot_trajectories(trace), out_dir / "fig2a_trajectories.png"),
+            save_png(plot_bandwidth(trace), out_dir / "fig2b_bandwidth.png"),
+            save_png(plot_performance({opts.method: [trace]}), out_dir / "fig3_performance.png"),
         ]
         console.print("plots: " + ", ".join(str(p) for p in written))
     console.print(f"trace: {result.trace_path}")

@@ -27,7 +27,9 @@ from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.bus import ZenohBus
 from isac_mission.service.bus_security import default_endpoint, secured_settings
-from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings, SlotEvent
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport, SlotEvent
+from isac_mission.service.ground.settings import GroundSettings
 
 log = logging.getLogger(__name__)
 

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from isac_mission.cli.app import ConfigArg, app, console, err_console
-from isac_mission.errors import ConfigError
+from isac_mission.errors import ConfigError, MissingDependencyError
 from isac_mission.quiet import quiet_highs_banner
 
 
@@ -42,8 +42,14 @@ def sweep(
     plots: Annotated[bool, typer.Option(help="Write RMSE-vs-parameter PNGs.")] = True,
 ) -> None:
     """Monte Carlo over a parameter grid, on Dask (grid point x method x run, seed = seed + run)."""
-    from isac_mission.experiment import sweep as sw
-    from isac_mission.experiment.report import mission_progress
+    from isac_mission.experiment.report import mission_progress, print_table
+    from isac_mission.experiment.sweep import runs as sw
+    from isac_mission.experiment.sweep.summary import (
+        aggregate,
+        sweep_table,
+        write_csv,
+        write_rows_csv,
+    )
 
     try:
         plan = sw.plan_sweep(config, grid, seed)
@@ -51,6 +57,16 @@ def sweep(
         err_console.print(f"[bold red]invalid sweep[/]\n{err}", highlight=False)
         raise typer.Exit(2) from None
     use_dask = not serial and (workers > 0 or scheduler is not None)
+    if use_dask:
+        from rich.markup import escape
+
+        from isac_mission.experiment.sweep.cluster import require_dask
+
+        try:
+            require_dask()
+        except MissingDependencyError as err:
+            err_console.print(f"[bold red]sweep[/]: {escape(str(err))}", highlight=False)
+            raise typer.Exit(2) from None
     where = (
         f"scheduler {scheduler}"
         if scheduler and use_dask
@@ -71,22 +87,29 @@ def sweep(
             bar.advance(task)
 
         if use_dask:
-            from isac_mission.experiment.sweep_dask import dask_client, run_dask
+            from isac_mission.experiment.sweep.cluster import dask_client, run_dask
 
             with dask_client(scheduler, workers) as client:
                 rows = run_dask(client, plan.tasks, done)
         else:
             rows = sw.run_serial(plan.tasks, done)
-    summaries = sw.aggregate(rows, plan.points)
-    console.print(
-        sw.sweep_table(
+    summaries = aggregate(rows, plan.points)
+    print_table(
+        console,
+        sweep_table(
             summaries, g.paths, f"{plan.mission_id}: {g.runs} runs per point (95% t-intervals)"
-        )
+        ),
     )
     out_dir = out if out is not None else Path("out") / f"sweep-{plan.mission_id}"
-    csv_path = sw.write_csv(summaries, g.paths, out_dir / "sweep.csv")
-    sw.write_rows_csv(rows, out_dir / "runs.csv")
+    csv_path = write_csv(summaries, g.paths, out_dir / "sweep.csv")
+    write_rows_csv(rows, out_dir / "runs.csv")
     console.print(f"results: {csv_path}  per-run rows: {out_dir / 'runs.csv'}")
     if plots:
-        written = sw.plot_sweep(summaries, g, out_dir)
+        from isac_mission.experiment.plots import save_png
+        from isac_mission.experiment.sweep.plots import RMSE_PLOT_DPI, sweep_figures
+
+        written = [
+            save_png(fig, out_dir / name, dpi=RMSE_PLOT_DPI)
+            for name, fig in sweep_figures(summaries, g).items()
+        ]
         console.print("plots: " + ", ".join(str(p) for p in written))

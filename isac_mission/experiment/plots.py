@@ -1,8 +1,11 @@
-"""PNG figures in the style of the paper's Fig. 2 (trajectories, bandwidth) and Fig. 3 (bound, RMSE).
+"""Figures in the style of the paper's Fig. 2 (trajectories, bandwidth) and Fig. 3 (bound, RMSE).
 
-Everything is drawn on a `matplotlib.figure.Figure` with the Agg canvas: no pyplot, no global
-backend switch, no display, safe to call from any thread. Each function writes one PNG of a fixed
-size (the *_SIZE_IN constants times `dpi`) and returns its path. Inputs are traces as read by
+Each plot function draws into the axes it is given (`ax=` / `axes=`, e.g. a notebook's) or, by
+default, into a new `matplotlib.figure.Figure` of a fixed size (the *_SIZE_IN constants, inches)
+with an Agg canvas, and returns the Figure. Nothing here calls pyplot or switches the backend
+(`matplotlib.use`), so inline notebook plots keep working, and drawing is safe from any thread.
+Nothing here writes a file unless asked: `save_png(fig, path, dpi=...)` does, at size_in x dpi
+pixels (the CLI's commands call it). Inputs are traces as read by
 `isac_mission.records.read_trace`; the config keys used are bs_xy, d_th, area and
 uav_start_xy (all optional except bs_xy for the trajectory plot).
 """
@@ -12,9 +15,10 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -44,17 +48,35 @@ def _uav_colour(m: int) -> str:
     return _UAV_COLOURS[m % len(_UAV_COLOURS)]
 
 
-def _new_figure(size_in: tuple[float, float], dpi: int) -> Figure:
-    fig = Figure(figsize=size_in, dpi=dpi, layout="constrained")
+def new_figure(
+    size_in: tuple[float, float], *, layout: Literal["constrained", "tight"] | None = "constrained"
+) -> Figure:
+    """A Figure of `size_in` (width, height) inches on an Agg canvas (no pyplot, no backend)."""
+    fig = Figure(figsize=size_in, dpi=DEFAULT_DPI, layout=layout)
     FigureCanvasAgg(fig)
     return fig
 
 
-def _save(fig: Figure, path: str | Path, dpi: int) -> Path:
+def figure_of(ax: Axes) -> Figure:
+    """The (root) Figure that `ax` is drawn in."""
+    fig = ax.get_figure(root=True)
+    if fig is None:
+        raise ValueError("the axes belong to no figure")
+    return fig
+
+
+def save_png(fig: Figure, path: str | Path, *, dpi: int = DEFAULT_DPI) -> Path:
+    """Write `fig` as a PNG of (figure size in inches) x `dpi` pixels, making the parent folders;
+    returns the path."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, format="png", dpi=dpi)
     return out
+
+
+def _side_legend(ax: Axes, handles: Sequence[Any]) -> None:
+    """The legend of a plot drawn into a caller's axes: beside them, on the right."""
+    ax.legend(handles=list(handles), loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)
 
 
 def _area(config: Mapping[str, Any], points: FloatArray) -> tuple[float, float, float, float]:
@@ -75,7 +97,7 @@ def _title(trace: Trace, what: str) -> str:
     return f"{what}: {method}, {len(trace.slots)} slots"
 
 
-def plot_trajectories(trace: Trace, path: str | Path, *, dpi: int = DEFAULT_DPI) -> Path:
+def plot_trajectories(trace: Trace, ax: Axes | None = None) -> Figure:
     """Fig. 2(a)-style map of one run: BSs, control-range circles, UAV and target paths.
 
     BSs (triangles, config bs_xy [K, 2] m) with circles of radius d_th (config d_th, m) around
@@ -83,7 +105,8 @@ def plot_trajectories(trace: Trace, path: str | Path, *, dpi: int = DEFAULT_DPI)
     the paper's scenario where d_th is about 24 km); the area's bounds (config area [2] m); each
     UAV's path from its start (config uav_start_xy, circle) through the slots' uav_xy to its last
     position (square), one colour per UAV; the target's true path (black) and the EKF estimate
-    (red, dashed). Returns the PNG's path.
+    (red, dashed). Draws into `ax` if given (legend beside it), else into a new Figure of
+    TRAJECTORY_SIZE_IN (legend outside on the right); returns the Figure.
     """
     cfg = trace.config
     bs_xy = np.asarray(cfg.get("bs_xy", []), dtype=float).reshape(-1, 2)
@@ -96,8 +119,12 @@ def plot_trajectories(trace: Trace, path: str | Path, *, dpi: int = DEFAULT_DPI)
     margin = 0.1 * max(x1 - x0, y1 - y0, 1.0)
     view = (x0 - margin, x1 + margin, y0 - margin, y1 + margin)
 
-    fig = _new_figure(TRAJECTORY_SIZE_IN, dpi)
-    ax = fig.subplots()
+    own = ax is None
+    if ax is None:
+        fig = new_figure(TRAJECTORY_SIZE_IN)
+        ax = fig.subplots()
+    else:
+        fig = figure_of(ax)
     handles: list[Any] = []
     if "area" in cfg:
         ax.add_patch(
@@ -162,17 +189,25 @@ def plot_trajectories(trace: Trace, path: str | Path, *, dpi: int = DEFAULT_DPI)
     ax.set_ylabel("y (north) [m]")
     ax.set_title(_title(trace, "UAV and target trajectories"))
     ax.grid(True, alpha=0.3)
-    fig.legend(handles=handles, loc="outside right upper", fontsize=8)
-    return _save(fig, path, dpi)
+    if own:
+        fig.legend(handles=handles, loc="outside right upper", fontsize=8)
+    else:
+        _side_legend(ax, handles)
+    return fig
 
 
-def plot_bandwidth(trace: Trace, path: str | Path, *, dpi: int = DEFAULT_DPI) -> Path:
+def plot_bandwidth(trace: Trace, ax: Axes | None = None) -> Figure:
     """Fig. 2(b)-style stacked bandwidth shares eta [M] over slots, one colour per UAV.
 
-    Slots whose status is not "ok" are shaded. Returns the PNG's path.
+    Slots whose status is not "ok" are shaded. Draws into `ax` if given (legend beside it), else
+    into a new Figure of BANDWIDTH_SIZE_IN; returns the Figure.
     """
-    fig = _new_figure(BANDWIDTH_SIZE_IN, dpi)
-    ax = fig.subplots()
+    own = ax is None
+    if ax is None:
+        fig = new_figure(BANDWIDTH_SIZE_IN)
+        ax = fig.subplots()
+    else:
+        fig = figure_of(ax)
     if trace.slots:
         slots = np.array([rec.slot for rec in trace.slots], dtype=float)
         eta = trace.stack("eta")  # [N, M]
@@ -204,8 +239,11 @@ def plot_bandwidth(trace: Trace, path: str | Path, *, dpi: int = DEFAULT_DPI) ->
     ax.set_title(_title(trace, "Bandwidth allocation"))
     ax.grid(True, alpha=0.3)
     if trace.slots:
-        fig.legend(*ax.get_legend_handles_labels(), loc="outside right upper", fontsize=8)
-    return _save(fig, path, dpi)
+        if own:
+            fig.legend(*ax.get_legend_handles_labels(), loc="outside right upper", fontsize=8)
+        else:
+            _side_legend(ax, ax.get_legend_handles_labels()[0])
+    return fig
 
 
 def _information_to_covariance(J: FloatArray) -> FloatArray:
@@ -250,17 +288,25 @@ def performance_curves(traces: Sequence[Trace]) -> dict[str, tuple[FloatArray, F
 
 
 def plot_performance(
-    traces_by_method: Mapping[str, Sequence[Trace]], path: str | Path, *, dpi: int = DEFAULT_DPI
-) -> Path:
+    traces_by_method: Mapping[str, Sequence[Trace]],
+    axes: tuple[Axes, Axes] | None = None,
+) -> Figure:
     """Fig. 3-style comparison of methods over Monte Carlo runs, two panels (log scale).
 
     (a) sqrt of the PCRB's location part tr(J^-1)[:2, :2] (m, solid) and velocity part
     tr(J^-1)[2:, 2:] (m/s, dashed), averaged over runs per slot, from each slot's logged J;
     (b) location RMSE (m, solid) and velocity RMSE (m/s, dashed) of target_est against
-    target_true over runs per slot. One colour per method. Returns the PNG's path.
+    target_true over runs per slot. One colour per method. Draws into `axes` = (a, b) if given
+    (legend in b), else into a new Figure of PERFORMANCE_SIZE_IN (legend below, a title);
+    returns the Figure.
     """
-    fig = _new_figure(PERFORMANCE_SIZE_IN, dpi)
-    ax_bound, ax_err = fig.subplots(1, 2)
+    own = axes is None
+    if axes is None:
+        fig = new_figure(PERFORMANCE_SIZE_IN)
+        ax_bound, ax_err = fig.subplots(1, 2)
+    else:
+        ax_bound, ax_err = axes
+        fig = figure_of(ax_bound)
     method_handles: list[Any] = []
     for i, (method, traces) in enumerate(traces_by_method.items()):
         colour = f"C{i % 10}"
@@ -289,6 +335,9 @@ def plot_performance(
         if any(np.any(np.isfinite(y) & (y > 0)) for y in ys):
             ax.set_yscale("log")
         ax.grid(True, which="both", alpha=0.3)
+    if not own:
+        ax_err.legend(handles=method_handles + style_handles, fontsize=8)
+        return fig
     fig.legend(
         handles=method_handles + style_handles,
         loc="outside lower center",
@@ -296,7 +345,7 @@ def plot_performance(
         fontsize=8,
     )
     fig.suptitle("Sensing performance over Monte Carlo runs")
-    return _save(fig, path, dpi)
+    return fig
 
 
 __all__ = [
@@ -304,8 +353,11 @@ __all__ = [
     "DEFAULT_DPI",
     "PERFORMANCE_SIZE_IN",
     "TRAJECTORY_SIZE_IN",
+    "figure_of",
+    "new_figure",
     "performance_curves",
     "plot_bandwidth",
     "plot_performance",
     "plot_trajectories",
+    "save_png",
 ]

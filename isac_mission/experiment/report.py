@@ -1,4 +1,9 @@
-"""`simulate`'s report: Monte Carlo with a progress bar, the tables, summary.json and the plots."""
+"""`simulate`'s report: Monte Carlo with a progress bar, the tables, summary.json and the plots.
+
+Tables print whole when the output is not a terminal (a pipe, a log file, CI): `print_table`
+renders them at least TABLE_WIDTH_NOT_TERMINAL columns wide (wider if a table needs it) instead
+of rich's 80-column default, which cuts cells ("Prop…", "0.02…").
+"""
 
 from __future__ import annotations
 
@@ -8,6 +13,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from rich.console import Console
+from rich.measure import Measurement
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -21,6 +27,9 @@ from isac_mission.experiment.montecarlo import (
     trace_path,
 )
 from isac_mission.planning.slot import Method
+
+TABLE_WIDTH_NOT_TERMINAL = 160
+"""Columns a table is rendered in when the console is not a terminal (at least)."""
 
 LABELS = {
     "proposed": "Proposed",
@@ -61,6 +70,22 @@ def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
             f"{s.solve_p95_ms:.1f}",
         )
     return t
+
+
+def print_table(console: Console, table: Table) -> None:
+    """Print `table` on `console` with no cell cut: on a terminal at the terminal's width (as
+    rich does); elsewhere at max(TABLE_WIDTH_NOT_TERMINAL, the table's natural width) columns."""
+    if console.is_terminal:
+        console.print(table)
+        return
+    natural = Measurement.get(console, console.options.update_width(10_000), table).maximum
+    wide = Console(
+        file=console.file,
+        width=max(TABLE_WIDTH_NOT_TERMINAL, natural),
+        force_terminal=False,
+        no_color=console.no_color,
+    )
+    wide.print(table)
 
 
 def reduction_rows(by_method: dict[str, MethodSummary]) -> list[dict[str, float | str | None]]:
@@ -142,10 +167,10 @@ def simulate_report(
             workers=workers,
         )
     summaries: dict[str, MethodSummary] = {m: summarize(results[m]) for m in methods}
-    console.print(summary_table(list(summaries.values()), f"{s.mission_id}: {runs} runs"))
+    print_table(console, summary_table(list(summaries.values()), f"{s.mission_id}: {runs} runs"))
     rows = reduction_rows(summaries) if "proposed" in summaries else []
     if rows:
-        console.print(reduction_table(rows))
+        print_table(console, reduction_table(rows))
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = {
         "config": s.trace_config(),
@@ -160,21 +185,22 @@ def simulate_report(
             plot_bandwidth,
             plot_performance,
             plot_trajectories,
+            save_png,
         )
         from isac_mission.records import read_trace
 
         first = "proposed" if "proposed" in methods else methods[0]
         run0 = read_trace(trace_path(trace_dir, first, 0))
+        performance = plot_performance(
+            {
+                LABELS.get(m, m): [read_trace(trace_path(trace_dir, m, r)) for r in range(runs)]
+                for m in methods
+            }
+        )
         written = [
-            plot_trajectories(run0, out_dir / "fig2a_trajectories.png"),
-            plot_bandwidth(run0, out_dir / "fig2b_bandwidth.png"),
-            plot_performance(
-                {
-                    LABELS.get(m, m): [read_trace(trace_path(trace_dir, m, r)) for r in range(runs)]
-                    for m in methods
-                },
-                out_dir / "fig3_performance.png",
-            ),
+            save_png(plot_trajectories(run0), out_dir / "fig2a_trajectories.png"),
+            save_png(plot_bandwidth(run0), out_dir / "fig2b_bandwidth.png"),
+            save_png(performance, out_dir / "fig3_performance.png"),
         ]
         console.print("plots: " + ", ".join(str(p) for p in written))
     console.print(f"traces: {trace_dir}/  summary: {out_dir / 'summary.json'}")

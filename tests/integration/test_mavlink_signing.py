@@ -26,8 +26,6 @@ import yaml
 
 os.environ.setdefault("MAVLINK20", "1")
 os.environ.setdefault("MAVLINK_DIALECT", "common")
-from pymavlink.dialects.v20 import common as mavlink2
-
 from isac_mission.config import (
     DEFAULT_SIGNING_KEY_ENV,
     MavlinkSigningKey,
@@ -36,17 +34,14 @@ from isac_mission.config import (
     parse_scenario,
 )
 from isac_mission.errors import LinkError
+from isac_mission.mavwire.builders import Target, arm_command, takeoff_command
+from isac_mission.mavwire.dialect import mavlink2
+from isac_mission.mavwire.signing import signing_timestamp
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
-from isac_mission.service.mavlink import (
-    Target,
-    arm_command,
-    signing_timestamp,
-    takeoff_command,
-)
 from isac_mission.timebase import WallTime
 from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
 from sim.world import World, WorldOptions

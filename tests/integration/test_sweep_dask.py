@@ -13,15 +13,10 @@ import psutil
 import pytest
 import yaml
 
-from isac_mission.experiment.sweep import (
-    TaskRow,
-    aggregate,
-    expand_grid,
-    make_tasks,
-    parse_grid,
-    run_serial,
-)
-from isac_mission.experiment.sweep_dask import cluster_addresses, dask_client, run_dask
+from isac_mission.experiment.sweep.cluster import cluster_addresses, dask_client, run_dask
+from isac_mission.experiment.sweep.grid import expand_grid, parse_grid
+from isac_mission.experiment.sweep.runs import TaskRow, make_tasks, run_serial
+from isac_mission.experiment.sweep.summary import aggregate
 
 ROOT = Path(__file__).resolve().parents[2]
 # Wall-clock solve times differ between runs; everything else must be identical.
@@ -133,3 +128,27 @@ def test_cli_sweep_rejects_a_bad_point_before_any_work(tmp_path: Path) -> None:
     assert result.exit_code == 2
     assert "grid point 1 (uavs.max_speed_mps=0)" in result.output
     assert not out.exists()
+
+
+def test_cli_sweep_without_dask_names_the_extra_and_serial_still_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import sys
+
+    from typer.testing import CliRunner
+
+    from isac_mission.cli import app
+
+    for name in ("dask", "distributed"):
+        monkeypatch.setitem(sys.modules, name, None)  # as if the extra were not installed
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("uavs.max_speed_mps: [20, 25]\nmethods: [sd]\nruns: 1\nslots: 2\n")
+    out = tmp_path / "out"
+    args = ["sweep", str(ROOT / "config" / "paper.yaml"), "--grid", str(grid), "--out", str(out)]
+    result = CliRunner().invoke(app, [*args, "--workers", "2", "--no-plots"])
+    assert result.exit_code == 2, result.output
+    assert "isac-mission[sweep]" in result.output
+    assert not out.exists()
+    result = CliRunner().invoke(app, [*args, "--serial", "--no-plots"])
+    assert result.exit_code == 0, result.output
+    assert len((out / "sweep.csv").read_text().splitlines()) == 3

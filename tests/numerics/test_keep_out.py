@@ -12,7 +12,7 @@ from isac_mission.planning.feasibility import SlotConstraints
 from isac_mission.planning.positions import PositionSubproblem
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.service.codec import PlanMsg, decode_plan, encode_plan
-from isac_mission.service.fleet_plan import NO_BS, KitCache, PlanningJob
+from isac_mission.service.ground.fleet_plan import NO_BS, KitCache, PlanningJob
 from isac_mission.types import Gaussian
 
 

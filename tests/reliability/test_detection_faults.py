@@ -42,7 +42,9 @@ from isac_mission.service.codec import (
     encode_clock,
     encode_detection,
 )
-from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport
+from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.tracking.ekf import ekf_predict, ekf_update
 from isac_mission.tracking.pcrb import SensingParams
 from isac_mission.types import FloatArray, Gaussian

@@ -45,12 +45,15 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from pymavlink.dialects.v20 import common as mavlink2
 
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
+from isac_mission.mavwire.builders import gcs_heartbeat, message_interval_command
+from isac_mission.mavwire.dialect import mavlink2
+from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.signing import new_encoder, pack
 from isac_mission.service import codec
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
@@ -63,14 +66,7 @@ from isac_mission.service.codec import (
     encode_clock,
     rejection_reason,
 )
-from isac_mission.service.ground import SlotEvent
-from isac_mission.service.mavlink import (
-    MavlinkLink,
-    gcs_heartbeat,
-    message_interval_command,
-    new_encoder,
-    pack,
-)
+from isac_mission.service.ground.report import SlotEvent
 from isac_mission.timebase import FuncTime
 from sim.autopilot import AutopilotSettings, FlightMode
 from tests.support.loop_calls import call_on_loop

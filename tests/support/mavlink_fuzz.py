@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 os.environ.setdefault("MAVLINK20", "1")
 os.environ.setdefault("MAVLINK_DIALECT", "common")
-from pymavlink.dialects.v20 import common as mavlink2
+from isac_mission.mavwire.dialect import mavlink2
 
 MESSAGE_IDS: Final = sorted(mavlink2.mavlink_map)
 """Every message id of the common dialect."""

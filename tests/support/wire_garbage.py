@@ -36,7 +36,9 @@ from isac_mission.service.codec import (
     encode_detection,
     encode_telemetry,
 )
-from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport
+from isac_mission.service.ground.settings import GroundSettings
 from tests.support.loop_calls import call_on_loop
 
 T = TypeVar("T")

@@ -6,10 +6,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.supervision import LinkWatch
-from isac_mission.service.mavlink import VehicleStatus
 
 
 def status(

@@ -249,9 +249,7 @@ def test_checker_does_not_import_the_library_it_checks() -> None:
             imported.add(node.module)
     forbidden = ("isac_mission.model", "isac_mission.tracking", "isac_mission.planning")
     assert not [m for m in imported if m.startswith(forbidden)]
-    assert {m for m in imported if m.startswith("isac_mission")} <= {
-        "isac_mission.records"
-    }
+    assert {m for m in imported if m.startswith("isac_mission")} <= {"isac_mission.records"}
 
 
 # ---------------------------------------------------------------------------------------------

@@ -14,28 +14,25 @@ from typing import Any
 
 import numpy as np
 import pytest
-from pymavlink.dialects.v20 import common as mavlink2
 
 from isac_mission.errors import LinkError
-from isac_mission.service.mavlink import (
-    MavlinkLink,
+from isac_mission.mavwire.builders import (
     Target,
     arm_command,
     command_name,
     gcs_heartbeat,
-    heartbeat_mode_name,
     hold_mode_command,
     land_command,
     message_interval_command,
-    new_encoder,
     offboard_mode_command,
-    pack,
     position_target_local_ned,
     position_type_mask,
-    px4_custom_mode,
-    px4_mode_name,
     takeoff_command,
 )
+from isac_mission.mavwire.dialect import mavlink2
+from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.modes import heartbeat_mode_name, px4_custom_mode, px4_mode_name
+from isac_mission.mavwire.signing import new_encoder, pack
 from sim.autopilot import FlightMode
 
 VEHICLE = Target(system=3, component=1)
@@ -345,7 +342,7 @@ def test_handler_exception_is_counted_and_does_not_stop_the_link(
 def test_unhandled_type_is_noted_once_and_counted(caplog: pytest.LogCaptureFixture) -> None:
     link, _ = make_link()
     msg = mavlink2.MAVLink_vfr_hud_message(1.0, 1.0, 0, 50, 10.0, 0.0)
-    with caplog.at_level(logging.INFO, logger="isac_mission.service.mavlink"):
+    with caplog.at_level(logging.INFO, logger="isac_mission.mavwire.link"):
         for _ in range(3):
             link.datagram_received(vehicle_bytes(msg), VEHICLE_ADDR)
     assert link.ignored["unhandled:VFR_HUD"] == 3

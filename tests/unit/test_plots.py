@@ -1,12 +1,15 @@
-"""Plots: each function writes a PNG of the documented size from synthetic traces."""
+"""Plots: each function returns a Figure that saves to a PNG of the documented size from synthetic
+traces, draws into the caller's axes when given them, and never switches the matplotlib backend."""
 
 from __future__ import annotations
 
 import struct
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
 
 from isac_mission.experiment.plots import (
     BANDWIDTH_SIZE_IN,
@@ -16,6 +19,7 @@ from isac_mission.experiment.plots import (
     plot_bandwidth,
     plot_performance,
     plot_trajectories,
+    save_png,
 )
 from isac_mission.records import SlotRecord, Trace
 
@@ -77,16 +81,18 @@ def synthetic_trace(method: str, seed: int, n_slots: int = 12, d_th: float = 24e
 
 @pytest.mark.parametrize("d_th", [24e3, 800.0])
 def test_trajectory_plot_is_a_png_of_the_documented_size(tmp_path: Path, d_th: float) -> None:
-    out = plot_trajectories(
-        synthetic_trace("proposed", 1, d_th=d_th), tmp_path / "traj.png", dpi=DPI
-    )
+    fig = plot_trajectories(synthetic_trace("proposed", 1, d_th=d_th))
+    assert isinstance(fig, Figure)
+    out = save_png(fig, tmp_path / "traj.png", dpi=DPI)
     assert out == tmp_path / "traj.png"
     assert out.stat().st_size > 10_000
     assert png_size(out) == expected_px(TRAJECTORY_SIZE_IN)
 
 
 def test_bandwidth_plot_is_a_png_of_the_documented_size(tmp_path: Path) -> None:
-    out = plot_bandwidth(synthetic_trace("proposed", 2), tmp_path / "sub" / "bw.png", dpi=DPI)
+    out = save_png(
+        plot_bandwidth(synthetic_trace("proposed", 2)), tmp_path / "sub" / "bw.png", dpi=DPI
+    )
     assert out.stat().st_size > 5_000
     assert png_size(out) == expected_px(BANDWIDTH_SIZE_IN)
 
@@ -96,7 +102,7 @@ def test_performance_plot_is_a_png_of_the_documented_size(tmp_path: Path) -> Non
         "proposed": [synthetic_trace("proposed", s) for s in range(3)],
         "SD": [synthetic_trace("SD", s, n_slots=8) for s in range(2)],
     }
-    out = plot_performance(traces, tmp_path / "perf.png", dpi=DPI)
+    out = save_png(plot_performance(traces), tmp_path / "perf.png", dpi=DPI)
     assert out.stat().st_size > 10_000
     assert png_size(out) == expected_px(PERFORMANCE_SIZE_IN)
 
@@ -117,9 +123,55 @@ def test_performance_curves_are_root_mean_squares_over_runs() -> None:
 
 def test_plots_accept_an_empty_trace(tmp_path: Path) -> None:
     empty = Trace(config={"bs_xy": [[0.0, 0.0]], "area": [100.0, 100.0]}, slots=[])
-    assert png_size(plot_trajectories(empty, tmp_path / "t.png", dpi=DPI)) == expected_px(
+    assert png_size(save_png(plot_trajectories(empty), tmp_path / "t.png", dpi=DPI)) == expected_px(
         TRAJECTORY_SIZE_IN
     )
-    assert png_size(plot_bandwidth(empty, tmp_path / "b.png", dpi=DPI)) == expected_px(
+    assert png_size(save_png(plot_bandwidth(empty), tmp_path / "b.png", dpi=DPI)) == expected_px(
         BANDWIDTH_SIZE_IN
     )
+
+
+def test_plots_draw_into_the_callers_axes_and_write_no_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    trace = synthetic_trace("proposed", 3)
+    fig = Figure(figsize=(12.0, 8.0))
+    ax_traj, ax_bw, ax_bound, ax_err = fig.subplots(2, 2).ravel()
+    assert plot_trajectories(trace, ax=ax_traj) is fig
+    assert plot_bandwidth(trace, ax=ax_bw) is fig
+    assert plot_performance({"proposed": [trace]}, axes=(ax_bound, ax_err)) is fig
+    assert len(fig.axes) == 4  # nothing added beside the caller's axes
+    # M UAV paths, the target's true and estimated paths at least, on the caller's axes.
+    assert len(ax_traj.get_lines()) >= trace.stack("uav_xy").shape[1] + 2
+    assert ax_traj.get_legend() is not None
+    assert len(ax_bw.collections) >= 1  # the stacked shares
+    assert ax_bw.get_ylim() == (0.0, 1.0)
+    # (a): a location and a velocity bound line; (b): the same for the errors, per method.
+    assert len(ax_bound.get_lines()) == 2 and len(ax_err.get_lines()) == 2
+    assert ax_bound.get_yscale() == "log"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_axes_in_a_subfigure_returns_the_root_figure() -> None:
+    fig = Figure()
+    (sub,) = fig.subfigures(1, 1, squeeze=False)[0]
+    ax = sub.subplots()
+    assert plot_bandwidth(synthetic_trace("proposed", 4), ax=ax) is fig
+
+
+def test_plotting_keeps_the_matplotlib_backend() -> None:
+    before = matplotlib.get_backend()
+    plot_trajectories(synthetic_trace("proposed", 5))
+    assert matplotlib.get_backend() == before
+
+
+def test_no_module_switches_the_backend_or_uses_pyplot() -> None:
+    root = Path(__file__).resolve().parents[2]
+    offenders = [
+        str(path.relative_to(root))
+        for folder in ("isac_mission", "sim")
+        for path in sorted((root / folder).rglob("*.py"))
+        if "matplotlib.use(" in (text := path.read_text()) or "matplotlib.pyplot" in text
+    ]
+    assert offenders == []

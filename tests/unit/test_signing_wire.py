@@ -1,4 +1,4 @@
-"""MAVLink 2 signing on the wire helpers of isac_mission/service/mavlink.py, without sockets:
+"""MAVLink 2 signing in isac_mission/mavwire/ (signing, parsing), without sockets:
 what is signed, what is refused and why, and that a forged packet cannot poison a stream."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import time
 import pytest
 
 from isac_mission.config import MavlinkSigningKey
-from isac_mission.service.mavlink import (
+from isac_mission.mavwire.builders import gcs_heartbeat
+from isac_mission.mavwire.signing import (
     SIGNING_EPOCH_UNIX_S,
     enable_signing,
-    gcs_heartbeat,
     new_encoder,
     new_parser,
     pack,

@@ -12,19 +12,19 @@ import pytest
 import yaml
 
 from isac_mission.errors import ConfigError
-from isac_mission.experiment.sweep import (
-    TaskRow,
-    aggregate,
+from isac_mission.experiment.sweep.grid import (
     expand_grid,
-    limit_blas_threads,
     load_grid,
-    make_tasks,
     parse_grid,
-    plan_sweep,
     ring_start_points,
-    t_interval,
-    write_csv,
 )
+from isac_mission.experiment.sweep.runs import (
+    TaskRow,
+    limit_blas_threads,
+    make_tasks,
+    plan_sweep,
+)
+from isac_mission.experiment.sweep.summary import aggregate, t_interval, write_csv
 
 ROOT = Path(__file__).resolve().parents[2]
 

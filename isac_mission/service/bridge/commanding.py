@@ -14,11 +14,12 @@ from typing import Any
 import numpy as np
 
 from isac_mission.errors import LinkError
+from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.pacing import MIN_SPEED
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.telemetry import vehicle_xy
-from isac_mission.service.mavlink import MavlinkLink, VehicleStatus
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
 

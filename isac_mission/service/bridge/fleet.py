@@ -18,6 +18,7 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.errors import IsacError, LinkError, MessageError
+from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
 from isac_mission.service.bridge.clock_time import (
     ClockSimTime,
     close_bus_and_clock,
@@ -28,7 +29,6 @@ from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.service.codec import PlanMsg, decode_plan
-from isac_mission.service.mavlink import OFFBOARD_BASE_PORT
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
 

@@ -24,12 +24,12 @@ from collections.abc import Callable
 import numpy as np
 
 from isac_mission.errors import LinkError
+from isac_mission.mavwire.builders import arm_command, offboard_mode_command, takeoff_command
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.commanding import VehicleCommander
 from isac_mission.service.bridge.setpoints import SetpointStream
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.telemetry import vehicle_xy
-from isac_mission.service.mavlink import arm_command, offboard_mode_command, takeoff_command
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
 

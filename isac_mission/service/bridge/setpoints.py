@@ -17,11 +17,13 @@ from typing import Final
 import numpy as np
 
 from isac_mission.frames import scenario_to_ned, scenario_to_ned_velocity
+from isac_mission.mavwire.builders import position_target_local_ned
+from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.legs import CarrotLeg, HermiteLeg, hermite_leg, plan_leg
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.telemetry import vehicle_xy
-from isac_mission.service.mavlink import MavlinkLink, VehicleStatus, position_target_local_ned
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
 

@@ -9,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, InstanceOf, ValidationError, model_v
 
 from isac_mission.config import MavlinkSigningKey
 from isac_mission.errors import ConfigError
-from isac_mission.service.mavlink import OFFBOARD_BASE_PORT
+from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
 
 _POSITIVE = (
     "v_max_mps",

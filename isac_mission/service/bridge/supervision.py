@@ -15,9 +15,9 @@ from __future__ import annotations
 import logging
 import math
 
+from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.settings import BridgeSettings
-from isac_mission.service.mavlink import VehicleStatus
 
 log = logging.getLogger(__name__)
 

@@ -10,8 +10,8 @@ from collections.abc import Sequence
 from typing import Final
 
 from isac_mission.frames import ned_to_scenario, ned_to_scenario_velocity
+from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.codec import TELEMETRY_MODES, TelemetryMsg
-from isac_mission.service.mavlink import VehicleStatus
 from isac_mission.types import FloatArray
 
 _MANUAL_MODES: Final = frozenset({"manual", "altctl", "posctl", "acro", "stabilized", "rattitude"})

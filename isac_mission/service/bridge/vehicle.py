@@ -20,6 +20,14 @@ from collections.abc import Sequence
 import numpy as np
 
 from isac_mission.errors import LinkError
+from isac_mission.mavwire.builders import (
+    arm_command,
+    gcs_heartbeat,
+    hold_mode_command,
+    land_command,
+)
+from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bridge.clock_time import (
     ClockSimTime,
     close_bus_and_clock,
@@ -36,14 +44,6 @@ from isac_mission.service.bridge.supervision import LinkWatch
 from isac_mission.service.bridge.telemetry import telemetry_message, vehicle_xy
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.service.codec import TelemetryMsg, encode_telemetry
-from isac_mission.service.mavlink import (
-    MavlinkLink,
-    VehicleStatus,
-    arm_command,
-    gcs_heartbeat,
-    hold_mode_command,
-    land_command,
-)
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
 

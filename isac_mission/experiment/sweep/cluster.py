@@ -1,4 +1,8 @@
-"""The Dask adapter of `sweep`: a loopback LocalCluster (or an existing scheduler) and the task map.
+"""The Dask runner of a sweep: a loopback LocalCluster (or an existing scheduler) and the task map.
+
+Dask is optional (`pip install 'isac-mission[sweep]'`): it is imported only when a client is
+made, and a missing Dask raises `MissingDependencyError` naming the extra (`sweep --serial` needs
+no Dask).
 
 Network: the default LocalCluster binds its scheduler, nannies and workers to 127.0.0.1 and has
 no dashboard (scheduler or worker); another cluster is used only when the caller passes its
@@ -12,19 +16,36 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
-from isac_mission.experiment.sweep import SweepTask, TaskRow, run_task
+from isac_mission.errors import MissingDependencyError
+from isac_mission.experiment.sweep.runs import SweepTask, TaskRow, run_task
 from isac_mission.quiet import quiet_highs_banner
 
 if TYPE_CHECKING:
     from distributed import Client
 
 LOOPBACK = "127.0.0.1"
+SWEEP_EXTRA = "isac-mission[sweep]"
+
+
+def require_dask() -> None:
+    """Raise MissingDependencyError (naming the `sweep` extra) unless dask and distributed import."""
+    try:
+        import dask  # noqa: F401
+        import distributed  # noqa: F401
+    except ImportError as err:
+        raise MissingDependencyError(
+            f"a Dask sweep needs dask and distributed ({err}): install the extra with "
+            f"`pip install '{SWEEP_EXTRA}'`, or run the sweep without Dask (--serial)"
+        ) from None
 
 
 @contextmanager
 def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Client]:
     """A Client of `scheduler` (e.g. tcp://HOST:8786) if given, else of a LocalCluster of
-    `workers` single-threaded worker processes on 127.0.0.1 with the dashboards off."""
+    `workers` single-threaded worker processes on 127.0.0.1 with the dashboards off.
+
+    Raises MissingDependencyError if Dask is not installed."""
+    require_dask()
     from distributed import Client, LocalCluster
 
     if scheduler is not None:

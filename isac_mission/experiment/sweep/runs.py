@@ -1,0 +1,157 @@
+"""The work of a sweep: tasks (grid point x method x run), one closed-loop run per task, serially.
+
+Task = (grid point, method, run) -> one `run_closed_loop` with noise seed = seed + run (common
+random numbers across methods and grid points) -> one `TaskRow`. `run_task` is also what the
+Dask workers run (`cluster.run_dask`); this module never imports Dask.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
+from isac_mission.experiment.sweep.grid import (
+    GridPoint,
+    GridSpec,
+    expand_grid,
+    load_config_mapping,
+    load_grid,
+)
+from isac_mission.planning.slot import Method, SolverKit
+
+
+@dataclass(frozen=True)
+class SweepTask:
+    """One unit of work: run `run` of `method` at grid point `point` (noise seed `seed`)."""
+
+    point: int
+    key: str
+    scenario: Scenario
+    method: Method
+    run: int
+    seed: int
+
+
+@dataclass(frozen=True)
+class TaskRow:
+    """Metrics of one closed-loop run (units: m^2, (m/s)^2, ms; means over slots 1..N)."""
+
+    point: int
+    method: str
+    run: int
+    seed: int
+    loc_mse: float
+    vel_mse: float
+    pcrb_pos: float
+    pcrb_vel: float
+    solve_median_ms: float
+    infeasible_slots: int
+    slots: int
+
+
+@dataclass(frozen=True)
+class SweepPlan:
+    """Everything a sweep will run: the grid, its validated points, the tasks and the base seed."""
+
+    grid: GridSpec
+    points: list[GridPoint]
+    tasks: list[SweepTask]
+    seed: int
+    mission_id: str
+
+
+def plan_sweep(config: str | Path, grid_file: str | Path, seed: int | None = None) -> SweepPlan:
+    """Load both files and validate every grid point (raises ConfigError before any work)."""
+    base = load_config_mapping(config)
+    grid = load_grid(grid_file)
+    points = expand_grid(base, grid, str(config))
+    if seed is None:
+        seed = grid.seed if grid.seed is not None else points[0].scenario.seed
+    tasks = make_tasks(points, grid, seed)
+    return SweepPlan(grid, points, tasks, seed, points[0].scenario.mission_id)
+
+
+def make_tasks(points: Sequence[GridPoint], grid: GridSpec, seed: int) -> list[SweepTask]:
+    """Every (point, method, run), runs outermost so that early results cover all points."""
+    return [
+        SweepTask(p.index, p.key, p.scenario, m, r, seed + r)
+        for r in range(grid.runs)
+        for p in points
+        for m in grid.methods
+    ]
+
+
+_KITS: dict[str, SolverKit] = {}
+_MAX_KITS = 8
+
+
+def kit_for(key: str, s: Scenario) -> SolverKit:
+    """The SolverKit of a scenario, built once per process (a few are kept)."""
+    kit = _KITS.get(key)
+    if kit is None:
+        if len(_KITS) >= _MAX_KITS:
+            _KITS.clear()
+        kit = _KITS[key] = SolverKit(s)
+    return kit
+
+
+def clear_kits() -> None:
+    """Forget this process's SolverKits (benchmarks time the cvxpy compilations again)."""
+    _KITS.clear()
+
+
+def limit_blas_threads(n: int = 1) -> list[str]:
+    """Set every BLAS library loaded in this process to `n` threads; returns their file paths.
+
+    OpenBLAS' results depend (at the 1e-8 level, which the closed loop amplifies) on its thread
+    count, and Dask's nannies start workers with OMP/OPENBLAS_NUM_THREADS=1. Calling this in every
+    task makes the serial run, a local cluster and any other cluster compute the same numbers (and
+    avoids oversubscribing cores with BLAS threads). The libraries are found and set by
+    threadpoolctl (OpenBLAS, MKL, BLIS, FlexiBLAS); the limit stays until changed again.
+    """
+    from threadpoolctl import ThreadpoolController
+
+    blas = ThreadpoolController().select(user_api="blas")
+    blas.limit(limits=n)
+    return sorted({str(lib.filepath) for lib in blas.lib_controllers})
+
+
+def run_task(task: SweepTask) -> TaskRow:
+    """One closed-loop mission; returns its per-run metrics (runs in a worker process)."""
+    limit_blas_threads(1)
+    s = task.scenario
+    res = run_closed_loop(s, task.method, draw_run_noise(s, task.seed), kit_for(task.key, s))
+    err = res.est - res.true  # [N, 4]
+    pos_tr = np.trace(res.pcrb[:, :2, :2], axis1=-2, axis2=-1)
+    vel_tr = np.trace(res.pcrb[:, 2:, 2:], axis1=-2, axis2=-1)
+    return TaskRow(
+        point=task.point,
+        method=task.method,
+        run=task.run,
+        seed=task.seed,
+        loc_mse=float(np.mean(np.sum(err[:, :2] ** 2, axis=1))),
+        vel_mse=float(np.mean(np.sum(err[:, 2:] ** 2, axis=1))),
+        pcrb_pos=float(pos_tr.mean()),
+        pcrb_vel=float(vel_tr.mean()),
+        solve_median_ms=float(np.median(res.solve_s) * 1e3),
+        infeasible_slots=sum(st != "ok" for st in res.status),
+        slots=len(res.status),
+    )
+
+
+def run_serial(
+    tasks: Sequence[SweepTask], on_done: Callable[[TaskRow], None] | None = None
+) -> list[TaskRow]:
+    """Every task in this process, in order (the reference the Dask runner must match)."""
+    rows = []
+    for t in tasks:
+        row = run_task(t)
+        rows.append(row)
+        if on_done is not None:
+            on_done(row)
+    return rows
