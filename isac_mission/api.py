@@ -16,12 +16,11 @@ from isac_mission.config import Scenario
 from isac_mission.experiment.closed_loop import RunResult, SlotOutcome, draw_run_noise
 from isac_mission.experiment.closed_loop import run_closed_loop as _fly
 from isac_mission.experiment.montecarlo import outcome_record
-from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.slot import Method, SlotInput, SolverKit
 from isac_mission.planning.slot import plan_slot as _plan
 from isac_mission.records import SlotRecord, Trace
-from isac_mission.tracking.ekf import ekf_predict
-from isac_mission.tracking.pcrb import Bound, predict_information, scaled_inverse
+from isac_mission.tracking.cycle import CycleModel, TrackState, predict
+from isac_mission.tracking.pcrb import Bound
 from isac_mission.types import Gaussian, SlotPlan
 
 
@@ -36,18 +35,19 @@ def build_kit(scenario: Scenario) -> SolverKit:
 def first_slot_input(scenario: Scenario) -> SlotInput:
     """What the planner knows at slot 1 with a perfect start: the UAVs at their start points
     (uav_start_xy, m), equal shares 1/M, no association yet, at rest, and the target's prior
-    (x0, P0) predicted one slot (dt, kappa) with the bound's prior chosen by
-    tracker.bound_prior."""
-    F, W = transition_matrix(scenario.dt), process_noise(scenario.dt, scenario.kappa)
-    pred = ekf_predict(Gaussian(x=scenario.x0.copy(), P=scenario.P0.copy()), F, W)
-    J_pred = predict_information(Bound.from_covariance(scenario.P0.copy()), F, W)
-    prior = J_pred if scenario.bound_prior == "pcrb" else scaled_inverse(pred.P)
+    (x0, P0) predicted one slot by the slot recursion's `predict` (tracking/cycle.py: the
+    EKF prediction, and the planner's prior chosen by tracker.bound_prior)."""
+    start = TrackState(
+        belief=Gaussian(x=scenario.x0.copy(), P=scenario.P0.copy()),
+        bound=Bound.from_covariance(scenario.P0.copy()),
+    )
+    slot_1 = predict(CycleModel.from_scenario(scenario), start)
     return SlotInput(
         prev_xy=scenario.uav_start_xy.copy(),
         prev_eta=np.full(scenario.M, 1.0 / scenario.M),
         prev_assoc=None,
-        x_pred=pred.x,
-        J_pred=prior,
+        x_pred=slot_1.prediction.x,
+        J_pred=slot_1.prior,
         prev_velocity=np.zeros((scenario.M, 2)),
     )
 

@@ -66,7 +66,7 @@ class LiveOptions:
     link_outages: tuple[str, ...] = ()
     plan_budget_s: float | None = 1.0
     """Wall seconds a slot's planning may take (GroundSettings.plan_budget_s)."""
-    """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S` (sim.world)."""
+    """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S` (sim.world_options)."""
 
     @property
     def trace_path(self) -> Path:

@@ -18,7 +18,8 @@ from isac_mission.service.bus import BusSettings, ZenohBus
 from isac_mission.service.codec import PlanMsg, decode_detection, encode_plan
 from isac_mission.types import SlotPlan, SolveReport
 from sim.autopilot import FlightMode
-from sim.world import World, WorldOptions
+from sim.world import World
+from sim.world_options import WorldOptions
 from tests.support.bridge_rig import (
     ALTITUDE_M,
     ARRIVE_TOL_M,

@@ -44,7 +44,8 @@ from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.timebase import WallTime
 from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
-from sim.world import World, WorldOptions
+from sim.world import World
+from sim.world_options import WorldOptions
 from tests.support.ports import free_port_block
 from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports, wait_until
 

@@ -25,7 +25,8 @@ from isac_mission.service.codec import (
     encode_plan,
 )
 from isac_mission.types import SlotPlan, SolveReport
-from sim.world import World, WorldOptions
+from sim.world import World
+from sim.world_options import WorldOptions
 
 TIMEOUT_S = 30.0
 SPEED = 20.0

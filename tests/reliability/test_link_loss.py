@@ -2,7 +2,8 @@
 
 Real parts: the embedded world's PX4-like vehicles over loopback UDP MAVLink, the bridges, the
 ground loop and a Zenoh observer of `health`. The fault is the simulator's radio-silence window
-(sim.world.LinkOutage): the vehicle neither sends nor hears anything for 5 simulation seconds.
+(sim.world_options.LinkOutage): the vehicle neither sends nor hears anything for 5 simulation
+seconds.
 """
 
 from __future__ import annotations

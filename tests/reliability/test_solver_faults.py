@@ -25,7 +25,8 @@ from isac_mission.service.codec import ControlMsg, decode_plan, encode_control
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.types import SlotPlan
-from sim.world import WorldOptions, run_world
+from sim.world import run_world
+from sim.world_options import WorldOptions
 
 ERROR_SLOT, SLOW_SLOT = 3, 5
 BUDGET_S = 0.4

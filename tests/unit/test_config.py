@@ -136,3 +136,10 @@ def test_an_existing_file_wins_over_a_shipped_name(
     (tmp_path / "paper").write_text(yaml.safe_dump({"mission_id": "local"}))
     monkeypatch.chdir(tmp_path)
     assert load_scenario("paper").mission_id == "local"
+
+
+def test_a_sweep_reads_a_shipped_scenario_by_name() -> None:
+    from isac_mission.experiment.sweep.grid import load_config_mapping
+
+    expected = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
+    assert load_config_mapping("paper") == expected
