@@ -14,7 +14,7 @@ from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.legs import CarrotLeg, plan_leg
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.telemetry import telemetry_mode
-from isac_mission.service.codec import TELEMETRY_MODES, ClockMsg
+from isac_mission.wire import TELEMETRY_MODES, ClockMsg
 
 
 def test_telemetry_modes_are_codec_modes() -> None:

@@ -16,8 +16,8 @@ from collections.abc import Callable
 
 from isac_mission.errors import IsacError, MessageError
 from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus
-from isac_mission.service.codec import ClockMsg, decode_clock
 from isac_mission.timebase import SimTime, SlotTimeline
+from isac_mission.wire import ClockMsg, decode_clock
 
 log = logging.getLogger(__name__)
 

@@ -28,9 +28,9 @@ from isac_mission.service.bridge.counters import FleetCounters
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
-from isac_mission.service.codec import PlanMsg, decode_plan
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
+from isac_mission.wire import PlanMsg, decode_plan
 
 log = logging.getLogger(__name__)
 

@@ -11,14 +11,14 @@ from typing import Final
 
 from isac_mission.frames import ned_to_scenario, ned_to_scenario_velocity
 from isac_mission.mavwire.status import VehicleStatus
-from isac_mission.service.codec import TELEMETRY_MODES, TelemetryMsg
 from isac_mission.types import FloatArray
+from isac_mission.wire import TELEMETRY_MODES, TelemetryMsg
 
 _MANUAL_MODES: Final = frozenset({"manual", "altctl", "posctl", "acro", "stabilized", "rattitude"})
 
 
 def telemetry_mode(px4_mode: str) -> str:
-    """The telemetry mode name (codec.TELEMETRY_MODES) of a PX4 mode name."""
+    """The telemetry mode name (wire.TELEMETRY_MODES) of a PX4 mode name."""
     if px4_mode in TELEMETRY_MODES:
         return px4_mode
     if px4_mode in _MANUAL_MODES:

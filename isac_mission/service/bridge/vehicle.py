@@ -43,9 +43,9 @@ from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.supervision import LinkWatch
 from isac_mission.service.bridge.telemetry import telemetry_message, vehicle_xy
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
-from isac_mission.service.codec import TelemetryMsg, encode_telemetry
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
+from isac_mission.wire import TelemetryMsg, encode_telemetry
 
 log = logging.getLogger(__name__)
 
