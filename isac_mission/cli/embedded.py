@@ -15,7 +15,8 @@ from isac_mission.config import Scenario
 from isac_mission.service.bus import ZenohBus
 from isac_mission.service.bus_security import secured_settings
 from isac_mission.service.ground.report import SlotEvent
-from sim.world import WorldOptions, parse_outages, run_world
+from sim.world import run_world
+from sim.world_options import WorldOptions, parse_outages
 
 
 def check_link_outages(specs: Sequence[str], n_uavs: int) -> None:

@@ -52,7 +52,8 @@ def sim(
     import signal
 
     from isac_mission.service.bus_security import default_endpoint, secured_settings
-    from sim.world import WorldOptions, parse_outages, run_world
+    from sim.world import run_world
+    from sim.world_options import WorldOptions, parse_outages
 
     s = load_or_exit(config)
     if not logging.getLogger().handlers:

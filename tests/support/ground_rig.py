@@ -22,7 +22,13 @@ from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.radar import measure
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
-from isac_mission.service.codec import (
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport
+from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.tracking.ekf import ekf_predict, ekf_update
+from isac_mission.tracking.pcrb import SensingParams
+from isac_mission.types import FloatArray, Gaussian
+from isac_mission.wire import (
     ClockMsg,
     DetectionMsg,
     HealthMsg,
@@ -34,12 +40,6 @@ from isac_mission.service.codec import (
     encode_clock,
     encode_detection,
 )
-from isac_mission.service.ground.loop import GroundLoop
-from isac_mission.service.ground.report import GroundReport
-from isac_mission.service.ground.settings import GroundSettings
-from isac_mission.tracking.ekf import ekf_predict, ekf_update
-from isac_mission.tracking.pcrb import SensingParams
-from isac_mission.types import FloatArray, Gaussian
 from tests.support.sim_harness import async_wait_until
 
 WAIT_S = 30.0

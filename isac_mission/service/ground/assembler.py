@@ -11,9 +11,9 @@ from __future__ import annotations
 import time
 from collections import Counter
 
-from isac_mission.service.codec import DetectionMsg
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.timebase import SlotTimeline, reached
+from isac_mission.wire import DetectionMsg
 
 
 class DetectionAssembler:

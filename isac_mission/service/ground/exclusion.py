@@ -13,10 +13,10 @@ import time
 
 import numpy as np
 
-from isac_mission.service.codec import TelemetryMsg
 from isac_mission.service.ground.report import GroundReport
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.types import FloatArray
+from isac_mission.wire import TelemetryMsg
 
 log = logging.getLogger(__name__)
 

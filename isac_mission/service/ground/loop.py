@@ -22,7 +22,16 @@ from isac_mission.errors import MessageError
 from isac_mission.planning.slot import SolverKit
 from isac_mission.records import SlotRecord, TraceWriter
 from isac_mission.service.bus import Keys, Subscription, ZenohBus
-from isac_mission.service.codec import (
+from isac_mission.service.ground.assembler import DetectionAssembler
+from isac_mission.service.ground.exclusion import VehicleWatch
+from isac_mission.service.ground.fleet_plan import PlanningJob
+from isac_mission.service.ground.mission import MissionState
+from isac_mission.service.ground.planner_thread import consume_result, in_daemon_thread
+from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEvent
+from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.service.ground.tracefile import open_trace
+from isac_mission.types import FloatArray, Gaussian, SlotPlan
+from isac_mission.wire import (
     MAX_REASON_CHARS,
     HealthMsg,
     PlanMsg,
@@ -38,15 +47,6 @@ from isac_mission.service.codec import (
     encode_track,
     rejection_reason,
 )
-from isac_mission.service.ground.assembler import DetectionAssembler
-from isac_mission.service.ground.exclusion import VehicleWatch
-from isac_mission.service.ground.fleet_plan import PlanningJob
-from isac_mission.service.ground.mission import MissionState
-from isac_mission.service.ground.planner_thread import consume_result, in_daemon_thread
-from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEvent
-from isac_mission.service.ground.settings import GroundSettings
-from isac_mission.service.ground.tracefile import open_trace
-from isac_mission.types import FloatArray, Gaussian, SlotPlan
 
 log = logging.getLogger(__name__)
 
@@ -161,7 +161,7 @@ class GroundLoop:
         log.exception("ground loop: internal error (the loop goes on)")
 
     def _reject(self, err: MessageError) -> None:
-        """Count an invalid payload under "rejected <reason>" (codec.rejection_reason), keep its
+        """Count an invalid payload under "rejected <reason>" (wire.rejection_reason), keep its
         message as the last error, and log it (the first few of each reason, then every 100th:
         a flood of garbage must not turn into a flood of log lines)."""
         name = f"rejected {rejection_reason(err)}"
