@@ -2,9 +2,9 @@
 FROM python:3.11-slim
 ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 MAVLINK20=1 MAVLINK_DIALECT=common
 WORKDIR /app
-COPY pyproject.toml README.md ./
+COPY pyproject.toml README.md LICENSE constraints.txt ./
 COPY isac_mission ./isac_mission
 COPY sim ./sim
-COPY config ./config
-RUN pip install --no-cache-dir .
+# The scenarios ship inside the package: `isac-mission serve paper` needs no config folder.
+RUN pip install --no-cache-dir -c constraints.txt .
 ENTRYPOINT ["isac-mission"]

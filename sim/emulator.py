@@ -4,7 +4,7 @@ A thin I/O wrapper around the pure `sim.sensing.Sensor`. Each slot it draws ever
 and publishes it on `isac/<mission>/detections/<m>` (codec `detection` payload; a missed
 detection is published with null range and radial velocity). The bandwidth shares are equal
 (1/M) until a plan arrives on `isac/<mission>/plan`; slot n then uses the shares of the plan
-with the largest slot <= n (plan n carries eta_n; see isac_mission/service/codec.py). A malformed
+with the largest slot <= n (plan n carries eta_n; see isac_mission/wire/models.py). A malformed
 plan (including one for a different number of UAVs or base stations) is counted in
 `plans_rejected`, logged with its reason and ignored.
 """
@@ -19,8 +19,8 @@ import numpy as np
 
 from isac_mission.errors import MessageError
 from isac_mission.service.bus import Keys
-from isac_mission.service.codec import PlanMsg, decode_plan, detection_messages, encode_detection
 from isac_mission.types import Detections, FloatArray
+from isac_mission.wire import PlanMsg, decode_plan, detection_messages, encode_detection
 from sim.sensing import Sensor, equal_shares
 
 log = logging.getLogger(__name__)

@@ -2,7 +2,8 @@
 
 For every UAV m at horizontal position q_m, the true range d_m and radial velocity v_m of the
 target come from the model's h(x) (`isac_mission.model.radar.measure`, eq. 6); Gaussian noise with
-the model's variances at the UAV's bandwidth share eta_m (`noise_variances`, eq. 8) is added:
+the model's variances at the UAV's bandwidth share eta_m (eq. 8) is added; the noisy values come
+from `isac_mission.model.detections.noisy_detections`, the function the offline loop uses too:
 
     d_m + N(0, sigma_d^2(d_m, eta_m)),   v_m + N(0, sigma_v^2(d_m)).
 
@@ -22,7 +23,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from isac_mission.model.radar import measure, noise_variances
+from isac_mission.model.detections import noisy_detections
+from isac_mission.tracking.pcrb import SensingParams
 from isac_mission.types import Detections, FloatArray
 
 if TYPE_CHECKING:
@@ -53,17 +55,16 @@ class SensingModel:
             missed_detection_prob=s.missed_detection_prob,
         )
 
+    @property
+    def params(self) -> SensingParams:
+        """The eq. 8 constants as the tracking code holds them (one variance formula)."""
+        return SensingParams(self.radar_gain, self.alpha_d, self.alpha_v, self.B, self.Ts)
+
     def variances(self, range_m: FloatArray, eta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(sigma_d^2 [M] in m^2, sigma_v^2 [M] in m^2/s^2) at ranges range_m [M], shares eta [M]."""
-        return noise_variances(
-            np.asarray(range_m, dtype=float),
-            np.asarray(eta, dtype=float),
-            radar_gain=self.radar_gain,
-            alpha_d=self.alpha_d,
-            alpha_v=self.alpha_v,
-            B=self.B,
-            Ts=self.Ts,
-        )
+        r = np.asarray(range_m, dtype=float)
+        r_diag = self.params.variances(r, np.asarray(eta, dtype=float))
+        return r_diag[: r.size], r_diag[r.size :]
 
 
 class Sensor:
@@ -79,6 +80,7 @@ class Sensor:
                 f"missed_detection_prob must be in [0, 1), got {model.missed_detection_prob}"
             )
         self.model = model
+        self._params = model.params
         self._rng = rng
 
     def sense(
@@ -103,17 +105,16 @@ class Sensor:
         z_d: FloatArray = self._rng.standard_normal(size=(m,))
         z_v: FloatArray = self._rng.standard_normal(size=(m,))
         u: FloatArray = self._rng.random(size=(m,))
-
-        d_true = np.linalg.norm(x[None, :2] - q, axis=1)
-        ok = (d_true > 0.0) & (e > 0.0) & np.isfinite(e) & (u >= self.model.missed_detection_prob)
-        rng_m = np.full(m, np.nan)
-        vel_mps = np.full(m, np.nan)
-        if np.any(ok):
-            h = measure(x, q[ok])
-            k = int(np.count_nonzero(ok))
-            var_d, var_v = self.model.variances(h[:k], e[ok])
-            rng_m[ok] = h[:k] + np.sqrt(var_d) * z_d[ok]
-            vel_mps[ok] = h[k:] + np.sqrt(var_v) * z_v[ok]
+        z = noisy_detections(
+            x,
+            q,
+            e,
+            self._params,
+            np.concatenate([z_d, z_v]),
+            u,
+            self.model.missed_detection_prob,
+        )
+        rng_m, vel_mps = z[:m], z[m:]
         return Detections(slot=slot, range_m=rng_m, radial_velocity_mps=vel_mps, uav_xy_m=q.copy())
 
 

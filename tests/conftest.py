@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from isac_mission.config import Scenario, load_scenario
+from tests.support import ports
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -60,19 +60,13 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
 
 
-def _free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture
 def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that was free a moment ago."""
-    return _free_port(socket.SOCK_DGRAM)
+    """A UDP port on 127.0.0.1 that was free a moment ago (tests/support/ports.py)."""
+    return ports.free_udp_port()
 
 
 @pytest.fixture
 def free_tcp_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    return _free_port(socket.SOCK_STREAM)
+    """A TCP port on 127.0.0.1 that was free a moment ago (tests/support/ports.py)."""
+    return ports.free_tcp_port()

@@ -19,7 +19,13 @@ app = typer.Typer(
 console = Console()
 err_console = Console(stderr=True)
 
-ConfigArg = Annotated[Path, typer.Argument(help="Scenario YAML file, e.g. config/paper.yaml.")]
+ConfigArg = Annotated[
+    Path,
+    typer.Argument(
+        help="Scenario YAML file (e.g. config/paper.yaml), or the name of a shipped scenario "
+        "(paper, paper-literal, constrained)."
+    ),
+]
 
 PlanBudgetOpt = Annotated[
     float,

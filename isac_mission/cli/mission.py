@@ -23,10 +23,13 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.errors import IsacError
 from isac_mission.planning.slot import Method, SolverKit
-from isac_mission.service.bridge import BridgeFleet, ClockSimTime
+from isac_mission.service.bridge.clock_time import ClockSimTime
+from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.bus import ZenohBus
 from isac_mission.service.bus_security import default_endpoint, secured_settings
-from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings, SlotEvent
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport, SlotEvent
+from isac_mission.service.ground.settings import GroundSettings
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +66,7 @@ class LiveOptions:
     link_outages: tuple[str, ...] = ()
     plan_budget_s: float | None = 1.0
     """Wall seconds a slot's planning may take (GroundSettings.plan_budget_s)."""
-    """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S` (sim.world)."""
+    """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S` (sim.world_options)."""
 
     @property
     def trace_path(self) -> Path:

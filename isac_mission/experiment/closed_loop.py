@@ -2,7 +2,9 @@
 
 Every method of one Monte Carlo run sees the same random numbers (`RunNoise`): the same target path,
 the same initial estimate error and the same standard-normal measurement draws, scaled by each
-method's own noise standard deviations. The planner is the same `plan_slot` the live service calls.
+method's own noise standard deviations. The planner is the same `plan_slot` the live service calls, and the slot recursion the same
+`tracking/cycle.py` (predict -> plan -> update -> bound); the noisy detections are
+`model/detections.py`'s, as in `sim/sensing.py`.
 """
 
 from __future__ import annotations
@@ -13,11 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.model.detections import noisy_detections
 from isac_mission.model.kinematics import process_noise, transition_matrix
-from isac_mission.model.radar import measure
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
-from isac_mission.tracking.ekf import ekf_predict, ekf_update
-from isac_mission.tracking.pcrb import Bound, bound_step, predict_information, scaled_inverse
+from isac_mission.tracking.cycle import CycleModel, TrackState, predict, update
+from isac_mission.tracking.pcrb import Bound
 from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan
 
 
@@ -61,7 +63,7 @@ def true_trajectory(s: Scenario, noise: RunNoise) -> FloatArray:
 
 @dataclass(frozen=True)
 class SlotOutcome:
-    """Everything one slot produced (the trace's contract fields, DESIGN.md).
+    """Everything one slot produced (the trace's contract fields, docs/trace.md).
 
     slot_input: what the planner was given; uav_xy [M, 2] where measurements were taken; r_diag
     [2M] variances used (NaN = missing);
@@ -109,37 +111,39 @@ def run_closed_loop(
     on_slot: Callable[[SlotOutcome], None] | None = None,
 ) -> RunResult:
     """Fly one mission of N slots with the given planning method; returns per-slot results."""
-    F, W = transition_matrix(s.dt), process_noise(s.dt, s.kappa)
+    model = CycleModel.from_scenario(s)
     truth = true_trajectory(s, noise)
-    belief = Gaussian(x=s.x0 + noise.initial_error, P=s.P0.copy())
-    bound = Bound.from_covariance(s.P0.copy())
+    state = TrackState(
+        belief=Gaussian(x=s.x0 + noise.initial_error, P=s.P0.copy()),
+        bound=Bound.from_covariance(s.P0.copy()),
+    )
     uav_xy, eta, assoc = s.uav_start_xy.copy(), np.full(s.M, 1.0 / s.M), None
     velocity = np.zeros((s.M, 2))
     rows: dict[str, list[object]] = {
         k: [] for k in ("est", "pcrb", "solve_s", "status", "uav_xy", "eta", "assoc")
     }
     for n in range(1, s.N + 1):
-        pred = ekf_predict(belief, F, W)
-        J_pred = predict_information(bound, F, W)
-        prior = J_pred if s.bound_prior == "pcrb" else scaled_inverse(pred.P)
-        slot_input = SlotInput(uav_xy, eta, assoc, pred.x, prior, velocity)
+        predicted = predict(model, state)
+        pred = predicted.prediction
+        slot_input = SlotInput(uav_xy, eta, assoc, pred.x, predicted.prior, velocity)
         plan = plan_slot(slot_input, kit, method)
         # The kinematic model flies each leg at constant velocity.
         velocity = (plan.uav_xy_m - uav_xy) / s.dt
         uav_xy, eta, assoc = plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav
         # Measurements at the planned positions: noise from the true geometry; the filter and the
         # bound use the variances at the predicted state (the target's truth is not theirs).
-        z_clean = measure(truth[n], uav_xy)
-        true_range = z_clean[: s.M]
-        var_true = kit.sensing.variances(true_range, eta)
-        z = z_clean + np.sqrt(var_true) * noise.measurement[n - 1]
-        r_diag = kit.sensing.variances(np.linalg.norm(pred.x[None, :2] - uav_xy, axis=1), eta)
-        missed = noise.miss_draw[n - 1] < s.missed_detection_prob
-        lost = np.concatenate([missed, missed])
-        z[lost] = np.nan
-        r_used = np.where(lost, np.nan, r_diag)
-        belief = ekf_update(pred, z, uav_xy, r_used, s.ekf_iterations)
-        bound = bound_step(bound, F, W, pred.x, uav_xy, r_used)
+        z = noisy_detections(
+            truth[n],
+            uav_xy,
+            eta,
+            kit.sensing,
+            noise.measurement[n - 1],
+            noise.miss_draw[n - 1],
+            s.missed_detection_prob,
+        )
+        updated = update(model, state, predicted, kit.sensing, z, uav_xy, eta)
+        state, r_used = updated.state, updated.r_used
+        belief, bound = state.belief, state.bound
         for key, value in (
             ("est", belief.x),
             ("pcrb", bound.C),

@@ -52,7 +52,7 @@ from typing import Any
 
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.modes import FlightMode
-from isac_mission.mavwire.parsing import Rejection, parse_datagram
+from isac_mission.mavwire.parsing import Rejection
 from isac_mission.mavwire.ports import AUTOPILOT_COMPONENT_ID, LOOPBACK, Address
 from sim.autopilot import mission
 from sim.autopilot.commands import CommandHandler
@@ -273,7 +273,7 @@ class Autopilot:
         if self.radio_silent:
             self.rejected["radio silence"] += 1
             return
-        for item in parse_datagram(link.encoder, data, addr):
+        for item in link.parser.parse(data, addr):
             if isinstance(item, Rejection):
                 self._reject(item.reason, item.detail)
             else:

@@ -17,6 +17,7 @@ from typing import Any, cast
 
 from isac_mission.config import MavlinkSigningKey
 from isac_mission.mavwire.dialect import mavlink2
+from isac_mission.mavwire.parsing import DatagramParser
 from isac_mission.mavwire.ports import AUTOPILOT_COMPONENT_ID, Address
 from isac_mission.mavwire.signing import enable_signing, new_encoder, pack
 
@@ -55,6 +56,8 @@ class VehicleLink(asyncio.DatagramProtocol):
         """Packs (and signs) what the link sends; its signing state is shared by the parsers."""
         if signing is not None:
             enable_signing(self.encoder, signing)
+        self.parser = DatagramParser(self.encoder)
+        """Parses what the link receives (`isac_mission.mavwire.parsing`)."""
         self._on_datagram = on_datagram
         self._radio_silent = radio_silent
         self.intervals_s: dict[int, float] = {}

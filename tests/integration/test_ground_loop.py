@@ -12,10 +12,12 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.records import read_trace
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
-from isac_mission.service.codec import decode_health, decode_plan, decode_track
-from isac_mission.service.ground import GroundLoop, GroundSettings
-from sim.world import WorldOptions, run_world
-from tests.support.independent_check import compare_pcrb
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.wire import decode_health, decode_plan, decode_track
+from sim.world import run_world
+from sim.world_options import WorldOptions
+from tests.support.independent.pcrb import compare_pcrb
 
 
 async def _mission(
@@ -88,7 +90,7 @@ async def test_restarted_ground_loop_resumes_from_the_last_traced_slot(
     assert [r.slot for r in first.slots] == [1, 2, 3, 4]
     # A new loop on the same trace continues after slot 4 with the traced P and J.
     from isac_mission.planning.slot import SolverKit
-    from isac_mission.service.mission import MissionState
+    from isac_mission.service.ground.mission import MissionState
 
     state = MissionState.resumed(paper, SolverKit(paper), "proposed", first.slots[-1])
     assert state.slot == 4

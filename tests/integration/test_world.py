@@ -15,7 +15,8 @@ import pytest
 
 from isac_mission.config import Scenario, parse_scenario
 from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus, tcp_loopback
-from isac_mission.service.codec import (
+from isac_mission.types import SlotPlan, SolveReport
+from isac_mission.wire import (
     AnyMsg,
     ClockMsg,
     DetectionMsg,
@@ -24,8 +25,8 @@ from isac_mission.service.codec import (
     decode_any,
     encode_plan,
 )
-from isac_mission.types import SlotPlan, SolveReport
-from sim.world import World, WorldOptions
+from sim.world import World
+from sim.world_options import WorldOptions
 
 TIMEOUT_S = 30.0
 SPEED = 20.0

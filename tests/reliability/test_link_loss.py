@@ -2,7 +2,8 @@
 
 Real parts: the embedded world's PX4-like vehicles over loopback UDP MAVLink, the bridges, the
 ground loop and a Zenoh observer of `health`. The fault is the simulator's radio-silence window
-(sim.world.LinkOutage): the vehicle neither sends nor hears anything for 5 simulation seconds.
+(sim.world_options.LinkOutage): the vehicle neither sends nor hears anything for 5 simulation
+seconds.
 """
 
 from __future__ import annotations
@@ -19,8 +20,8 @@ from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.records import read_trace
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
-from isac_mission.service.codec import decode_health
-from tests.support.independent_check import check_constraints
+from isac_mission.wire import decode_health
+from tests.support.independent.constraints import check_constraints
 from tests.support.ports import free_port_block
 
 LOST = 1

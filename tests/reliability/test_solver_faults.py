@@ -21,10 +21,12 @@ from isac_mission.config import Scenario
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.records import read_trace
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
-from isac_mission.service.codec import ControlMsg, decode_plan, encode_control
-from isac_mission.service.ground import GroundLoop, GroundSettings
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.types import SlotPlan
-from sim.world import WorldOptions, run_world
+from isac_mission.wire import ControlMsg, decode_plan, encode_control
+from sim.world import run_world
+from sim.world_options import WorldOptions
 
 ERROR_SLOT, SLOW_SLOT = 3, 5
 BUDGET_S = 0.4

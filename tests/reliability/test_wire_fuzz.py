@@ -46,6 +46,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from isac_mission import wire
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
@@ -55,10 +56,12 @@ from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.link import MavlinkLink
 from isac_mission.mavwire.modes import FlightMode
 from isac_mission.mavwire.signing import new_encoder, pack
-from isac_mission.service import codec
-from isac_mission.service.bridge import BridgeSettings, VehicleBridge
+from isac_mission.service.bridge.settings import BridgeSettings
+from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
-from isac_mission.service.codec import (
+from isac_mission.service.ground.report import SlotEvent
+from isac_mission.timebase import FuncTime
+from isac_mission.wire import (
     ClockMsg,
     decode_clock,
     decode_detection,
@@ -66,8 +69,6 @@ from isac_mission.service.codec import (
     encode_clock,
     rejection_reason,
 )
-from isac_mission.service.ground import SlotEvent
-from isac_mission.timebase import FuncTime
 from sim.autopilot.settings import AutopilotSettings
 from tests.support.loop_calls import call_on_loop
 from tests.support.mavlink_fuzz import mavlink_frames, random_datagrams, unknown_message
@@ -160,7 +161,7 @@ def test_each_bad_payload_is_counted_under_its_reason_and_the_mission_still_flie
         assert g.alive, f"the ground loop stopped after {bad.name!r}"
     assert _rejected(g.counters) == expected
     # Megabytes go over the wire (Zenoh fragments them) and are dropped at once on arrival.
-    big = [b.name for b in catalogue if len(b.payload) > codec.MAX_PAYLOAD_BYTES]
+    big = [b.name for b in catalogue if len(b.payload) > wire.MAX_PAYLOAD_BYTES]
     print(
         "publish-to-counted lag of the oversized payloads (ms):",
         {n: round(lag_s[n] * 1e3, 1) for n in big},
@@ -182,7 +183,7 @@ def test_each_bad_payload_is_counted_under_its_reason_and_the_mission_still_flie
 
 def test_an_oversized_payload_is_refused_before_it_is_parsed() -> None:
     """4 MB of valid JSON would take json.loads tens of milliseconds; the size check refuses it
-    in microseconds (the limit is codec.MAX_PAYLOAD_BYTES)."""
+    in microseconds (the limit is wire.MAX_PAYLOAD_BYTES)."""
     body = json.dumps(valid_detection() | {"pad": [1.5] * 800_000}).encode()
     assert len(body) > 3_000_000
     t0 = time.perf_counter()

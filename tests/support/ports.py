@@ -6,14 +6,19 @@ binds it, so callers that can retry on `OSError` should.
 
 - `free_tcp_port()`: one TCP port (a Zenoh `tcp/127.0.0.1:PORT` endpoint).
 - `free_udp_port()`: one UDP port.
+- `free_udp_ports(n)`: n distinct UDP ports (not necessarily consecutive).
 - `free_port_block(n, kind)`: a base port such that base .. base + n - 1 are all free (vehicle m
   uses base + m: MAVLink vehicle ports, ground-station ports).
+- `udp_sinks(n)`: n consecutive UDP ports bound (and so kept) for the duration of a `with` block,
+  for a test that must receive what vehicles send to base + m; yields the base.
 """
 
 from __future__ import annotations
 
+import contextlib
 import random
 import socket
+from collections.abc import Iterator
 
 LOOPBACK = "127.0.0.1"
 """The only address the tests bind to."""
@@ -34,6 +39,21 @@ def free_tcp_port() -> int:
 def free_udp_port() -> int:
     """A UDP port on 127.0.0.1 that was free a moment ago."""
     return _free_port(socket.SOCK_DGRAM)
+
+
+def free_udp_ports(n: int) -> list[int]:
+    """`n` distinct UDP ports on 127.0.0.1 that were free a moment ago (all probed at once, so no
+    port is handed out twice)."""
+    socks: list[socket.socket] = []
+    try:
+        for _ in range(n):
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            socks.append(s)
+            s.bind((LOOPBACK, 0))
+        return [int(s.getsockname()[1]) for s in socks]
+    finally:
+        for s in socks:
+            s.close()
 
 
 def free_port_block(n: int, kind: int = socket.SOCK_DGRAM, tries: int = 200) -> int:
@@ -60,3 +80,29 @@ def free_port_block(n: int, kind: int = socket.SOCK_DGRAM, tries: int = 200) -> 
             for s in socks:
                 s.close()
     raise RuntimeError(f"no block of {n} free ports found")
+
+
+@contextlib.contextmanager
+def udp_sinks(n: int, tries: int = 50) -> Iterator[int]:
+    """Bind n consecutive UDP ports on 127.0.0.1 and keep them bound inside the `with` block;
+    yields the first. Nothing is read from them: they only make the ports taken (a vehicle's
+    datagrams to base + m are not refused). RuntimeError after `tries` failed blocks."""
+    for _ in range(tries):
+        base = free_port_block(n)
+        socks: list[socket.socket] = []
+        try:
+            for port in range(base, base + n):
+                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                socks.append(s)
+                s.bind((LOOPBACK, port))
+        except OSError:  # taken between the probe and the bind: another block
+            for s in socks:
+                s.close()
+            continue
+        try:
+            yield base
+        finally:
+            for s in socks:
+                s.close()
+        return
+    raise RuntimeError(f"no block of {n} free UDP ports")

@@ -2,7 +2,7 @@
 
 `bad_payloads(M)` is a catalogue of invalid payloads for the keys the ground loop reads
 (detections, telemetry, clock), each with the reason the ground must count it under
-(`"rejected <reason>"`, codec.rejection_reason). `GroundThread` runs a real
+(`"rejected <reason>"`, wire.rejection_reason). `GroundThread` runs a real
 GroundLoop on its own event loop and Zenoh hub, so that a synchronous test (hypothesis) can
 publish and wait while the loop works. Run as a program
 (`python -m tests.support.wire_garbage ENDPOINT MISSION M RATE BIG_EVERY_S`) it is a flooder: a
@@ -27,7 +27,10 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.service.bus import BusSettings, Keys, ZenohBus
-from isac_mission.service.codec import (
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport
+from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.wire import (
     MAX_PAYLOAD_BYTES,
     ClockMsg,
     DetectionMsg,
@@ -36,7 +39,6 @@ from isac_mission.service.codec import (
     encode_detection,
     encode_telemetry,
 )
-from isac_mission.service.ground import GroundLoop, GroundReport, GroundSettings
 from tests.support.loop_calls import call_on_loop
 
 T = TypeVar("T")

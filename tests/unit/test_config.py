@@ -9,7 +9,13 @@ from typing import Any
 import pytest
 import yaml
 
-from isac_mission.config import load_scenario, parse_scenario
+from isac_mission.config import (
+    SCENARIOS_DIR,
+    load_scenario,
+    parse_scenario,
+    scenario_names,
+    scenario_path,
+)
 from isac_mission.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -96,3 +102,44 @@ def test_bad_files_give_errors_not_tracebacks(tmp_path: Path) -> None:
 def test_every_shipped_config_loads() -> None:
     for path in sorted((ROOT / "config").glob("*.yaml")):
         assert load_scenario(path).N > 0
+
+
+def test_shipped_scenarios_load_by_name_as_by_path() -> None:
+    names = scenario_names()
+    assert {"paper", "paper-literal", "constrained"} <= set(names)
+    assert names == sorted(p.stem for p in (ROOT / "config").glob("*.yaml"))
+    for name in names:
+        by_name, by_path = load_scenario(name), load_scenario(ROOT / "config" / f"{name}.yaml")
+        assert by_name.trace_config() == by_path.trace_config()
+        assert scenario_path(name).resolve() == (ROOT / "config" / f"{name}.yaml").resolve()
+
+
+def test_the_repository_config_folder_is_the_package_data() -> None:
+    assert (ROOT / "config").resolve() == SCENARIOS_DIR.resolve()
+    assert (SCENARIOS_DIR / "grids" / "example.yaml").is_file()
+
+
+def test_an_unknown_name_lists_the_shipped_scenarios(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"^nope: no such file, nor a shipped scenario") as err:
+        load_scenario("nope")
+    assert "paper-literal" in str(err.value)
+    # A path (a folder or a .yaml suffix) is never taken for a name.
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_scenario("paper.yaml")
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_scenario(tmp_path / "paper")
+
+
+def test_an_existing_file_wins_over_a_shipped_name(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    (tmp_path / "paper").write_text(yaml.safe_dump({"mission_id": "local"}))
+    monkeypatch.chdir(tmp_path)
+    assert load_scenario("paper").mission_id == "local"
+
+
+def test_a_sweep_reads_a_shipped_scenario_by_name() -> None:
+    from isac_mission.experiment.sweep.grid import load_config_mapping
+
+    expected = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
+    assert load_config_mapping("paper") == expected

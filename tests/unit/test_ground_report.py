@@ -8,7 +8,7 @@ import numpy as np
 
 from isac_mission.cli.mission import LiveResult, summarize_live
 from isac_mission.records import SlotRecord
-from isac_mission.service.ground import SLOTS_KEPT, GroundReport
+from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport
 
 
 def _record(n: int, rng: np.random.Generator) -> SlotRecord:

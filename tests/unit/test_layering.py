@@ -15,7 +15,7 @@ PURE = [
     *sorted((ROOT / "isac_mission" / "model").glob("*.py")),
     *sorted((ROOT / "isac_mission" / "tracking").glob("*.py")),
     *sorted((ROOT / "isac_mission" / "planning").glob("*.py")),
-    ROOT / "isac_mission" / "config.py",
+    *sorted((ROOT / "isac_mission" / "config").glob("*.py")),
     ROOT / "isac_mission" / "types.py",
     ROOT / "sim" / "vehicle.py",
     ROOT / "sim" / "target.py",

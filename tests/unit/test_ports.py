@@ -7,7 +7,13 @@ import socket
 import pytest
 
 from tests.support import ports
-from tests.support.ports import free_port_block, free_tcp_port, free_udp_port
+from tests.support.ports import (
+    free_port_block,
+    free_tcp_port,
+    free_udp_port,
+    free_udp_ports,
+    udp_sinks,
+)
 
 
 def test_free_tcp_port_can_be_bound_and_listened_on() -> None:
@@ -63,3 +69,28 @@ def test_free_port_block_gives_up_when_every_probe_fails(monkeypatch: pytest.Mon
     monkeypatch.setattr(ports.socket, "socket", TakenSocket)
     with pytest.raises(RuntimeError, match="no block of 2 free ports"):
         ports.free_port_block(2, tries=3)
+
+
+def test_free_udp_ports_are_distinct_and_bindable() -> None:
+    got = free_udp_ports(5)
+    assert len(set(got)) == 5
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in got]
+    try:
+        for s, port in zip(socks, got, strict=True):
+            s.bind(("127.0.0.1", port))
+    finally:
+        for s in socks:
+            s.close()
+
+
+def test_udp_sinks_hold_the_block_and_free_it_after() -> None:
+    with udp_sinks(3) as base:
+        for port in range(base, base + 3):
+            with (
+                socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s,
+                pytest.raises(OSError, match="in use"),
+            ):
+                s.bind(("127.0.0.1", port))
+    for port in range(base, base + 3):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", port))

@@ -116,7 +116,8 @@ def test_scripted_target_loops_back_to_its_first_waypoint() -> None:
 def test_world_target_starts_at_a_seeded_draw_from_p0_around_the_cue() -> None:
     """The configured x0 is the tracker's cue; the true start is x0 + e, e ~ N(0, P0), by seed."""
     from isac_mission.config import parse_scenario
-    from sim.world import WorldOptions, make_target
+    from sim.world_assembly import make_target
+    from sim.world_options import WorldOptions
 
     s = parse_scenario({})
     starts = np.array(

@@ -33,7 +33,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel
 
-from isac_mission.config import Scenario, ScenarioFile, parse_scenario
+from isac_mission.config import Scenario, ScenarioFile, parse_scenario, read_scenario_data
 from isac_mission.errors import ConfigError
 from isac_mission.planning.slot import METHODS, Method
 
@@ -271,13 +271,8 @@ def expand_grid(base: dict[str, Any], grid: GridSpec, source: str = "<config>") 
 
 
 def load_config_mapping(path: str | Path) -> dict[str, Any]:
-    """The raw YAML mapping of a scenario file, validated once with `parse_scenario`."""
-    p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except OSError as err:
-        raise ConfigError(f"{p}: cannot read: {err.strerror}") from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{p}: not valid YAML: {err}") from None
-    parse_scenario(data, str(p))
+    """The raw YAML mapping of a scenario file (or a shipped scenario by name), validated once
+    with `parse_scenario`."""
+    data, source = read_scenario_data(path)
+    parse_scenario(data, source)
     return cast(dict[str, Any], data)

@@ -2,8 +2,9 @@
 
 Slot convention (as sim/world.py and codec.py): plan n carries the waypoints flown during
 (n-1, n] and the shares used for slot n's detections; after the detections of slot n are folded in,
-the ground plans slot n+1. `MissionState` is the same sequence `experiment/closed_loop.py` runs
-offline, split at the points where the live service waits for the network.
+the ground plans slot n+1. `MissionState` runs the slot recursion of `tracking/cycle.py`, as
+`experiment/closed_loop.py` does offline, split at the points where the live service waits for the
+network: `next_job` predicts (the plan is made on the planner's thread), `process` updates.
 """
 
 from __future__ import annotations
@@ -13,12 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord
-from isac_mission.service.fleet_plan import KitCache, PlanningJob
-from isac_mission.tracking.ekf import ekf_predict, ekf_update
-from isac_mission.tracking.pcrb import Bound, bound_step, predict_information, scaled_inverse
+from isac_mission.service.ground.fleet_plan import KitCache, PlanningJob
+from isac_mission.tracking.cycle import CycleModel, SlotPrediction, TrackState, predict, update
+from isac_mission.tracking.pcrb import Bound
 from isac_mission.types import Detections, FloatArray, Gaussian, IntArray, SlotPlan
 
 
@@ -27,8 +27,13 @@ class PendingSlot:
     """What was decided for slot n before its measurements: prediction and plan."""
 
     slot: int
-    prediction: Gaussian
+    predicted: SlotPrediction
     plan: SlotPlan
+
+    @property
+    def prediction(self) -> Gaussian:
+        """The EKF prediction of the slot."""
+        return self.predicted.prediction
 
 
 class MissionState:
@@ -38,8 +43,7 @@ class MissionState:
         self.scenario = s
         self.kit = kit
         self.method: Method = method
-        self.F = transition_matrix(s.dt)
-        self.W = process_noise(s.dt, s.kappa)
+        self.model = CycleModel.from_scenario(s)
         self.belief = initial
         self.bound = Bound.from_covariance(initial.P.copy())
         self.slot = 0
@@ -71,9 +75,7 @@ class MissionState:
         """Predict slot n+1: the planning job from the UAVs' current positions uav_xy [M, 2]
         (and velocities uav_v [M, 2], for a dynamics-aware planner), planning without the
         `excluded` vehicles (fleet_plan.py). Nothing changes until `commit`."""
-        prediction = ekf_predict(self.belief, self.F, self.W)
-        J_pred = predict_information(self.bound, self.F, self.W)
-        prior = J_pred if self.scenario.bound_prior == "pcrb" else scaled_inverse(prediction.P)
+        predicted = predict(self.model, TrackState(self.belief, self.bound))
         return PlanningJob(
             slot=self.slot + 1,
             method=self.method,
@@ -82,8 +84,8 @@ class MissionState:
             uav_v=None if uav_v is None else np.asarray(uav_v, dtype=float),
             prev_eta=self.eta,
             prev_assoc=self.assoc,
-            prediction=prediction,
-            J_pred=prior,
+            prediction=predicted.prediction,
+            J_pred=predicted.prior,
             excluded=tuple(sorted(excluded)),
         )
 
@@ -91,7 +93,8 @@ class MissionState:
         """Adopt `plan` (from job.run(), or a fallback) as the plan of slot n+1."""
         if job.slot != self.slot + 1:
             raise ValueError(f"job for slot {job.slot}, but the next slot is {self.slot + 1}")
-        self.pending = PendingSlot(job.slot, job.prediction, plan)
+        predicted = SlotPrediction(job.prediction, job.J_pred)
+        self.pending = PendingSlot(job.slot, predicted, plan)
         return self.pending
 
     def plan_next(
@@ -111,6 +114,7 @@ class MissionState:
         if s.M != self.scenario.M:
             raise ValueError(f"the new scenario has M = {s.M}, the mission {self.scenario.M}")
         self.scenario = s
+        self.model = CycleModel.from_scenario(s)
         self.renew_kits()
 
     def process(self, det: Detections, eta_used: FloatArray, fallback_xy: FloatArray) -> SlotRecord:
@@ -122,15 +126,20 @@ class MissionState:
         pending = self.pending
         if pending is None or det.slot != pending.slot:
             raise ValueError(f"slot {det.slot} is not the planned slot {self.slot + 1}")
-        sens = self.kit.sensing
         uav_xy = np.where(np.isfinite(det.uav_xy_m), det.uav_xy_m, fallback_xy)
         pred = pending.prediction
         z = np.concatenate([det.range_m, det.radial_velocity_mps])
-        with np.errstate(divide="ignore"):  # eta = 0: a vehicle outside the plan senses nothing
-            r_diag = sens.variances(np.linalg.norm(pred.x[None, :2] - uav_xy, axis=1), eta_used)
-        r_used = np.where(np.isfinite(z) & np.isfinite(r_diag), r_diag, np.nan)
-        self.belief = ekf_update(pred, z, uav_xy, r_used, self.scenario.ekf_iterations)
-        self.bound = bound_step(self.bound, self.F, self.W, pred.x, uav_xy, r_used)
+        updated = update(
+            self.model,
+            TrackState(self.belief, self.bound),
+            pending.predicted,
+            self.kit.sensing,
+            z,
+            uav_xy,
+            eta_used,
+        )
+        self.belief, self.bound = updated.state.belief, updated.state.bound
+        r_used = updated.r_used
         self.slot = det.slot
         plan = pending.plan
         self.eta, self.assoc = plan.bandwidth_share, plan.bs_of_uav

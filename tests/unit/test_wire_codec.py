@@ -1,4 +1,4 @@
-"""isac_mission/service/codec.py: round trips, and every malformed kind refused with its field."""
+"""isac_mission/wire (codec, models, refusal): round trips, and every malformed kind refused with its field."""
 
 from __future__ import annotations
 
@@ -9,9 +9,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from isac_mission import wire
 from isac_mission.errors import MessageError
-from isac_mission.service import codec
-from isac_mission.service.codec import (
+from isac_mission.types import Detections, SlotPlan, SolveReport
+from isac_mission.wire import (
     ClockMsg,
     DetectionMsg,
     PlanMsg,
@@ -31,7 +32,6 @@ from isac_mission.service.codec import (
     encode_track,
     encode_truth,
 )
-from isac_mission.types import Detections, SlotPlan, SolveReport
 
 
 def _detection(**kw: Any) -> DetectionMsg:
@@ -247,7 +247,7 @@ def test_plan_contents_are_checked() -> None:
 
 def test_too_long_payload_is_refused() -> None:
     det = _obj(encode_detection(_detection()))
-    det["padding"] = "x" * codec.MAX_PAYLOAD_BYTES
+    det["padding"] = "x" * wire.MAX_PAYLOAD_BYTES
     assert "bytes" in _expect(_bytes(det), "payload")
 
 

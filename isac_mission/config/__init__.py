@@ -1,0 +1,86 @@
+"""Scenarios: pydantic sections that validate a YAML file, and its SI-unit resolution.
+
+Files carry dB and dBm where engineers expect them; `load_scenario` (a path, or the name of a
+shipped scenario: `load_scenario("paper")`) validates once and returns a frozen `Scenario` in SI
+units (W, Hz, m, s, linear ratios) under the paper's symbols. Every choice the paper leaves open
+is a field whose description points at docs/model.md.
+
+Modules: `units` (dB/dBm), `sections` (timing ... planner), `signing` (MAVLink signing and its
+key), `security` (Zenoh users, roles, TLS), `scenario` (`ScenarioFile`, `Scenario`), `resolve`
+(derived constants and cross-field checks), `loading` (files, mappings, names).
+"""
+
+from isac_mission.config.loading import (
+    SCENARIOS_DIR,
+    load_scenario,
+    parse_scenario,
+    read_scenario_data,
+    scenario_names,
+    scenario_path,
+)
+from isac_mission.config.resolve import radar_crb_alphas, random_bs_layout, resolve
+from isac_mission.config.scenario import Scenario, ScenarioFile
+from isac_mission.config.sections import (
+    AreaConfig,
+    BaseStationConfig,
+    PlannerConfig,
+    RadioConfig,
+    SensingConfig,
+    TargetConfig,
+    TimingConfig,
+    TrackerConfig,
+    UavConfig,
+)
+from isac_mission.config.security import (
+    SecurityConfig,
+    ZenohRoleConfig,
+    ZenohSecurityConfig,
+    ZenohTlsConfig,
+    ZenohTopic,
+)
+from isac_mission.config.signing import (
+    DEFAULT_SIGNING_KEY_ENV,
+    MIN_PASSPHRASE_CHARS,
+    SIGNING_KEY_BYTES,
+    MavlinkSigningConfig,
+    MavlinkSigningKey,
+    mavlink_signing_key,
+)
+from isac_mission.config.units import SPEED_OF_LIGHT_MPS, db_to_linear, dbm_to_w
+
+__all__ = [
+    "DEFAULT_SIGNING_KEY_ENV",
+    "MIN_PASSPHRASE_CHARS",
+    "SCENARIOS_DIR",
+    "SIGNING_KEY_BYTES",
+    "SPEED_OF_LIGHT_MPS",
+    "AreaConfig",
+    "BaseStationConfig",
+    "MavlinkSigningConfig",
+    "MavlinkSigningKey",
+    "PlannerConfig",
+    "RadioConfig",
+    "Scenario",
+    "ScenarioFile",
+    "SecurityConfig",
+    "SensingConfig",
+    "TargetConfig",
+    "TimingConfig",
+    "TrackerConfig",
+    "UavConfig",
+    "ZenohRoleConfig",
+    "ZenohSecurityConfig",
+    "ZenohTlsConfig",
+    "ZenohTopic",
+    "db_to_linear",
+    "dbm_to_w",
+    "load_scenario",
+    "mavlink_signing_key",
+    "parse_scenario",
+    "radar_crb_alphas",
+    "random_bs_layout",
+    "read_scenario_data",
+    "resolve",
+    "scenario_names",
+    "scenario_path",
+]

@@ -1,0 +1,100 @@
+"""Loading: a YAML file, a mapping, or a scenario shipped with the package (by name) to a
+`Scenario`; a `ValidationError` becomes one line per field (`file: radio.bandwidth_hz: ...`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import ValidationError
+
+from isac_mission.config.resolve import resolve
+from isac_mission.config.scenario import Scenario, ScenarioFile
+from isac_mission.errors import ConfigError
+
+
+def _format_validation_error(source: str, err: ValidationError) -> str:
+    """One `source: field.path: reason (got value)` line per error; security values never shown."""
+    lines = []
+    for e in err.errors():
+        where = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key"
+        elif msg.startswith("Value error, "):
+            msg = msg[len("Value error, ") :]
+        got = e.get("input")
+        secret = e["loc"][:1] == ("security",)  # never echo what might be a key or password
+        got_txt = "" if isinstance(got, dict) or secret else f" (got {got!r})"
+        lines.append(f"{source}: {where}: {msg}{got_txt}")
+    return "\n".join(lines)
+
+
+def parse_scenario(data: Any, source: str = "<config>") -> Scenario:
+    """Validate a mapping (as read from YAML) and resolve it. Raises ConfigError."""
+    if not isinstance(data, dict):
+        raise ConfigError(
+            f"{source}: the file must hold a mapping of sections, got {type(data).__name__}"
+        )
+    try:
+        spec = ScenarioFile.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(_format_validation_error(source, err)) from None
+    try:
+        return resolve(spec)
+    except ConfigError as err:
+        raise ConfigError(
+            "\n".join(f"{source}: {line}" for line in str(err).splitlines())
+        ) from None
+
+
+SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "scenarios"
+"""The scenarios shipped with the package (`isac_mission/scenarios/*.yaml`; `config/` in a
+checkout points at it)."""
+
+
+def scenario_names() -> list[str]:
+    """Names of the shipped scenarios (`paper`, `paper-literal`, `constrained`, ...), sorted."""
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml"))
+
+
+def scenario_path(path_or_name: str | Path) -> Path:
+    """The file of a scenario given by path, or by the name of a shipped scenario.
+
+    An existing file wins; otherwise a bare name (no folder, no `.yaml`/`.yml` suffix) is looked
+    up among `scenario_names()`. Raises ConfigError for an unknown name; a path that does not
+    exist is returned as is (reading it then fails with "cannot read").
+    """
+    p = Path(path_or_name)
+    if p.is_file() or len(p.parts) != 1 or p.suffix in {".yaml", ".yml"}:
+        return p
+    shipped = SCENARIOS_DIR / f"{p.name}.yaml"
+    if shipped.is_file():
+        return shipped
+    raise ConfigError(
+        f"{p}: no such file, nor a shipped scenario (choose from {', '.join(scenario_names())})"
+    )
+
+
+def read_scenario_data(path_or_name: str | Path) -> tuple[Any, str]:
+    """The YAML content of a scenario file or shipped scenario, and its name for messages.
+
+    Raises ConfigError (cannot read, not valid YAML, unknown name), never a traceback.
+    """
+    p = scenario_path(path_or_name)
+    try:
+        text = p.read_text()
+    except OSError as err:
+        raise ConfigError(f"{p}: cannot read: {err.strerror}") from None
+    try:
+        return yaml.safe_load(text), str(p)
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{p}: not valid YAML: {err}") from None
+
+
+def load_scenario(path_or_name: str | Path) -> Scenario:
+    """Read, validate and resolve a YAML scenario file, or a shipped scenario by name
+    (`load_scenario("paper")`). Raises ConfigError, never a traceback."""
+    data, source = read_scenario_data(path_or_name)
+    return parse_scenario(data, source)

@@ -1,0 +1,162 @@
+"""Resolution: a validated `ScenarioFile` to a `Scenario` in SI units, with the paper's derived
+constants (beta0, rho0, d_th, Gamma_th, the sensing alphas, the BS layout) and the cross-field
+feasibility checks (M <= K N_a, start points in range and apart, ...)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from isac_mission.config.scenario import Scenario, ScenarioFile
+from isac_mission.config.signing import mavlink_signing_key
+from isac_mission.config.units import SPEED_OF_LIGHT_MPS, db_to_linear, dbm_to_w
+from isac_mission.errors import ConfigError
+from isac_mission.types import FloatArray
+
+
+def radar_crb_alphas(bandwidth_hz: float, wavelength_m: float, cpi_s: float) -> tuple[float, float]:
+    """alpha_d [m^2 Hz^2] and alpha_v [m^2/s^2 s^2] of eq. 8 from the matched-filter CRB.
+
+    With noise PSD N0 = sigma_0^2 / B, the echo energy-to-noise ratio over the CPI is
+    SNR^s B T^s whatever the share eta; a flat spectrum of width eta B has rms bandwidth
+    eta B / sqrt(12) and a constant envelope of length T^s has rms duration T^s / sqrt(12).
+    The delay and Doppler CRBs then give (docs/model.md, "Sensing noise"):
+      sigma_d^2 = 3 c^2 / (8 pi^2 B T^s) / (SNR^s (eta B)^2)
+      sigma_v^2 = 3 lambda^2 / (8 pi^2 B T^s) / (SNR^s (T^s)^2).
+    """
+    scale = 3.0 / (8.0 * math.pi**2 * bandwidth_hz * cpi_s)
+    return scale * SPEED_OF_LIGHT_MPS**2, scale * wavelength_m**2
+
+
+def random_bs_layout(count: int, area_m: FloatArray, seed: int) -> FloatArray:
+    """[K, 2] BS positions drawn uniformly in the area with a fixed seed."""
+    rng = np.random.default_rng(seed)
+    return rng.uniform(0.0, 1.0, size=(count, 2)) * area_m
+
+
+def resolve(spec: ScenarioFile) -> Scenario:
+    """Convert a validated file to SI units and derive the paper's constants.
+
+    Raises ConfigError for cross-field problems (UAVs closer than D_s, out of control range, ...).
+    """
+    radio, bs, uav, tgt, sens = spec.radio, spec.base_stations, spec.uavs, spec.target, spec.sensing
+    wavelength = SPEED_OF_LIGHT_MPS / radio.carrier_hz
+    beta0 = (
+        db_to_linear(radio.ref_gain_db)
+        if radio.ref_gain_db is not None
+        else (wavelength / (4 * math.pi)) ** 2
+    )
+    Pu, P_bs, noise_w = (
+        dbm_to_w(radio.uav_tx_power_dbm),
+        dbm_to_w(radio.bs_tx_power_dbm),
+        dbm_to_w(radio.noise_power_dbm),
+    )
+    gamma_th = db_to_linear(radio.control_snr_min_db)
+    dH = uav.altitude_m - bs.height_m
+    area = np.asarray(spec.area.size_m, dtype=float)
+    bs_xy = (
+        np.asarray(bs.xy_m, dtype=float)
+        if bs.xy_m is not None
+        else random_bs_layout(bs.count, area, bs.placement_seed)
+    )
+    d_th_sq = P_bs * beta0 / (noise_w * gamma_th) - dH**2
+    if sens.model == "radar_crb":
+        alpha_d, alpha_v = radar_crb_alphas(radio.bandwidth_hz, wavelength, sens.cpi_s)
+    else:
+        assert sens.alpha_d is not None and sens.alpha_v is not None
+        alpha_d, alpha_v = sens.alpha_d, sens.alpha_v
+    sp, sv = spec.tracker.initial_position_std_m, spec.tracker.initial_velocity_std_mps
+    n_slots = spec.timing.duration_s / spec.timing.slot_s
+    scenario = Scenario(
+        mission_id=spec.mission_id,
+        seed=spec.seed,
+        M=len(uav.start_xy_m),
+        K=bs.count,
+        N=round(n_slots),
+        dt=spec.timing.slot_s,
+        area=area,
+        B=radio.bandwidth_hz,
+        fc=radio.carrier_hz,
+        wavelength=wavelength,
+        Pu=Pu,
+        P_bs=P_bs,
+        noise_w=noise_w,
+        beta0=beta0,
+        rho0=Pu * beta0 / noise_w,
+        r_th=radio.rate_min_bps,
+        gamma_th=gamma_th,
+        n_a=radio.bs_capacity,
+        d_th=math.sqrt(d_th_sq) if d_th_sq > 0 else 0.0,
+        H=uav.altitude_m,
+        H_bs=bs.height_m,
+        dH=dH,
+        bs_xy=bs_xy,
+        uav_start_xy=np.asarray(uav.start_xy_m, dtype=float),
+        v_max=uav.max_speed_mps,
+        d_safe=uav.safe_distance_m,
+        a_max=uav.max_accel_mps2,
+        x0=np.asarray(tgt.initial_state, dtype=float),
+        kappa=tgt.process_noise_intensity,
+        rcs_m2=db_to_linear(tgt.rcs_dbsm),
+        sensing_model=sens.model,
+        Ts=sens.cpi_s,
+        alpha_d=alpha_d,
+        alpha_v=alpha_v,
+        missed_detection_prob=sens.missed_detection_prob,
+        P0=np.diag([sp**2, sp**2, sv**2, sv**2]),
+        bound_prior=spec.tracker.bound_prior,
+        ekf_iterations=spec.tracker.update_iterations,
+        planner=spec.planner,
+        security=spec.security,
+        mavlink_signing_key=mavlink_signing_key(spec.security.mavlink_signing),
+    )
+    problems = _cross_field_problems(scenario, n_slots)
+    if problems:
+        raise ConfigError("\n".join(problems))
+    return scenario
+
+
+def _cross_field_problems(s: Scenario, n_slots: float) -> list[str]:
+    """Feasibility checks that involve several sections; one message per problem."""
+    out: list[str] = []
+    if abs(n_slots - round(n_slots)) > 1e-9:
+        out.append(f"timing: duration_s / slot_s must be a whole number of slots (got {n_slots})")
+    if s.M > s.K * s.n_a:
+        out.append(
+            f"uavs.start_xy_m: {s.M} UAVs cannot be served by {s.K} BSs of capacity {s.n_a} "
+            f"(M > K * N_a)"
+        )
+    if s.d_th <= 0:
+        out.append(
+            "radio: control link never closes: P_bs beta0 / (sigma0^2 Gamma_th) <= (H - H^B)^2 "
+            f"(d_th^2 = {s.P_bs * s.beta0 / (s.noise_w * s.gamma_th) - s.dH**2:.3g} m^2)"
+        )
+    for m, q in enumerate(s.uav_start_xy):
+        if not (0 <= q[0] <= s.area[0] and 0 <= q[1] <= s.area[1]):
+            out.append(f"uavs.start_xy_m[{m}]: {q.tolist()} is outside the area {s.area.tolist()}")
+        nearest = float(np.min(np.linalg.norm(s.bs_xy - q, axis=1)))
+        if s.d_th > 0 and nearest > s.d_th:
+            out.append(
+                f"uavs.start_xy_m[{m}]: {q.tolist()} is {nearest:.0f} m from the nearest BS, "
+                f"beyond the control range d_th = {s.d_th:.0f} m"
+            )
+    for i in range(s.M):
+        for j in range(i + 1, s.M):
+            gap = float(np.linalg.norm(s.uav_start_xy[i] - s.uav_start_xy[j]))
+            if gap < s.d_safe:
+                out.append(
+                    f"uavs.start_xy_m[{i}], [{j}]: {gap:.1f} m apart, closer than "
+                    f"safe_distance_m = {s.d_safe} m"
+                )
+    p = s.x0[:2]
+    if not (0 <= p[0] <= s.area[0] and 0 <= p[1] <= s.area[1]):
+        out.append(f"target.initial_state: position {p.tolist()} is outside the area")
+    for m, q in enumerate(s.uav_start_xy):
+        gap = float(np.linalg.norm(q - p))
+        if gap < s.d_safe:
+            out.append(
+                f"uavs.start_xy_m[{m}]: {gap:.1f} m from the target's start, closer than "
+                f"safe_distance_m = {s.d_safe} m"
+            )
+    return out

@@ -1,0 +1,144 @@
+"""The scenario: `ScenarioFile` (the YAML as written) and `Scenario` (resolved, SI units, named
+after the paper's symbols)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from pydantic import Field
+
+from isac_mission.config.sections import (
+    AreaConfig,
+    BaseStationConfig,
+    PlannerConfig,
+    RadioConfig,
+    Section,
+    SensingConfig,
+    TargetConfig,
+    TimingConfig,
+    TrackerConfig,
+    UavConfig,
+)
+from isac_mission.config.security import SecurityConfig
+from isac_mission.config.signing import MavlinkSigningKey
+from isac_mission.types import FloatArray
+
+
+class ScenarioFile(Section):
+    """The YAML file as written (dB units). See config/paper.yaml for every key."""
+
+    mission_id: str = Field("paper", pattern=r"^[A-Za-z0-9_-]+$")
+    seed: int = Field(1, ge=0, description="Base seed of the Monte Carlo runs.")
+    timing: TimingConfig = TimingConfig()
+    area: AreaConfig = AreaConfig()
+    radio: RadioConfig = RadioConfig()
+    base_stations: BaseStationConfig = BaseStationConfig()
+    uavs: UavConfig = UavConfig()
+    target: TargetConfig = TargetConfig()
+    sensing: SensingConfig = SensingConfig()
+    tracker: TrackerConfig = TrackerConfig()
+    planner: PlannerConfig = PlannerConfig()
+    security: SecurityConfig = SecurityConfig()
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A resolved scenario in SI units, named after the paper's symbols.
+
+    Arrays: bs_xy [K, 2], uav_start_xy [M, 2], x0 [4], P0 [4, 4], area [2].
+    """
+
+    mission_id: str
+    seed: int
+    M: int
+    K: int
+    N: int
+    dt: float
+    area: FloatArray
+    B: float
+    fc: float
+    wavelength: float
+    Pu: float
+    P_bs: float
+    noise_w: float
+    beta0: float
+    rho0: float
+    r_th: float
+    gamma_th: float
+    n_a: int
+    d_th: float
+    H: float
+    H_bs: float
+    dH: float
+    bs_xy: FloatArray
+    uav_start_xy: FloatArray
+    v_max: float
+    d_safe: float
+    a_max: float
+    x0: FloatArray
+    kappa: float
+    rcs_m2: float
+    sensing_model: str
+    Ts: float
+    alpha_d: float
+    alpha_v: float
+    missed_detection_prob: float
+    P0: FloatArray
+    bound_prior: str
+    ekf_iterations: int
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    security: SecurityConfig = field(default_factory=SecurityConfig)
+    mavlink_signing_key: MavlinkSigningKey | None = None
+    """Resolved from security.mavlink_signing; None when signing is off. Never traced."""
+
+    @property
+    def radar_gain(self) -> float:
+        """c0 in SNR^s = c0 / d^4 [m^4]: lambda^2 Pu sigma_RCS / ((4 pi)^3 sigma_0^2)."""
+        return self.wavelength**2 * self.Pu * self.rcs_m2 / ((4 * math.pi) ** 3 * self.noise_w)
+
+    def with_changes(self, **changes: Any) -> Scenario:
+        """A copy with some fields replaced (no re-validation: for studies and tests)."""
+        return replace(self, **changes)
+
+    def trace_config(self) -> dict[str, Any]:
+        """Every resolved parameter under the trace's names (docs/trace.md), JSON-ready."""
+        return {
+            "mission_id": self.mission_id,
+            "M": self.M,
+            "K": self.K,
+            "N": self.N,
+            "dt": self.dt,
+            "area": self.area.tolist(),
+            "B": self.B,
+            "fc": self.fc,
+            "Pu": self.Pu,
+            "P_bs": self.P_bs,
+            "noise_w": self.noise_w,
+            "rcs_m2": self.rcs_m2,
+            "H": self.H,
+            "H_bs": self.H_bs,
+            "alpha_d": self.alpha_d,
+            "alpha_v": self.alpha_v,
+            "Ts": self.Ts,
+            "kappa": self.kappa,
+            "v_max": self.v_max,
+            "d_safe": self.d_safe,
+            "a_max": self.a_max,
+            "gamma_th": self.gamma_th,
+            "r_th": self.r_th,
+            "n_a": self.n_a,
+            "beta0": self.beta0,
+            "rho0": self.rho0,
+            "d_th": self.d_th,
+            "bs_xy": self.bs_xy.tolist(),
+            "uav_start_xy": self.uav_start_xy.tolist(),
+            "x0": self.x0.tolist(),
+            "P0": self.P0.tolist(),
+            "sensing_model": self.sensing_model,
+            "missed_detection_prob": self.missed_detection_prob,
+            "bound_prior": self.bound_prior,
+            "ekf_iterations": self.ekf_iterations,
+            "planner": self.planner.model_dump(),
+        }

@@ -1,0 +1,168 @@
+"""The physical sections of a scenario file (timing, area, radio, base stations, UAVs, target,
+sensing, tracker, planner), as written in the YAML: dB and dBm where engineers expect them.
+
+Each section is a frozen pydantic model that forbids unknown keys; every choice the paper leaves
+open is a field whose description points at docs/model.md.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class Section(BaseModel):
+    """Base of every scenario section: frozen, unknown keys rejected."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class TimingConfig(Section):
+    duration_s: float = Field(60.0, gt=0, description="T, mission duration.")
+    slot_s: float = Field(1.0, gt=0, description="Delta t, slot length.")
+
+
+class AreaConfig(Section):
+    size_m: tuple[float, float] = Field(
+        (3000.0, 3000.0), description="Width (x, east) and height (y, north) of the area."
+    )
+
+    @model_validator(mode="after")
+    def _positive(self) -> AreaConfig:
+        if min(self.size_m) <= 0:
+            raise ValueError(f"size_m: both sides must be > 0 (got {list(self.size_m)})")
+        return self
+
+
+class RadioConfig(Section):
+    bandwidth_hz: float = Field(20e6, gt=0, description="B, total bandwidth shared by FDMA.")
+    carrier_hz: float = Field(28e9, gt=0, description="f_c, carrier frequency.")
+    uav_tx_power_dbm: float = Field(20.0, description="P_t^u (0.1 W = 20 dBm).")
+    bs_tx_power_dbm: float = Field(30.0, description="P_t^BS (1 W = 30 dBm).")
+    noise_power_dbm: float = Field(
+        -130.0, description="sigma_0^2, noise power over the whole band B (docs/model.md)."
+    )
+    ref_gain_db: float | None = Field(
+        None,
+        description="beta_0, channel gain at 1 m; null = free space (lambda/4pi)^2 (docs/model.md).",
+    )
+    rate_min_bps: float = Field(10e6, gt=0, description="R_th, minimum rate per UAV.")
+    control_snr_min_db: float = Field(11.0, description="Gamma_th, control-link SNR threshold.")
+    bs_capacity: int = Field(3, ge=1, description="N_a, UAVs one BS can serve.")
+
+
+class BaseStationConfig(Section):
+    count: int = Field(5, ge=1, description="K.")
+    height_m: float = Field(15.0, ge=0, description="H^B.")
+    placement_seed: int = Field(
+        2025, ge=0, description="Seed of the uniform random BS layout (docs/model.md)."
+    )
+    xy_m: list[tuple[float, float]] | None = Field(
+        None, description="Explicit BS positions; overrides the random layout."
+    )
+
+    @model_validator(mode="after")
+    def _count_matches(self) -> BaseStationConfig:
+        if self.xy_m is not None and len(self.xy_m) != self.count:
+            raise ValueError(f"xy_m: has {len(self.xy_m)} positions but count is {self.count}")
+        return self
+
+
+class UavConfig(Section):
+    altitude_m: float = Field(100.0, gt=0, description="H, flight altitude of UAVs and target.")
+    start_xy_m: list[tuple[float, float]] = Field(
+        default_factory=lambda: [(1500.0, 2300.0), (807.0, 1100.0), (2193.0, 1100.0)],
+        min_length=1,
+        description="q_{m,0}; M is its length.",
+    )
+    max_speed_mps: float = Field(25.0, gt=0, description="V_max.")
+    safe_distance_m: float = Field(30.0, ge=0, description="D_s.")
+    max_accel_mps2: float = Field(
+        10.0,
+        gt=0,
+        description="Horizontal acceleration limit of the simulated vehicles (not in the paper's "
+        "model, which has none; docs/model.md, 'Live service').",
+    )
+
+
+class TargetConfig(Section):
+    initial_state: tuple[float, float, float, float] = Field(
+        (600.0, 1600.0, 30.0, 0.0), description="x_0 = [x, y, vx, vy] in m and m/s."
+    )
+    process_noise_intensity: float = Field(0.5, ge=0, description="kappa in W (eq. 4), m^2/s^3.")
+    rcs_dbsm: float = Field(-10.0, description="sigma_RCS.")
+
+
+class SensingConfig(Section):
+    model: Literal["radar_crb", "literal"] = Field(
+        "radar_crb",
+        description="radar_crb: alpha_d, alpha_v from the matched-filter CRB; literal: as printed.",
+    )
+    cpi_s: float = Field(
+        0.01, gt=0, description="T^s, coherent processing interval (docs/model.md)."
+    )
+    alpha_d: float | None = Field(None, gt=0, description="literal model only.")
+    alpha_v: float | None = Field(None, gt=0, description="literal model only.")
+    missed_detection_prob: float = Field(0.0, ge=0, lt=1)
+
+    @model_validator(mode="after")
+    def _alphas_match_model(self) -> SensingConfig:
+        given = self.alpha_d is not None or self.alpha_v is not None
+        if self.model == "literal" and (self.alpha_d is None or self.alpha_v is None):
+            raise ValueError("model literal needs both alpha_d and alpha_v")
+        if self.model == "radar_crb" and given:
+            raise ValueError(
+                "alpha_d/alpha_v are derived by model radar_crb; remove them or use model: literal"
+            )
+        return self
+
+
+class TrackerConfig(Section):
+    initial_position_std_m: float = Field(
+        10.0, gt=0, description="Std of the tracker's initial position error (P0)."
+    )
+    initial_velocity_std_mps: float = Field(
+        2.0, gt=0, description="Std of the tracker's initial velocity error (P0)."
+    )
+    update_iterations: int = Field(
+        1,
+        ge=1,
+        le=50,
+        description="1: the EKF of the paper; > 1: iterated EKF (relinearised updates, docs/model.md).",
+    )
+    bound_prior: Literal["pcrb", "ekf"] = Field(
+        "pcrb",
+        description="Prior information of the planner's bound: its own recursion, or the EKF's P.",
+    )
+
+
+class PlannerConfig(Section):
+    association: Literal["resolve", "keep"] = Field(
+        "resolve",
+        description="resolve: P1-F.1 from q_{n-1} each slot; keep: Lemma 2 (docs/model.md).",
+    )
+    epsilon: float = Field(1e-3, gt=0, lt=1, description="Relative-decrease stop (Alg. 1, 2).")
+    line_search_step: float = Field(0.05, gt=0, le=1, description="Delta omega of the line search.")
+    max_ao_iterations: int = Field(8, ge=1)
+    max_position_iterations: int = Field(8, ge=1)
+    max_bandwidth_iterations: int = Field(8, ge=1)
+    per_uav_steps: bool = Field(
+        True,
+        description="Line-search each UAV's own step after Algorithm 1's common one (docs/model.md).",
+    )
+    accel_limit_mps2: float | None = Field(
+        None,
+        gt=0,
+        description="If set, each waypoint stays within a dt^2 / 4 of the vehicle's ballistic "
+        "point q + v dt (reachable on a smooth leg); null = the paper's kinematics (docs/model.md).",
+    )
+    keep_in_area: bool = Field(
+        True,
+        description="Keep every waypoint inside the operating area (the vehicles' geofence; "
+        "not in the paper, docs/model.md).",
+    )
+    solver: str = Field("CLARABEL", description="cvxpy solver for the SOCP subproblems.")
+    feasibility_tol_m: float = Field(
+        1e-6, gt=0, description="Slack allowed when re-checking 14a-14j on a returned plan."
+    )

@@ -1,0 +1,8 @@
+"""The ground service: detections -> EKF -> plan_slot -> plan, over the bus (docs/service.md).
+
+`loop.GroundLoop` runs one mission; `settings.GroundSettings` configures it; `report` holds what
+it counts; `assembler` gathers a slot's detections; `exclusion` decides which vehicles a plan
+can use; `mission.MissionState` is the slot recursion's state between network waits (on
+`isac_mission.tracking.cycle`); `fleet_plan` plans a slot for the vehicles that can follow it;
+`planner_thread` runs the planner off the event loop.
+"""

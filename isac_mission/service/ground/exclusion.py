@@ -1,0 +1,101 @@
+"""Which vehicles a plan can use: telemetry per vehicle, and the vehicles planned around.
+
+A vehicle whose bridge reports its link lost, or whose telemetry position is older than both
+`vehicle_lost_after_s` (simulation) and `vehicle_lost_wall_s` (wall), is excluded: the slot is
+planned for the others (fleet_plan.py) and the vehicle holds where it was last seen. It is
+re-admitted once its link is back, its telemetry fresh and it is in OFFBOARD again.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from isac_mission.service.ground.report import GroundReport
+from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.types import FloatArray
+from isac_mission.wire import TelemetryMsg
+
+log = logging.getLogger(__name__)
+
+
+class VehicleWatch:
+    """The last telemetry of every vehicle and the excluded ones, with the reason."""
+
+    def __init__(self, n_uavs: int, settings: GroundSettings, report: GroundReport) -> None:
+        self.n_uavs = n_uavs
+        self.settings = settings
+        self.report = report
+        self.telemetry: dict[int, TelemetryMsg] = {}
+        self.excluded: dict[int, str] = {}
+        """Vehicles planned around, with the reason."""
+        self.telemetry_fresh_wall: dict[int, float] = {}
+        """Vehicle -> wall time (time.monotonic) its telemetry position last advanced."""
+
+    def on_telemetry(self, msg: TelemetryMsg) -> None:
+        """Keep a vehicle's newest telemetry (and when its position last advanced)."""
+        last = self.telemetry.get(msg.uav)
+        if last is None or msg.t_s > last.t_s:
+            self.telemetry_fresh_wall[msg.uav] = time.monotonic()
+        self.telemetry[msg.uav] = msg
+
+    def update(self, t_s: float) -> bool:
+        """Exclude and re-admit vehicles at simulation time t_s (see the module doc); True when
+        the set changed (each change counted and logged)."""
+        now = time.monotonic()
+        changed = False
+        for m, tel in self.telemetry.items():
+            age_s = t_s - tel.t_s
+            stale = (
+                age_s > self.settings.vehicle_lost_after_s
+                and now - self.telemetry_fresh_wall.get(m, now) > self.settings.vehicle_lost_wall_s
+            )
+            if m not in self.excluded and (tel.link == "lost" or stale):
+                why = "link lost" if tel.link == "lost" else f"telemetry {age_s:.1f} s old"
+                self.excluded[m] = why
+                self.report.counters["vehicle exclusions"] += 1
+                self.report.last_error = f"vehicle {m}: {why}; planning around it"
+                log.warning("vehicle %d: %s; planning the others around it", m, why)
+                changed = True
+            elif m in self.excluded and tel.link == "ok" and not stale and tel.mode == "offboard":
+                del self.excluded[m]
+                self.report.counters["vehicle readmissions"] += 1
+                log.warning("vehicle %d: link back and in OFFBOARD; planning it again", m)
+                changed = True
+        return changed
+
+    def positions(self, t_s: float, det_xy: FloatArray | None = None) -> FloatArray:
+        """[M, 2] positions (m): fresh telemetry, else det_xy (a slot's detection positions),
+        else NaN. An excluded vehicle holds where it was last seen."""
+        xy = (
+            np.array(det_xy, dtype=float)
+            if det_xy is not None
+            else np.full((self.n_uavs, 2), np.nan)
+        )
+        for m in range(self.n_uavs):
+            tel = self.telemetry.get(m)
+            fresh = tel is not None and t_s - tel.t_s <= self.settings.telemetry_max_age_s
+            if tel is not None and ((fresh and tel.link == "ok") or m in self.excluded):
+                xy[m] = tel.position_xy_m  # an excluded vehicle holds where it was last seen
+        return xy
+
+    def velocities(self, t_s: float) -> FloatArray:
+        """[M, 2] velocities (m/s) from fresh telemetry (zero where there is none)."""
+        v = np.zeros((self.n_uavs, 2))
+        for m, tel in self.telemetry.items():
+            if tel.link == "ok" and t_s - tel.t_s <= self.settings.telemetry_max_age_s:
+                v[m] = tel.velocity_xy_mps
+        return v
+
+    def links(self) -> dict[int, str]:
+        """Vehicle -> "ok" or "lost", as last reported."""
+        return {m: t.link for m, t in self.telemetry.items()}
+
+    def status(self) -> dict[int, str]:
+        """Vehicle -> "active" or "excluded: <why>" (for the health message)."""
+        return {
+            m: f"excluded: {self.excluded[m]}" if m in self.excluded else "active"
+            for m in range(self.n_uavs)
+        }

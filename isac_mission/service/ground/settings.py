@@ -1,0 +1,66 @@
+"""The ground loop's settings, validated with pydantic; a bad value raises ConfigError."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from isac_mission.errors import ConfigError
+from isac_mission.planning.slot import Method, plan_slot
+from isac_mission.service.ground.fleet_plan import Planner
+
+
+class GroundSettings(BaseModel):
+    """method: planning strategy; trace_path: JSON Lines trace (None: no trace); resume: continue
+    an existing trace from its last complete slot; detection_wait_s: simulation seconds after a
+    slot boundary before a partial update; detection_wall_wait_s: the same bound in wall seconds,
+    counted from the first detection of the slot or from the clock reaching the slot's end,
+    whichever comes first (for a held or stalled clock);
+    telemetry_max_age_s: older telemetry is not used as a UAV position; trace_config: entries
+    that override or extend the trace's config line.
+
+    Faults (docs/reliability.md): plan_budget_s: wall seconds a slot's planning may take (None:
+    no limit); past it the slot's plan is "hold" (status "timeout") and the next slot plans
+    normally. vehicle_lost_after_s (simulation) and vehicle_lost_wall_s (wall): a vehicle whose
+    telemetry position is older than both, or whose bridge reports its link lost, is planned
+    around (fleet_plan.py) until its link is back and it is in OFFBOARD again.
+    plan_rate_factor: the planner's R_th margin, applied to an operator's new R_th too.
+    planner: the per-slot planning function (plan_slot; replaceable to inject faults).
+
+    Frozen; an unknown or invalid field raises ConfigError naming it
+    (`ground settings: plan_budget_s: Input should be greater than 0 (got -1.0)`)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
+
+    method: Method = "proposed"
+    trace_path: Path | None = None
+    resume: bool = False
+    detection_wait_s: float = Field(0.5, ge=0.0)
+    detection_wall_wait_s: float = Field(2.0, gt=0.0)
+    telemetry_max_age_s: float = Field(1.0, gt=0.0)
+    trace_config: dict[str, object] = Field(default_factory=dict)
+    plan_budget_s: float | None = Field(1.0, gt=0.0)
+    vehicle_lost_after_s: float = Field(1.5, gt=0.0)
+    vehicle_lost_wall_s: float = Field(1.0, gt=0.0)
+    plan_rate_factor: float = Field(1.0, gt=0.0)
+    planner: Planner = plan_slot
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _raise_config_error(cls, data: Any, handler: Any) -> Any:
+        try:
+            return handler(data)
+        except ValidationError as err:
+            raise ConfigError(_describe(err)) from None
+
+
+def _describe(err: ValidationError) -> str:
+    """One `ground settings: field: reason (got value)` line per problem."""
+    lines = []
+    for e in err.errors():
+        where = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
+        lines.append(f"ground settings: {where}: {msg} (got {e.get('input')!r})")
+    return "\n".join(lines)

@@ -1,0 +1,381 @@
+"""Bus payloads: bytes <-> the domain messages (`wire.messages`), through the wire models.
+
+A decoder checks the size first (`envelope.loads`: size, UTF-8, strict JSON, an object), then
+validates the object with its model (`wire.models`) and converts it: lists to numpy float64
+arrays (`assoc` int64), null to NaN. Every refusal is a `MessageError` whose message starts with
+the field at fault, e.g. ``plan.bandwidth_share: 2 values, expected 3`` (`wire.refusal`). The
+encoders write the same JSON as before the models existed (NaN range/velocity/objective as null)
+and decode what they wrote, so that a sender cannot publish a payload its receivers would refuse.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import Any, Final, TypeVar
+
+import numpy as np
+from pydantic import BaseModel, TypeAdapter, ValidationError
+
+from isac_mission.errors import MessageError
+from isac_mission.types import Detections, FloatArray, SlotPlan, SolveReport
+from isac_mission.wire.envelope import (
+    MAX_REASON_CHARS,
+    MAX_STATUS_CHARS,
+    Payload,
+    dumps,
+    envelope,
+    loads,
+)
+from isac_mission.wire.messages import (
+    AnyMsg,
+    ClockMsg,
+    ControlMsg,
+    DetectionMsg,
+    HealthMsg,
+    PlanMsg,
+    TelemetryMsg,
+    TrackMsg,
+    TruthMsg,
+)
+from isac_mission.wire.models import (
+    MODELS,
+    ClockWire,
+    ControlWire,
+    DetectionWire,
+    HealthWire,
+    PlanWire,
+    TelemetryWire,
+    TrackWire,
+    TruthWire,
+    WireMessage,
+)
+from isac_mission.wire.refusal import message_error
+from isac_mission.wire.strict_json import finite_floats, finite_or_none
+
+M = TypeVar("M", bound=BaseModel)
+_ANY: Final[TypeAdapter[Any]] = TypeAdapter(WireMessage)
+
+
+def _validate(model: type[M], kind: str, obj: dict[str, Any], context: dict[str, Any]) -> M:
+    try:
+        return model.model_validate(obj, strict=True, context=context)
+    except ValidationError as err:
+        raise message_error(err, kind, model) from None
+
+
+def _nan(x: float | None) -> float:
+    return math.nan if x is None else x
+
+
+# --------------------------------------------------------------------------- detection
+
+
+def encode_detection(msg: DetectionMsg) -> bytes:
+    """Payload of `isac/<mission>/detections/<m>`; NaN range/velocity are sent as null."""
+    obj = envelope("detection", msg.slot, msg.t_s)
+    obj.update(
+        uav=int(msg.uav),
+        range_m=finite_or_none(msg.range_m),
+        radial_velocity_mps=finite_or_none(msg.radial_velocity_mps),
+        uav_xy_m=finite_floats(msg.uav_xy_m, "detection.uav_xy_m"),
+        bandwidth_share=float(msg.bandwidth_share),
+    )
+    data = dumps(obj)
+    decode_detection(data)
+    return data
+
+
+def _detection(w: DetectionWire) -> DetectionMsg:
+    return DetectionMsg(
+        slot=w.slot,
+        t_s=w.t,
+        uav=w.uav,
+        range_m=_nan(w.range_m),
+        radial_velocity_mps=_nan(w.radial_velocity_mps),
+        uav_xy_m=np.array(w.uav_xy_m, dtype=float),
+        bandwidth_share=w.bandwidth_share,
+    )
+
+
+def decode_detection(payload: Payload, *, n_uavs: int | None = None) -> DetectionMsg:
+    """Validate a detection payload. n_uavs, when given, bounds the UAV index (< n_uavs)."""
+    obj = loads(payload)
+    return _detection(_validate(DetectionWire, "detection", obj, {"n_uavs": n_uavs}))
+
+
+def detection_messages(d: Detections, t_s: float, eta: FloatArray) -> list[DetectionMsg]:
+    """Split one slot's `Detections` [M] into per-UAV messages (eta [M]: shares in use)."""
+    return [
+        DetectionMsg(
+            slot=d.slot,
+            t_s=t_s,
+            uav=m,
+            range_m=float(d.range_m[m]),
+            radial_velocity_mps=float(d.radial_velocity_mps[m]),
+            uav_xy_m=np.asarray(d.uav_xy_m[m], dtype=float),
+            bandwidth_share=float(eta[m]),
+        )
+        for m in range(len(d.range_m))
+    ]
+
+
+def collect_detections(slot: int, msgs: Iterable[DetectionMsg], n_uavs: int) -> Detections:
+    """Assemble the messages of one slot into `Detections` [M]; absent UAVs get NaN and NaN xy.
+
+    Messages of other slots are ignored; for a UAV sent twice the last message wins.
+    """
+    rng = np.full(n_uavs, np.nan)
+    vel = np.full(n_uavs, np.nan)
+    xy = np.full((n_uavs, 2), np.nan)
+    for msg in msgs:
+        if msg.slot != slot or not 0 <= msg.uav < n_uavs:
+            continue
+        rng[msg.uav] = msg.range_m
+        vel[msg.uav] = msg.radial_velocity_mps
+        xy[msg.uav] = msg.uav_xy_m
+    return Detections(slot=slot, range_m=rng, radial_velocity_mps=vel, uav_xy_m=xy)
+
+
+# --------------------------------------------------------------------------- clock, truth
+
+
+def encode_clock(msg: ClockMsg) -> bytes:
+    """Payload of `isac/<mission>/clock`."""
+    obj = envelope("clock", msg.slot, msg.t_s)
+    obj.update(
+        slot_s=float(msg.slot_s),
+        speed=float(msg.speed),
+        mission_t0=None if msg.mission_t0_s is None else float(msg.mission_t0_s),
+    )
+    data = dumps(obj)
+    decode_clock(data)
+    return data
+
+
+def _clock(w: ClockWire) -> ClockMsg:
+    return ClockMsg(slot=w.slot, t_s=w.t, slot_s=w.slot_s, speed=w.speed, mission_t0_s=w.mission_t0)
+
+
+def decode_clock(payload: Payload) -> ClockMsg:
+    """Validate a clock payload (slot may be -1: the mission has not started)."""
+    return _clock(_validate(ClockWire, "clock", loads(payload), {}))
+
+
+def encode_truth(msg: TruthMsg) -> bytes:
+    """Payload of `isac/<mission>/truth`."""
+    obj = envelope("truth", msg.slot, msg.t_s)
+    obj["target_x"] = finite_floats(msg.target_x, "truth.target_x")
+    data = dumps(obj)
+    decode_truth(data)
+    return data
+
+
+def _truth(w: TruthWire) -> TruthMsg:
+    return TruthMsg(slot=w.slot, t_s=w.t, target_x=np.array(w.target_x, dtype=float))
+
+
+def decode_truth(payload: Payload) -> TruthMsg:
+    """Validate a truth payload: target_x is [x, y, vx, vy]."""
+    return _truth(_validate(TruthWire, "truth", loads(payload), {}))
+
+
+# --------------------------------------------------------------------------- plan
+
+
+def encode_plan(msg: PlanMsg) -> bytes:
+    """Payload of `isac/<mission>/plan` (objective NaN is sent as null)."""
+    p = msg.plan
+    obj = envelope("plan", msg.slot, msg.t_s)
+    obj.update(
+        assoc=[int(k) for k in np.asarray(p.bs_of_uav).ravel()],
+        bandwidth_share=finite_floats(p.bandwidth_share, "plan.bandwidth_share"),
+        waypoints_xy_m=[
+            finite_floats(row, f"plan.waypoints_xy_m[{i}]")
+            for i, row in enumerate(np.asarray(p.uav_xy_m))
+        ],
+        objective=finite_or_none(p.pcrb_trace),
+        status=p.report.status,
+        reason=p.report.reason,
+        solve_s=float(p.report.solve_s),
+    )
+    data = dumps(obj)
+    decode_plan(data)
+    return data
+
+
+def _plan(w: PlanWire) -> PlanMsg:
+    plan = SlotPlan(
+        uav_xy_m=np.array(w.waypoints_xy_m, dtype=float).reshape(len(w.assoc), 2),
+        bs_of_uav=np.array(w.assoc, dtype=np.int64),
+        bandwidth_share=np.array(w.bandwidth_share, dtype=float),
+        pcrb_trace=_nan(w.objective),
+        report=SolveReport(status=w.status, reason=w.reason, solve_s=w.solve_s),
+    )
+    return PlanMsg(slot=w.slot, t_s=w.t, plan=plan)
+
+
+def decode_plan(payload: Payload, *, n_uavs: int | None = None, n_bs: int | None = None) -> PlanMsg:
+    """Validate a plan payload.
+
+    Checks: assoc, bandwidth_share and waypoints_xy_m have the same length M (= n_uavs when
+    given, 1 <= M <= MAX_UAVS); assoc entries are BS indices in [0, n_bs), or -1 for a vehicle
+    outside the plan (link lost; its share must then be 0); shares lie in [0, 1]
+    and sum to 1 within SHARE_SUM_TOL; waypoints are finite [M, 2]; objective is >= 0 or null;
+    status is a non-empty string; solve_s >= 0. reason is optional ("" when absent).
+    """
+    obj = loads(payload)
+    return _plan(_validate(PlanWire, "plan", obj, {"n_uavs": n_uavs, "n_bs": n_bs}))
+
+
+# --------------------------------------------------------------------------- telemetry, track
+
+
+def encode_telemetry(msg: TelemetryMsg) -> bytes:
+    """Payload of `isac/<mission>/telemetry/<m>`."""
+    obj = envelope("telemetry", msg.slot, msg.t_s)
+    obj.update(
+        uav=int(msg.uav),
+        position_xy_m=finite_floats(msg.position_xy_m, "telemetry.position_xy_m"),
+        altitude_m=float(msg.altitude_m),
+        velocity_xy_mps=finite_floats(msg.velocity_xy_mps, "telemetry.velocity_xy_mps"),
+        mode=msg.mode,
+        armed=bool(msg.armed),
+        landed=bool(msg.landed),
+        link=msg.link,
+    )
+    data = dumps(obj)
+    decode_telemetry(data)
+    return data
+
+
+def _telemetry(w: TelemetryWire) -> TelemetryMsg:
+    return TelemetryMsg(
+        slot=w.slot,
+        t_s=w.t,
+        uav=w.uav,
+        position_xy_m=np.array(w.position_xy_m, dtype=float),
+        altitude_m=w.altitude_m,
+        velocity_xy_mps=np.array(w.velocity_xy_mps, dtype=float),
+        mode=w.mode,
+        armed=w.armed,
+        landed=w.landed,
+        link=w.link,
+    )
+
+
+def decode_telemetry(payload: Payload, *, n_uavs: int | None = None) -> TelemetryMsg:
+    """Validate a telemetry payload (uav in [0, n_uavs) when n_uavs is given)."""
+    obj = loads(payload)
+    return _telemetry(_validate(TelemetryWire, "telemetry", obj, {"n_uavs": n_uavs}))
+
+
+def encode_track(msg: TrackMsg) -> bytes:
+    """Payload of `isac/<mission>/track`."""
+    obj = envelope("track", msg.slot, msg.t_s)
+    obj.update(
+        x=finite_floats(msg.x, "track.x"),
+        P=[finite_floats(r, f"track.P[{i}]") for i, r in enumerate(np.asarray(msg.P))],
+        J=[finite_floats(r, f"track.J[{i}]") for i, r in enumerate(np.asarray(msg.J))],
+        pcrb_trace=float(msg.pcrb_trace),
+    )
+    data = dumps(obj)
+    decode_track(data)
+    return data
+
+
+def _track(w: TrackWire) -> TrackMsg:
+    return TrackMsg(
+        slot=w.slot,
+        t_s=w.t,
+        x=np.array(w.x, dtype=float),
+        P=np.array(w.P, dtype=float),
+        J=np.array(w.J, dtype=float),
+        pcrb_trace=w.pcrb_trace,
+    )
+
+
+def decode_track(payload: Payload) -> TrackMsg:
+    """Validate a track payload."""
+    return _track(_validate(TrackWire, "track", loads(payload), {}))
+
+
+# --------------------------------------------------------------------------- health, control
+
+
+def encode_health(msg: HealthMsg) -> bytes:
+    """Payload of `isac/<mission>/health`."""
+    obj = envelope("health", msg.slot, msg.t_s)
+    obj.update(
+        status=msg.status,
+        counters={str(k): int(v) for k, v in msg.counters.items()},
+        last_error=msg.last_error[:MAX_REASON_CHARS],
+        vehicles={str(m): state[:MAX_STATUS_CHARS] for m, state in msg.vehicles.items()},
+    )
+    data = dumps(obj)
+    decode_health(data)
+    return data
+
+
+def _health(w: HealthWire) -> HealthMsg:
+    return HealthMsg(
+        slot=w.slot,
+        t_s=w.t,
+        status=w.status,
+        counters={k[:MAX_STATUS_CHARS]: v for k, v in w.counters.items()},
+        last_error=w.last_error,
+        vehicles={int(k): v[:MAX_STATUS_CHARS] for k, v in w.vehicles.items()},
+    )
+
+
+def decode_health(payload: Payload) -> HealthMsg:
+    """Validate a health payload."""
+    return _health(_validate(HealthWire, "health", loads(payload), {}))
+
+
+def encode_control(msg: ControlMsg) -> bytes:
+    """Payload of `isac/<mission>/control`."""
+    obj = envelope("control", msg.slot, msg.t_s)
+    obj.update(command="set", params={k: float(v) for k, v in msg.params.items()})
+    data = dumps(obj)
+    decode_control(data)
+    return data
+
+
+def _control(w: ControlWire) -> ControlMsg:
+    return ControlMsg(slot=w.slot, t_s=w.t, params={k: float(v) for k, v in w.params.items()})
+
+
+def decode_control(payload: Payload) -> ControlMsg:
+    """Validate a control payload: command "set" and known parameters within their ranges."""
+    return _control(_validate(ControlWire, "control", loads(payload), {}))
+
+
+# --------------------------------------------------------------------------- dispatch
+
+
+_CONVERT: Final[dict[type[BaseModel], Any]] = {
+    DetectionWire: _detection,
+    ClockWire: _clock,
+    TruthWire: _truth,
+    PlanWire: _plan,
+    TelemetryWire: _telemetry,
+    TrackWire: _track,
+    HealthWire: _health,
+    ControlWire: _control,
+}
+
+
+def decode_any(payload: Payload) -> AnyMsg:
+    """Decode a payload of any type (`wire.models.WireMessage`), told apart by its "type"."""
+    obj = loads(payload)
+    kind = obj.get("type")
+    if not isinstance(kind, str) or kind not in MODELS:
+        raise MessageError(f"type: unknown payload type {kind!r}")
+    model = MODELS[kind]
+    try:
+        wire = _ANY.validate_python(obj, strict=True, context={})
+    except ValidationError as err:
+        raise message_error(err, kind, model, tagged=True) from None
+    result: AnyMsg = _CONVERT[type(wire)](wire)
+    return result

@@ -1,0 +1,134 @@
+"""The domain side of each bus message: small frozen dataclasses with numpy arrays, NaN for a
+missing number (`wire.codec` converts them to and from payload bytes; `wire.models` is the JSON
+shape). Units are SI and names carry them; shapes are in each docstring.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from isac_mission.types import FloatArray, SlotPlan
+
+
+@dataclass(frozen=True)
+class DetectionMsg:
+    """One UAV's detection of one slot (`isac/<mission>/detections/<m>`).
+
+    range_m (m) and radial_velocity_mps (m/s) are NaN when missed; uav_xy_m [2] is the horizontal
+    position (scenario plane, m) at which it was taken; bandwidth_share is the eta in use.
+    """
+
+    slot: int
+    t_s: float
+    uav: int
+    range_m: float
+    radial_velocity_mps: float
+    uav_xy_m: FloatArray
+    bandwidth_share: float
+
+    @property
+    def detected(self) -> bool:
+        """True when both the range and the radial velocity are present."""
+        return math.isfinite(self.range_m) and math.isfinite(self.radial_velocity_mps)
+
+
+@dataclass(frozen=True)
+class ClockMsg:
+    """Simulation time (`isac/<mission>/clock`).
+
+    slot: current slot n (t >= t0 + n slot_s), -1 before the mission has started; t_s: simulation
+    time (s) since the world started; slot_s: slot length (s); speed: simulation seconds per wall
+    second; mission_t0_s: simulation time at which slot 0 began (None before it has).
+    """
+
+    slot: int
+    t_s: float
+    slot_s: float
+    speed: float
+    mission_t0_s: float | None
+
+
+@dataclass(frozen=True)
+class TruthMsg:
+    """The target's true state [x, y, vx, vy] (m, m/s) at a slot (`isac/<mission>/truth`)."""
+
+    slot: int
+    t_s: float
+    target_x: FloatArray
+
+
+@dataclass(frozen=True)
+class PlanMsg:
+    """A slot plan (`isac/<mission>/plan`): plan.uav_xy_m [M, 2] waypoints, plan.bs_of_uav [M],
+    plan.bandwidth_share [M] (sums to 1), plan.pcrb_trace (objective, NaN if unknown) and
+    plan.report (status, reason, solve_s). slot: the slot the plan is for; t_s: when it was made."""
+
+    slot: int
+    t_s: float
+    plan: SlotPlan
+
+
+@dataclass(frozen=True)
+class TelemetryMsg:
+    """One vehicle's state as its MAVLink bridge saw it (`isac/<mission>/telemetry/<m>`).
+
+    position_xy_m [2] and velocity_xy_mps [2] in the scenario plane (x east, y north); altitude_m
+    above the scenario ground; mode is a flight-mode name (wire.models.TELEMETRY_MODES); link is "ok" or "lost".
+    slot is the last slot the bridge knows of (-1 before the mission).
+    """
+
+    slot: int
+    t_s: float
+    uav: int
+    position_xy_m: FloatArray
+    altitude_m: float
+    velocity_xy_mps: FloatArray
+    mode: str
+    armed: bool
+    landed: bool
+    link: str
+
+
+@dataclass(frozen=True)
+class TrackMsg:
+    """The ground's estimate after slot `slot` (`isac/<mission>/track`).
+
+    x [4] EKF state, P [4, 4] its covariance, J [4, 4] the PCRB information, pcrb_trace = tr(J^-1).
+    """
+
+    slot: int
+    t_s: float
+    x: FloatArray
+    P: FloatArray
+    J: FloatArray
+    pcrb_trace: float
+
+
+@dataclass(frozen=True)
+class HealthMsg:
+    """Service status (`isac/<mission>/health`): status word, counters by name, last error."""
+
+    slot: int
+    t_s: float
+    status: str
+    counters: dict[str, int]
+    last_error: str
+    vehicles: dict[int, str] = field(default_factory=dict)
+    """Vehicle index -> "active" or "excluded: <why>" (optional on the wire)."""
+
+
+@dataclass(frozen=True)
+class ControlMsg:
+    """An operator's command (`isac/<mission>/control`): set planning parameters from the next
+    planned slot on. params: name (wire.models.CONTROL_PARAMS) -> value; rate_min_mbps is R_th in Mbit/s."""
+
+    slot: int
+    t_s: float
+    params: dict[str, float]
+
+
+AnyMsg = (
+    DetectionMsg | ClockMsg | TruthMsg | PlanMsg | TelemetryMsg | TrackMsg | HealthMsg | ControlMsg
+)
+"""Any decoded message (`wire.codec.decode_any`)."""

@@ -1,0 +1,97 @@
+"""The parts of the simulated world, made from a scenario and the world's options: the target,
+the sensor (with their seeded random streams), and the vehicles (one PX4-like autopilot per UAV),
+with the few questions the world asks of the fleet (ready for an offboard start? where is
+everyone?).
+
+The vehicles' local NED frames are all centred on the scenario origin (0, 0) (north = y,
+east = x).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.mavwire.modes import FlightMode
+from isac_mission.types import FloatArray
+from sim.autopilot.endpoint import Autopilot
+from sim.autopilot.settings import AutopilotSettings
+from sim.sensing import SensingModel, Sensor
+from sim.target import CvTarget, ScriptedTarget, TargetModel
+from sim.vehicle import VehicleLimits
+from sim.world_options import WorldOptions
+
+
+def make_target_and_sensor(scenario: Scenario, options: WorldOptions) -> tuple[TargetModel, Sensor]:
+    """The target and the sensor, each on its own random stream spawned (in this order) from the
+    world's seed (options.seed, else the scenario's)."""
+    seed = scenario.seed if options.seed is None else options.seed
+    target_seq, sensing_seq = np.random.SeedSequence(seed).spawn(2)
+    target = make_target(scenario, options, np.random.default_rng(target_seq))
+    sensor = Sensor(SensingModel.from_scenario(scenario), np.random.default_rng(sensing_seq))
+    return target, sensor
+
+
+def make_target(scenario: Scenario, options: WorldOptions, rng: np.random.Generator) -> TargetModel:
+    """The target the options ask for: scripted path, or the CV model of the scenario."""
+    bounds = scenario.area if options.reflect_target else None
+    if options.target_waypoints_xy_m is not None:
+        speed = options.target_speed_mps
+        if speed is None:
+            speed = float(np.hypot(scenario.x0[2], scenario.x0[3])) or 1.0
+        return ScriptedTarget(
+            options.target_waypoints_xy_m, speed, scenario.dt, bounds_m=scenario.area
+        )
+    x0 = scenario.x0
+    if options.initial_error:
+        # The configured x0 is the cue the tracker starts from; the truth differs from it by a
+        # draw from P0, as in `simulate` (docs/model.md, "EKF start and P0").
+        x0 = x0 + rng.multivariate_normal(np.zeros(4), scenario.P0)
+    return CvTarget(x0, scenario.dt, scenario.kappa, rng, bounds_m=bounds)
+
+
+def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> AutopilotSettings:
+    """Vehicle m's settings: start point, flight altitude H, V_max, geofence = the area, and
+    the scenario's MAVLink signing key (None: signing off)."""
+    start = scenario.uav_start_xy[m]
+    return AutopilotSettings(
+        index=m,
+        offboard_port=options.mavlink_base_port + m,
+        gcs_port=options.gcs_base_port + m,
+        geo_origin=options.geo_origin,
+        local_origin_xy_m=(0.0, 0.0),
+        spawn_xy_m=(float(start[0]), float(start[1])),
+        takeoff_alt_m=scenario.H,
+        limits=VehicleLimits(
+            max_horizontal_speed_mps=scenario.v_max, max_horizontal_accel_mps2=scenario.a_max
+        ),
+        area_min_xy_m=(0.0, 0.0),
+        area_max_xy_m=(float(scenario.area[0]), float(scenario.area[1])),
+        max_altitude_m=max(500.0, 2.0 * scenario.H),
+        signing=scenario.mavlink_signing_key,
+    )
+
+
+def make_vehicles(scenario: Scenario, options: WorldOptions) -> list[Autopilot]:
+    """One autopilot per UAV (sockets not yet open), vehicle m with `autopilot_settings(.., m)`."""
+    return [Autopilot(autopilot_settings(scenario, options, m)) for m in range(scenario.M)]
+
+
+def ready_for_offboard_start(
+    vehicles: Sequence[Autopilot], altitude_m: float, tol_m: float
+) -> bool:
+    """Every vehicle armed, in the air, in OFFBOARD and within `tol_m` of `altitude_m` (m)."""
+    return all(
+        v.state.armed
+        and not v.state.landed
+        and v.state.mode is FlightMode.OFFBOARD
+        and abs(v.state.altitude_m - altitude_m) <= tol_m
+        for v in vehicles
+    )
+
+
+def positions_xy_m(vehicles: Sequence[Autopilot]) -> FloatArray:
+    """[M, 2] actual horizontal positions (scenario plane, m)."""
+    return np.array([v.state.position_xy_m for v in vehicles], dtype=float)

@@ -1,0 +1,123 @@
+"""How to run the simulated world (`WorldOptions`, scheduled link outages) and what it counts
+(`WorldStats`). Times are simulation seconds unless marked wall."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+from isac_mission.frames import PX4_SITL_ORIGIN, GeoPoint
+from isac_mission.mavwire.ports import GCS_BASE_PORT, OFFBOARD_BASE_PORT
+from isac_mission.service.bus import BusSettings
+
+StartMode = Literal["immediate", "offboard"]
+
+
+@dataclass(frozen=True)
+class LinkOutage:
+    """Vehicle `vehicle`'s MAVLink radio is dead for `duration_s` simulation seconds from
+    `start_s` after mission start (slot 0)."""
+
+    vehicle: int
+    start_s: float
+    duration_s: float
+
+    @classmethod
+    def parse(cls, text: str) -> LinkOutage:
+        """`M:START:DURATION`, e.g. `1:20:5` (vehicle 1, 20 s into the mission, for 5 s)."""
+        parts = text.split(":")
+        try:
+            m, start, duration = int(parts[0]), float(parts[1]), float(parts[2])
+            if len(parts) != 3 or m < 0 or start < 0 or duration <= 0:
+                raise ValueError
+        except (ValueError, IndexError):
+            raise ValueError(
+                f"link outage {text!r}: expected VEHICLE:START_S:DURATION_S, e.g. 1:20:5"
+            ) from None
+        return cls(m, start, duration)
+
+
+def parse_outages(texts: Sequence[str], n_vehicles: int) -> tuple[LinkOutage, ...]:
+    """LinkOutage.parse of each text, checked against the fleet size; ValueError names the bad one."""
+    outages = tuple(LinkOutage.parse(text) for text in texts)
+    for text, outage in zip(texts, outages, strict=True):
+        if outage.vehicle >= n_vehicles:
+            raise ValueError(
+                f"link outage {text!r}: no vehicle {outage.vehicle} (M = {n_vehicles})"
+            )
+    return outages
+
+
+@dataclass(frozen=True)
+class WorldOptions:
+    """How to run the world. Times are simulation seconds unless marked wall.
+
+    speed: simulation seconds per wall second (math.inf: as fast as possible).
+    lockstep: hold the clock at each slot boundary until the next slot's plan arrives.
+    lockstep_timeout_s: wall seconds to wait for that plan before going on.
+    seed: seed of the target and sensing noise (None: the scenario's seed).
+    bus: Zenoh settings (default: peer connecting to tcp/127.0.0.1:7447).
+    mavlink_base_port / gcs_base_port: vehicle m sends to 127.0.0.1:(base + m).
+    tick_hz: physics rate (simulation Hz); clock_rate_hz: clock publication rate (simulation Hz).
+    start: "immediate" or "offboard" (see `sim.world`: slot 0 at t = 0, or once every vehicle
+    is up in OFFBOARD); start_altitude_tol_m: |alt - H| allowed for an "offboard" start.
+    target_waypoints_xy_m / target_speed_mps: a scripted target path instead of the CV model
+    (speed default: the speed of x0). reflect_target: keep the CV target inside the area.
+    initial_error: start the CV target at x0 + e, e ~ N(0, P0), so that the tracker's prior
+    (mean x0, covariance P0) is honest; False starts it exactly at x0.
+    geo_origin: geodetic position of the scenario origin (GPS of the simulated vehicles).
+    link_outages: scheduled MAVLink radio failures (fault injection, docs/reliability.md).
+    """
+
+    speed: float = 1.0
+    lockstep: bool = False
+    lockstep_timeout_s: float = 30.0
+    seed: int | None = None
+    bus: BusSettings = field(default_factory=BusSettings)
+    mavlink_base_port: int = OFFBOARD_BASE_PORT
+    gcs_base_port: int = GCS_BASE_PORT
+    tick_hz: float = 50.0
+    clock_rate_hz: float = 10.0
+    start: StartMode = "immediate"
+    start_altitude_tol_m: float = 2.0
+    target_waypoints_xy_m: tuple[tuple[float, float], ...] | None = None
+    target_speed_mps: float | None = None
+    reflect_target: bool = True
+    initial_error: bool = True
+    geo_origin: GeoPoint = PX4_SITL_ORIGIN
+    link_outages: tuple[LinkOutage, ...] = ()
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.speed) or self.speed <= 0:
+            raise ValueError(f"speed must be > 0 or inf, got {self.speed}")
+        if not self.lockstep_timeout_s > 0:
+            raise ValueError(f"lockstep_timeout_s must be > 0, got {self.lockstep_timeout_s}")
+        if not (math.isfinite(self.tick_hz) and self.tick_hz > 0):
+            raise ValueError(f"tick_hz must be finite and > 0, got {self.tick_hz}")
+        if not (math.isfinite(self.clock_rate_hz) and self.clock_rate_hz > 0):
+            raise ValueError(f"clock_rate_hz must be finite and > 0, got {self.clock_rate_hz}")
+        if self.start not in ("immediate", "offboard"):
+            raise ValueError(f"start must be immediate or offboard, got {self.start!r}")
+        for name in ("mavlink_base_port", "gcs_base_port"):
+            port = getattr(self, name)
+            if not 1 <= port <= 65535 - 254:
+                raise ValueError(f"{name} must leave room for 254 vehicles, got {port}")
+
+
+@dataclass
+class WorldStats:
+    """Counters of a world run (returned by run_world)."""
+
+    slots: int = 0
+    mission_t0_s: float | None = None
+    sim_time_s: float = 0.0
+    detections_published: int = 0
+    clock_published: int = 0
+    truth_published: int = 0
+    plans_received: int = 0
+    plans_rejected: int = 0
+    lockstep_holds: int = 0
+    lockstep_timeouts: int = 0
+    last_error: str = ""

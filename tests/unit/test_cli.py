@@ -1,0 +1,81 @@
+"""The `isac-mission` command line: the version, scenarios by name, the package entry points."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+import isac_mission
+from isac_mission.cli import COMMAND_GROUPS, app
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_version_prints_the_package_version() -> None:
+    result = CliRunner().invoke(app, ["--version"])
+    assert result.exit_code == 0
+    assert result.output.strip() == f"isac-mission {isac_mission.__version__}"
+
+
+def test_python_dash_m_runs_the_cli() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "isac_mission.cli", "--version"],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
+    assert out.stdout.strip() == f"isac-mission {isac_mission.__version__}"
+
+
+def test_the_console_script_is_the_cli_main() -> None:
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts == {"isac-mission": "isac_mission.cli:main"}
+
+
+def test_every_command_is_registered_in_help_order() -> None:
+    names = [
+        c.name or getattr(c.callback, "__name__", "").replace("_", "-")
+        for c in app.registered_commands
+    ]
+    assert names[:8] == [
+        "check-config",
+        "simulate",
+        "sweep",
+        "sim",
+        "run",
+        "serve",
+        "gen-certs",
+        "gen-users",
+    ]
+    assert COMMAND_GROUPS[:5] == ("offline", "sweep", "embedded", "live", "security")
+
+
+def test_check_config_takes_a_shipped_scenario_by_name() -> None:
+    result = CliRunner().invoke(app, ["check-config", "paper"], env={"COLUMNS": "160"})
+    assert result.exit_code == 0, result.output
+    assert "paper (mission paper)" in result.output
+    assert "3 / 5 / 60" in result.output
+
+
+def test_an_unknown_scenario_name_exits_2_naming_the_choices() -> None:
+    result = CliRunner().invoke(app, ["check-config", "nope"], env={"COLUMNS": "160"})
+    assert result.exit_code == 2
+    assert "no such file, nor a shipped scenario" in result.output
+    assert "paper-literal" in result.output
+
+
+def test_starting_the_cli_loads_neither_the_simulator_nor_the_service() -> None:
+    code = (
+        "import sys, isac_mission.cli; "
+        "print(sorted({m.split('.')[0] if m.startswith('sim') else m for m in sys.modules "
+        "if m == 'sim' or m.startswith(('sim.', 'isac_mission.service', 'zenoh', 'cvxpy'))}))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    assert out.stdout.strip() == "[]"
