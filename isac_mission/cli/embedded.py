@@ -10,10 +10,10 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable, Sequence
 
+from isac_mission.bus import ZenohBus
+from isac_mission.bus.security import secured_settings
 from isac_mission.cli.mission import LiveOptions, LiveResult, fly_mission, ground_endpoint
 from isac_mission.config import Scenario
-from isac_mission.service.bus import ZenohBus
-from isac_mission.service.bus_security import secured_settings
 from isac_mission.service.ground.report import SlotEvent
 from sim.world import run_world
 from sim.world_options import WorldOptions, parse_outages

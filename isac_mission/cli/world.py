@@ -51,7 +51,7 @@ def sim(
     import logging
     import signal
 
-    from isac_mission.service.bus_security import default_endpoint, secured_settings
+    from isac_mission.bus.security import default_endpoint, secured_settings
     from sim.world import run_world
     from sim.world_options import WorldOptions, parse_outages
 

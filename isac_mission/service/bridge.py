@@ -62,6 +62,7 @@ from typing import Any, Final
 
 import numpy as np
 
+from isac_mission.bus import BusSettings, Subscription, ZenohBus
 from isac_mission.config import MavlinkSigningKey, Scenario
 from isac_mission.errors import IsacError, LinkError, MessageError
 from isac_mission.frames import (
@@ -82,12 +83,12 @@ from isac_mission.mavwire.builders import (
 from isac_mission.mavwire.link import MavlinkLink
 from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
 from isac_mission.mavwire.status import VehicleStatus
-from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus
 from isac_mission.timebase import SimTime, SlotTimeline
 from isac_mission.types import FloatArray
 from isac_mission.wire import (
     TELEMETRY_MODES,
     ClockMsg,
+    Keys,
     PlanMsg,
     TelemetryMsg,
     decode_clock,

@@ -25,14 +25,15 @@ from typing import Any
 import numpy as np
 import pytest
 
+from isac_mission.bus import BusSettings, ZenohBus
 from isac_mission.config import Scenario
 from isac_mission.mavwire.builders import Target, hold_mode_command, message_interval_command
 from isac_mission.mavwire.signing import new_encoder, pack
 from isac_mission.service.bridge import BridgeFleet, BridgeSettings, ClockSimTime, VehicleBridge
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.types import SlotPlan, SolveReport
 from isac_mission.wire import (
     ClockMsg,
+    Keys,
     PlanMsg,
     TelemetryMsg,
     decode_detection,
