@@ -21,7 +21,8 @@ from isac_mission.cli.mission import LiveOptions, planning_scenario, summarize_l
 from isac_mission.config import Scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo
 from isac_mission.records import read_trace
-from tests.support.independent_check import check_constraints, compare_pcrb
+from tests.support.independent.constraints import check_constraints
+from tests.support.independent.pcrb import compare_pcrb
 from tests.support.live_cli import cli, serve_argv, sim_argv, start
 from tests.support.ports import free_port_block
 

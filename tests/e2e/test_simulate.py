@@ -18,7 +18,8 @@ import pytest
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo, summarize
 from isac_mission.records import read_trace
-from tests.support.independent_check import check_constraints, compare_pcrb
+from tests.support.independent.constraints import check_constraints
+from tests.support.independent.pcrb import compare_pcrb
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -17,7 +17,7 @@ from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.wire import Keys, decode_health, decode_plan, decode_track
 from sim.world import run_world
 from sim.world_options import WorldOptions
-from tests.support.independent_check import compare_pcrb
+from tests.support.independent.pcrb import compare_pcrb
 
 
 async def _mission(

@@ -38,12 +38,10 @@ from isac_mission.errors import LinkError
 from isac_mission.mavwire.builders import Target, arm_command, takeoff_command
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.signing import signing_timestamp
-from isac_mission.service.bridge import (
-    BridgeFleet,
-    BridgeSettings,
-    ClockSimTime,
-    VehicleBridge,
-)
+from isac_mission.service.bridge.clock_time import ClockSimTime
+from isac_mission.service.bridge.fleet import BridgeFleet
+from isac_mission.service.bridge.settings import BridgeSettings
+from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.timebase import WallTime
 from isac_mission.wire import Keys
 from sim.autopilot import Autopilot, AutopilotSettings, FlightMode

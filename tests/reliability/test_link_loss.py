@@ -21,7 +21,7 @@ from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.records import read_trace
 from isac_mission.wire import Keys, decode_health
-from tests.support.independent_check import check_constraints
+from tests.support.independent.constraints import check_constraints
 from tests.support.ports import free_port_block
 
 LOST = 1

@@ -38,7 +38,7 @@ from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from sim.world import run_world
 from sim.world_options import WorldOptions
-from tests.support.independent_check import bound_update, compare_pcrb, cv_model, jacobian
+from tests.support.independent.pcrb import bound_update, compare_pcrb, cv_model, jacobian
 from tests.support.live_cli import serve_argv, sim_argv, start
 from tests.support.ports import free_port_block
 

@@ -23,7 +23,7 @@ import yaml
 
 from isac_mission.cli.mission import summarize_live
 from isac_mission.config import load_scenario
-from isac_mission.service.bridge import TIMESTAMPS_KEPT
+from isac_mission.service.bridge.setpoints import TIMESTAMPS_KEPT
 from isac_mission.wire import TrackMsg, decode_track, encode_track
 from tests.support.soak import (
     LOOP_RADIUS_M,

@@ -56,7 +56,8 @@ from isac_mission.mavwire.builders import gcs_heartbeat, message_interval_comman
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.link import MavlinkLink
 from isac_mission.mavwire.signing import new_encoder, pack
-from isac_mission.service.bridge import BridgeSettings, VehicleBridge
+from isac_mission.service.bridge.settings import BridgeSettings
+from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.service.ground.report import SlotEvent
 from isac_mission.timebase import FuncTime
 from isac_mission.wire import (

@@ -6,15 +6,14 @@ import math
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
-from isac_mission.errors import IsacError
-from isac_mission.service.bridge import (
-    BridgeSettings,
-    CarrotLeg,
-    ClockSimTime,
-    plan_leg,
-    telemetry_mode,
-)
+from isac_mission.config import MavlinkSigningKey
+from isac_mission.errors import ConfigError, IsacError
+from isac_mission.service.bridge.clock_time import ClockSimTime
+from isac_mission.service.bridge.legs import CarrotLeg, plan_leg
+from isac_mission.service.bridge.settings import BridgeSettings
+from isac_mission.service.bridge.telemetry import telemetry_mode
 from isac_mission.wire import TELEMETRY_MODES, ClockMsg
 
 
@@ -112,3 +111,19 @@ def test_bridge_settings_defaults_follow_px4_sitl_ports() -> None:
 def test_bridge_settings_name_every_bad_value() -> None:
     with pytest.raises(IsacError, match=r"setpoint_rate_hz.*\n.*command_attempts"):
         BridgeSettings(setpoint_rate_hz=0.0, command_attempts=0)
+
+
+def test_bridge_settings_name_an_unknown_or_mistyped_field() -> None:
+    with pytest.raises(ConfigError, match=r"BridgeSettings: v_max: unknown key"):
+        BridgeSettings(v_max=3.0)  # type: ignore[call-arg]
+    with pytest.raises(ConfigError, match=r"BridgeSettings: index: .*integer.*'two'"):
+        BridgeSettings(index="two")  # type: ignore[arg-type]
+
+
+def test_bridge_settings_are_frozen_and_keep_the_signing_key_object() -> None:
+    key = MavlinkSigningKey(bytes(range(32)), link_id=3)
+    s = BridgeSettings(signing=key, origin_xy_m=[1.0, 2.0])  # type: ignore[arg-type]
+    assert s.signing is key
+    assert s.origin_xy_m == (1.0, 2.0)
+    with pytest.raises(ValidationError, match="frozen"):
+        s.index = 4  # type: ignore[misc]

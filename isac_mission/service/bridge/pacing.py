@@ -1,0 +1,43 @@
+"""Periodic loops on simulation time: tick every 1 / rate simulation seconds, paced on the wall.
+
+A loop sleeps 1 / rate / speed wall seconds (at least `MIN_WALL_PERIOD_S`), paced against
+deadlines so that sleep overshoot does not lower the rate; one that falls behind by more than a
+period re-anchors instead of bursting. A tick that raises is reported and the loop goes on.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from typing import Final
+
+from isac_mission.timebase import SimTime
+
+MIN_WALL_PERIOD_S: Final = 0.001
+"""Shortest wall sleep of a periodic loop (a very fast or unpaced simulation)."""
+
+MIN_SPEED: Final = 1e-9
+"""Floor of the time source's speed in wall-time divisions (a stopped clock)."""
+
+
+async def run_paced(
+    rate_hz: float,
+    tick: Callable[[], None],
+    time: SimTime,
+    on_error: Callable[[Exception], None],
+) -> None:
+    """Call `tick()` every 1 / rate_hz simulation seconds of `time` until cancelled;
+    `on_error(err)` (called inside the `except`) for a tick that raised."""
+    loop = asyncio.get_running_loop()
+    due = loop.time()
+    while True:
+        try:
+            tick()
+        except Exception as err:  # keep the loop alive; the caller counts and reports
+            on_error(err)
+        period = max(1.0 / rate_hz / max(time.speed, MIN_SPEED), MIN_WALL_PERIOD_S)
+        due += period
+        now = loop.time()
+        if due < now - period:  # fell behind: re-anchor instead of bursting
+            due = now
+        await asyncio.sleep(max(0.0, due - now))

@@ -1,0 +1,161 @@
+"""A vehicle's setpoint stream: the leg being flown and SET_POSITION_TARGET_LOCAL_NED out.
+
+The setpoint is the current leg (legs.py) sampled `setpoint_lead_s` ahead of now, to make up for
+the setpoint's hold time and the link latency, and sent in the vehicle's local NED frame with
+the leg's velocity as feed-forward. A new goal starts its leg where the setpoint is, so the
+velocity feed-forward is continuous across slots when the plan is. The stream only sends while
+started (`start`/`stop`), once the vehicle's address is known and a mission altitude is set.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+
+from isac_mission.frames import scenario_to_ned, scenario_to_ned_velocity
+from isac_mission.mavwire.builders import position_target_local_ned
+from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.status import VehicleStatus
+from isac_mission.service.bridge.counters import BridgeCounters
+from isac_mission.service.bridge.legs import CarrotLeg, HermiteLeg, hermite_leg, plan_leg
+from isac_mission.service.bridge.settings import BridgeSettings
+from isac_mission.service.bridge.telemetry import vehicle_xy
+from isac_mission.timebase import SimTime
+from isac_mission.types import FloatArray
+
+TIMESTAMPS_KEPT: Final = 1024
+"""How many setpoint wall times, and first-setpoint times of plans, a bridge keeps for the
+timing figures: the latest ones, so that a long mission's memory does not grow with it
+(docs/reliability.md, "Soak")."""
+
+
+@dataclass
+class Goal:
+    """Where the setpoint is heading (scenario plane, m), by when (simulation s), how fast."""
+
+    xy_m: FloatArray
+    arrive_by_s: float | None
+    max_speed_mps: float
+
+
+class SetpointStream:
+    """The leg, the goal and the setpoint stream of one vehicle's bridge.
+
+    Args:
+        settings: The bridge's settings (origin, V_max, lead, feed-forward, yaw).
+        time: Simulation time.
+        link: The vehicle's MAVLink link (status for the vehicle's position, send).
+        counters: The bridge's counters (setpoints_sent).
+    """
+
+    def __init__(
+        self, settings: BridgeSettings, time: SimTime, link: MavlinkLink, counters: BridgeCounters
+    ) -> None:
+        self.settings = settings
+        self.time = time
+        self.link = link
+        self.counters = counters
+        self.leg: CarrotLeg | HermiteLeg | None = None
+        self.goal: Goal | None = None
+        self.altitude_m: float | None = None
+        """The mission altitude the setpoints fly at, m (None: no setpoint is sent)."""
+        self.since_s = 0.0
+        """Simulation time at which the stream (last) started, s."""
+        self.plan_slot = -1
+        """The latest plan slot fed to the bridge (-1: none)."""
+        self.setpoint_wall_s: deque[float] = deque(maxlen=TIMESTAMPS_KEPT)
+        """Wall times (time.monotonic) of the stream's latest periodic setpoints (at most
+        TIMESTAMPS_KEPT), for jitter figures."""
+        self.first_setpoint_wall_s: dict[int, float] = {}
+        """Plan slot -> wall time of the first setpoint sent for it, for the latest
+        TIMESTAMPS_KEPT plans (latency figures)."""
+        self._origin = np.array(settings.origin_xy_m, dtype=float)
+        self._streaming = False
+
+    @property
+    def streaming(self) -> bool:
+        """True while setpoints are being streamed."""
+        return self._streaming
+
+    def carrot_time_s(self) -> float:
+        """The time the carrot is sampled at: now + setpoint_lead_s (simulation s)."""
+        return self.time.now_s() + self.settings.setpoint_lead_s
+
+    def setpoint(self) -> tuple[FloatArray, FloatArray] | None:
+        """The setpoint now (the carrot `setpoint_lead_s` ahead): scenario-plane position
+        [2], m, and velocity [2], m/s."""
+        return None if self.leg is None else self.leg.sample(self.carrot_time_s())
+
+    def hover(self, xy_m: FloatArray) -> None:
+        """Carrot and goal at `xy_m`, at rest."""
+        self.leg = plan_leg(xy_m, xy_m, self.carrot_time_s(), None, self.settings.v_max_mps)
+        self.goal = Goal(xy_m.copy(), None, self.settings.v_max_mps)
+
+    def set_goal(self, xy_m: FloatArray, arrive_by_s: float | None, max_speed_mps: float) -> None:
+        """A new leg to `xy_m` [2] by `arrive_by_s` from where the setpoint is (or the vehicle,
+        before any leg): smooth when planned (`smooth_legs`), else a carrot."""
+        now = self.carrot_time_s()
+        here_v = np.zeros(2)
+        here: FloatArray | None = None
+        if self.leg is not None:
+            here, here_v = self.leg.sample(now)
+        else:
+            here = vehicle_xy(self.link.status(), self._origin)
+        if here is None:
+            here = xy_m
+        if self.settings.smooth_legs and arrive_by_s is not None and arrive_by_s - now > 0.05:
+            self.leg = hermite_leg(here, here_v, xy_m, now, arrive_by_s, max_speed_mps)
+        else:
+            self.leg = plan_leg(here, xy_m, now, arrive_by_s, max_speed_mps)
+        self.goal = Goal(xy_m.copy(), arrive_by_s, max_speed_mps)
+
+    def reanchor(self, status: VehicleStatus) -> None:
+        """Restart the carrot at the vehicle, toward the current goal."""
+        here = vehicle_xy(status, self._origin)
+        goal = self.goal
+        if here is None or goal is None:
+            return
+        self.leg = plan_leg(
+            here, goal.xy_m, self.carrot_time_s(), goal.arrive_by_s, goal.max_speed_mps
+        )
+
+    def start(self) -> None:
+        """Start streaming (noting when, unless already streaming)."""
+        if not self._streaming:
+            self._streaming = True
+            self.since_s = self.time.now_s()
+
+    def stop(self) -> None:
+        """Stop streaming."""
+        self._streaming = False
+
+    def send(self, periodic: bool = True) -> None:
+        """Send the current setpoint; `periodic` marks the stream's own ticks (whose wall times
+        are kept for the jitter figures) as opposed to the immediate send of a new plan."""
+        if not self._streaming or self.leg is None or self.altitude_m is None:
+            return
+        if self.link.vehicle_address is None:
+            return
+        now = self.time.now_s()
+        xy, v = self.leg.sample(self.carrot_time_s())
+        msg = position_target_local_ned(
+            self.link.target,
+            scenario_to_ned(xy, self.altitude_m, self._origin),
+            scenario_to_ned_velocity(v) if self.settings.velocity_feed_forward else None,
+            self.settings.yaw_rad,
+            time_boot_ms=round(now * 1000.0),
+        )
+        if self.link.send(msg):
+            self.counters.setpoints_sent += 1
+            wall = time.monotonic()
+            if periodic:
+                self.setpoint_wall_s.append(wall)
+            firsts = self.first_setpoint_wall_s
+            if self.plan_slot >= 0 and self.plan_slot not in firsts:
+                firsts[self.plan_slot] = wall
+                if len(firsts) > TIMESTAMPS_KEPT:
+                    del firsts[next(iter(firsts))]  # the oldest plan (insertion order)

@@ -1,0 +1,96 @@
+"""Link supervision of one vehicle: losses, regains, interruptions, and when to re-enter OFFBOARD.
+
+A vehicle whose HEARTBEAT stops for `link_lost_after_s` (simulation seconds) is reported with
+link "lost"; the setpoint stream keeps running meanwhile (the uplink may still work). When
+heartbeats return while the bridge is flying the mission, the bridge re-enters OFFBOARD if the
+vehicle took its loss action. A radio gap shorter than link loss but longer than PX4's
+offboard-loss timeout (`interruption_after_s`) also leaves the vehicle in hold: after such a gap
+in its position stream, the bridge re-enters OFFBOARD once the vehicle reports the hold. A mode
+change by anyone else while the link is up is respected (no re-entry). Pure state: the bridge
+calls `observe` with each status and runs the re-entry itself (docs/reliability.md).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+from isac_mission.mavwire.status import VehicleStatus
+from isac_mission.service.bridge.counters import BridgeCounters
+from isac_mission.service.bridge.settings import BridgeSettings
+
+log = logging.getLogger(__name__)
+
+
+class LinkWatch:
+    """Follows one vehicle's link-state transitions and position-stream gaps.
+
+    Args:
+        settings: The bridge's settings (index, link_lost_after_s, interruption_after_s).
+        counters: The bridge's counters (link_losses, link_interruptions).
+    """
+
+    def __init__(self, settings: BridgeSettings, counters: BridgeCounters) -> None:
+        self.settings = settings
+        self.counters = counters
+        self._reported_lost = True
+        self._ever_ok = False
+        self._last_position_s: float | None = None
+        self._reentry_watch_until_s = -math.inf
+        """After the vehicle's stream resumes from a gap, re-enter OFFBOARD until this time if
+        the vehicle reports the offboard-loss hold (the gap may be shorter than link loss)."""
+
+    @property
+    def index(self) -> int:
+        """Vehicle index m."""
+        return self.settings.index
+
+    def observe(
+        self, st: VehicleStatus, now_s: float, want_offboard: bool, reentry_idle: bool
+    ) -> bool:
+        """Take status `st` at simulation time `now_s`; True when the bridge should start
+        re-entering OFFBOARD (it wants OFFBOARD and no re-entry is running)."""
+        start = self._watch_interruptions(st, now_s, want_offboard, reentry_idle)
+        if st.lost == self._reported_lost:
+            return start
+        self._reported_lost = st.lost
+        if st.lost:
+            if self._ever_ok:
+                self.counters.link_losses += 1
+                log.warning(
+                    "vehicle %d: link lost (no heartbeat for %.1f s)",
+                    self.index,
+                    self.settings.link_lost_after_s,
+                )
+            return start
+        regained = self._ever_ok
+        self._ever_ok = True
+        if regained:
+            log.info("vehicle %d: link regained (mode %s)", self.index, st.mode)
+            # A re-entry the interruption watch has just asked for is the one to run.
+            return start or (want_offboard and reentry_idle)
+        return start
+
+    def _watch_interruptions(
+        self, st: VehicleStatus, now_s: float, want_offboard: bool, reentry_idle: bool
+    ) -> bool:
+        if st.position_s is not None:
+            last, self._last_position_s = self._last_position_s, st.position_s
+            if last is not None and st.position_s - last > self.settings.interruption_after_s:
+                log.warning(
+                    "vehicle %d: no position for %.1f s; link interrupted",
+                    self.index,
+                    st.position_s - last,
+                )
+                self.counters.link_interruptions += 1
+                self._reentry_watch_until_s = now_s + 3.0 * self.settings.interruption_after_s + 2.0
+        if (
+            now_s <= self._reentry_watch_until_s
+            and not st.lost
+            and st.mode != "offboard"
+            and want_offboard
+            and reentry_idle
+        ):
+            self._reentry_watch_until_s = -math.inf
+            return True
+        return False

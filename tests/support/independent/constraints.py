@@ -1,0 +1,219 @@
+"""The paper's constraints (14a)-(14j), re-derived and checked slot by slot on a trace.
+
+Units: SI throughout; positions [M, 2] in the scenario plane (see the package doc).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from tests.support.independent.common import Array, as_trace, config_value
+
+CONSTRAINTS = ("14a", "14b", "14c", "14d", "14e", "14f/g", "14h", "14i", "14j")
+"""The labels check_constraints uses (14e is the N_a capacity; 14f and 14g are checked together:
+each UAV must name exactly one valid BS)."""
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One broken constraint at one slot.
+
+    constraint: "14a" .. "14j" (see CONSTRAINTS); uavs: 0-based UAV indices involved (for 14e
+    the UAVs sharing the over-full BS); value and limit in the constraint's own unit (bit/s for
+    14a, m for 14b/14h/14i/14j, a share for 14c/14d, a count for 14e, the BS index for 14f/g);
+    status: the slot's logged status, so the caller can decide what an infeasible slot may break.
+    """
+
+    slot: int
+    constraint: str
+    uavs: tuple[int, ...]
+    value: float
+    limit: float
+    status: str
+    detail: str
+
+    def __str__(self) -> str:
+        who = ",".join(str(m) for m in self.uavs)
+        return (
+            f"slot {self.slot} ({self.status}): {self.constraint} UAV {who}: {self.detail}: "
+            f"{self.value:.9g} vs limit {self.limit:.9g}"
+        )
+
+
+def control_range_m(config: Mapping[str, Any]) -> float:
+    """d_th = sqrt(P_bs beta0 / (noise_w gamma_th) - (H - H_bs)^2) (14b), m; 0 if it never closes."""
+    p_bs, beta0 = float(config_value(config, "P_bs")), float(config_value(config, "beta0"))
+    noise, gamma = float(config_value(config, "noise_w")), float(config_value(config, "gamma_th"))
+    dh = float(config_value(config, "H")) - float(config_value(config, "H_bs"))
+    sq = p_bs * beta0 / (noise * gamma) - dh * dh
+    return math.sqrt(sq) if sq > 0.0 else 0.0
+
+
+def uplink_rate_bps(eta: float, horizontal_m: float, config: Mapping[str, Any]) -> float:
+    """eta B log2(1 + Pu beta0 / (noise_w (d^2 + (H - H_bs)^2))) (eq. 1-2), bit/s."""
+    bandwidth, pu = float(config_value(config, "B")), float(config_value(config, "Pu"))
+    beta0, noise = float(config_value(config, "beta0")), float(config_value(config, "noise_w"))
+    dh = float(config_value(config, "H")) - float(config_value(config, "H_bs"))
+    snr = pu * beta0 / noise / (horizontal_m * horizontal_m + dh * dh)
+    return eta * bandwidth * math.log2(1.0 + snr)
+
+
+def _dist(a: Array, b: Array) -> float:
+    return math.hypot(float(a[0] - b[0]), float(a[1] - b[1]))
+
+
+@dataclass(frozen=True)
+class _Limits:
+    """The constants the constraints need, read once from the config."""
+
+    bs_xy: Array
+    start_xy: Array
+    r_th: float
+    n_a: int
+    step_m: float
+    d_safe: float
+    d_th: float
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> _Limits:
+        return cls(
+            bs_xy=np.asarray(config_value(cfg, "bs_xy"), dtype=float).reshape(-1, 2),
+            start_xy=np.asarray(config_value(cfg, "uav_start_xy"), dtype=float).reshape(-1, 2),
+            r_th=float(config_value(cfg, "r_th")),
+            n_a=int(config_value(cfg, "n_a")),
+            step_m=float(config_value(cfg, "v_max")) * float(config_value(cfg, "dt")),
+            d_safe=float(config_value(cfg, "d_safe")),
+            d_th=control_range_m(cfg),
+        )
+
+
+def _bs_index(k: Any, n_bs: int) -> int | None:
+    """k as a valid 0-based BS index, or None."""
+    if isinstance(k, bool | np.bool_) or not isinstance(k, int | np.integer):
+        return None
+    return int(k) if 0 <= int(k) < n_bs else None
+
+
+def _check_slot(
+    rec: Any,
+    cfg: Mapping[str, Any],
+    lim: _Limits,
+    prev_xy: Array,
+    elapsed: int,
+    tol_m: float,
+    rate_rtol: float,
+    share_tol: float,
+) -> list[Violation]:
+    n, status = int(rec.slot), str(rec.status)
+    q = np.asarray(rec.uav_xy, dtype=float).reshape(-1, 2)
+    eta = np.asarray(rec.eta, dtype=float).reshape(-1)
+    assoc = list(np.asarray(rec.assoc).reshape(-1))
+    n_uav, n_bs = q.shape[0], lim.bs_xy.shape[0]
+    out: list[Violation] = []
+
+    def flag(c: str, uavs: tuple[int, ...], value: float, limit: float, detail: str) -> None:
+        out.append(Violation(n, c, uavs, float(value), float(limit), status, detail))
+
+    # 14c, 14d: shares
+    total = float(np.sum(eta))
+    if not abs(total - 1.0) <= share_tol:
+        flag("14c", tuple(range(n_uav)), total, 1.0, "bandwidth shares do not sum to 1")
+    share_ok = [bool(-share_tol <= e <= 1.0 + share_tol) for e in eta]
+    for m, e in enumerate(eta):
+        if not share_ok[m]:
+            flag("14d", (m,), e, 0.0 if not e >= 0.0 else 1.0, "share outside [0, 1]")
+    # A vehicle outside the plan (its link lost) is marked by BS -1 and share 0: it has no link
+    # to check (14a, 14f/g); it still counts for 14b-14j.
+    unplanned = {m for m, k in enumerate(assoc) if k == -1 and eta[m] == 0.0}
+    # 14f/g: exactly one valid BS per UAV
+    bs_of = [_bs_index(k, n_bs) for k in assoc]
+    for m, k in enumerate(assoc):
+        if bs_of[m] is None and m not in unplanned:
+            value = float(k) if isinstance(k, int | float | np.number) else math.nan
+            flag("14f/g", (m,), value, n_bs - 1, f"BS index not an integer in [0, {n_bs})")
+    # 14e: capacity N_a per BS
+    for k in range(n_bs):
+        users = tuple(m for m in range(n_uav) if bs_of[m] == k)
+        if len(users) > lim.n_a:
+            flag("14e", users, len(users), lim.n_a, f"BS {k} serves more than N_a UAVs")
+    # 14a: rate to the associated BS (only where the share and the BS index are valid)
+    for m in range(n_uav):
+        k_m = bs_of[m]
+        if k_m is None or not share_ok[m]:
+            continue
+        # The position tolerance applies here too: the rate tol_m metres closer to the BS.
+        rate = uplink_rate_bps(float(eta[m]), max(_dist(q[m], lim.bs_xy[k_m]) - tol_m, 0.0), cfg)
+        if not rate >= lim.r_th * (1.0 - rate_rtol):
+            flag("14a", (m,), rate, lim.r_th, f"rate to BS {k_m} below R_th (bit/s)")
+    # 14b: control range of the nearest BS
+    for m in range(n_uav):
+        nearest = min(_dist(q[m], w) for w in lim.bs_xy)
+        if not nearest <= lim.d_th + tol_m:
+            flag("14b", (m,), nearest, lim.d_th, "nearest BS beyond control range d_th (m)")
+    # 14h: speed limit since the previous record (or the start positions)
+    if prev_xy.shape == q.shape:
+        allowed = lim.step_m * elapsed
+        for m in range(n_uav):
+            moved = _dist(q[m], prev_xy[m])
+            if not moved <= allowed + tol_m:
+                flag("14h", (m,), moved, allowed, f"moved too far in {elapsed} slot(s) (m)")
+    else:
+        flag("14h", tuple(range(n_uav)), n_uav, prev_xy.shape[0], "number of UAVs changed")
+    # 14i: UAV-UAV separation
+    for i in range(n_uav):
+        for j in range(i + 1, n_uav):
+            gap = _dist(q[i], q[j])
+            if not gap >= lim.d_safe - tol_m:
+                flag("14i", (i, j), gap, lim.d_safe, "UAVs closer than D_s (m)")
+    # 14j: UAV-predicted target separation
+    target = np.asarray(rec.target_pred, dtype=float).reshape(-1)[:2]
+    for m in range(n_uav):
+        gap = _dist(q[m], target)
+        if not gap >= lim.d_safe - tol_m:
+            flag("14j", (m,), gap, lim.d_safe, "UAV closer than D_s to the predicted target (m)")
+    return out
+
+
+def check_constraints(
+    trace: Any,
+    tol_m: float = 1e-6,
+    *,
+    rate_rtol: float = 1e-9,
+    share_tol: float = 1e-9,
+) -> list[Violation]:
+    """Re-check every slot of a trace (or trace path) against (14a)-(14j) of the paper.
+
+    Uses the config keys B, Pu, beta0, noise_w, H, H_bs, P_bs, gamma_th, r_th, n_a, v_max, dt,
+    d_safe, bs_xy and uav_start_xy (ValueError names a missing one).
+    - 14a  eta_m B log2(1 + Pu beta0 / noise_w / (||q_m - w_k||^2 + dH^2)) >= r_th (1 - rate_rtol)
+           for the BS k the UAV is associated with; checked only where the UAV's share (14d) and
+           BS index (14f/g) are valid, which are reported under their own labels instead.
+    - 14b  min_k ||q_m - w_k|| <= d_th + tol_m, d_th recomputed from P_bs, beta0, ... .
+    - 14c  |sum_m eta_m - 1| <= share_tol;  14d  -share_tol <= eta_m <= 1 + share_tol.
+    - 14e  at most n_a UAVs per BS;  14f/g  each assoc entry is an integer in [0, K).
+    - 14h  ||q_n - q_prev|| <= v_max dt s + tol_m, s = slots elapsed since the previous record;
+           the first record is compared with uav_start_xy (the positions at slot 0) with
+           s = max(1, its slot number).
+    - 14i  ||q_i - q_j|| >= d_safe - tol_m;  14j  ||q_m - target_pred[:2]|| >= d_safe - tol_m.
+    A UAV with BS -1 and share 0 is outside the plan (link lost): 14a and 14f/g skip it.
+    Non-finite values count as violations. Every slot is checked whatever its status; each
+    Violation carries the status so the caller decides what a non-"ok" slot may break.
+    """
+    tr = as_trace(trace)
+    lim = _Limits.from_config(tr.config)
+    out: list[Violation] = []
+    prev_xy, prev_slot = lim.start_xy, None
+    for rec in tr.slots:
+        n = int(rec.slot)
+        elapsed = max(1, n) if prev_slot is None else n - prev_slot
+        out += _check_slot(rec, tr.config, lim, prev_xy, elapsed, tol_m, rate_rtol, share_tol)
+        prev_xy, prev_slot = np.asarray(rec.uav_xy, dtype=float).reshape(-1, 2), n
+    return out
+
+
+__all__ = ["CONSTRAINTS", "Violation", "check_constraints", "control_range_m", "uplink_rate_bps"]
