@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from isac_mission.service.bus import BusSettings
+from isac_mission.bus import BusSettings
 from sim.autopilot import GCS_BASE_PORT, OFFBOARD_BASE_PORT, PX4_SITL_ORIGIN, GeoPoint
 
 StartMode = Literal["immediate", "offboard"]

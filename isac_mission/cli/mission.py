@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
+from isac_mission.bus import ZenohBus
+from isac_mission.bus.security import default_endpoint, secured_settings
 from isac_mission.config import Scenario
 from isac_mission.errors import IsacError
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
-from isac_mission.service.bus import ZenohBus
-from isac_mission.service.bus_security import default_endpoint, secured_settings
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.report import GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings

@@ -8,16 +8,9 @@ import socket
 
 import pytest
 
+from isac_mission.bus import DEFAULT_ENDPOINT, BusSettings, ZenohBus, make_config, tcp_loopback
 from isac_mission.errors import ConfigError
-from isac_mission.service.bus import (
-    DEFAULT_ENDPOINT,
-    BusSettings,
-    Keys,
-    ZenohBus,
-    make_config,
-    tcp_loopback,
-    uav_index,
-)
+from isac_mission.wire import Keys, uav_index
 
 TIMEOUT_S = 20.0
 

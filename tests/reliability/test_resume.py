@@ -29,11 +29,11 @@ import pytest
 import yaml
 
 import isac_mission.records.writer as trace_mod
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.planning.slot import SolverKit
 from isac_mission.records import SlotRecord, Trace, TraceWriter, read_trace
-from isac_mission.service.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from sim.world import run_world

@@ -47,6 +47,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from isac_mission import wire
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
@@ -57,11 +58,11 @@ from isac_mission.mavwire.link import MavlinkLink
 from isac_mission.mavwire.signing import new_encoder, pack
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.ground.report import SlotEvent
 from isac_mission.timebase import FuncTime
 from isac_mission.wire import (
     ClockMsg,
+    Keys,
     decode_clock,
     decode_detection,
     decode_telemetry,

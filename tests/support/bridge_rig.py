@@ -18,12 +18,12 @@ from typing import Any
 
 import numpy as np
 
+from isac_mission.bus import ZenohBus
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
-from isac_mission.service.bus import Keys, ZenohBus
 from isac_mission.timebase import SlotTimeline, reached
-from isac_mission.wire import ClockMsg, TelemetryMsg, decode_telemetry, encode_clock
+from isac_mission.wire import ClockMsg, Keys, TelemetryMsg, decode_telemetry, encode_clock
 from sim.autopilot import Autopilot, AutopilotSettings
 from tests.support.sim_harness import SimRunner, free_udp_ports
 
