@@ -8,9 +8,11 @@ from typing import Any
 import pytest
 
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
+from isac_mission.config import MavlinkSigningKey
 from sim.autopilot.endpoint import Autopilot
 from sim.autopilot.settings import AutopilotSettings
 from tests.support.autopilot_client import Client, make_settings
+from tests.support.signing_peer import Peer
 from tests.support.sim_harness import SIM_SPEED, SimRunner
 
 
@@ -47,6 +49,21 @@ def fly(
     yield make
     for client in clients:
         client.close()
+
+
+@pytest.fixture
+def peers() -> Iterator[Callable[..., Peer]]:
+    """Factory `peers(dest, key)`: pymavlink peers of the signing tests, closed at teardown."""
+    made: list[Peer] = []
+
+    def make(dest: tuple[str, int], key: MavlinkSigningKey | None = None, **kw: Any) -> Peer:
+        peer = Peer(dest, key, **kw)
+        made.append(peer)
+        return peer
+
+    yield make
+    for peer in made:
+        peer.close()
 
 
 @pytest.fixture

@@ -10,14 +10,10 @@ deadlines.
 from __future__ import annotations
 
 import math
-import os
 
 import pytest
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("MAVLINK_DIALECT", "common")
-from pymavlink.dialects.v20 import common as mavlink2
-
+from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.modes import FlightMode
 from tests.support.autopilot_client import (
     HOLD,

@@ -10,15 +10,11 @@ deadlines.
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import pytest
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("MAVLINK_DIALECT", "common")
-from pymavlink.dialects.v20 import common as mavlink2
-
+from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.modes import FlightMode
 from sim.vehicle import VehicleLimits
 from tests.support.autopilot_client import (

@@ -10,18 +10,14 @@ deadlines.
 from __future__ import annotations
 
 import math
-import os
 import struct
 from typing import Any
 
 import numpy as np
 import pytest
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("MAVLINK_DIALECT", "common")
-from pymavlink.dialects.v20 import common as mavlink2
-
 from isac_mission.frames import scenario_to_geodetic
+from isac_mission.mavwire.dialect import mavlink2
 from sim.autopilot.params import ParamProtocol
 from tests.support.autopilot_client import HOLD, TAKEOFF_ALT_M, Client, make_settings
 from tests.support.sim_harness import wait_until
