@@ -55,6 +55,7 @@ from isac_mission.errors import MessageError
 from isac_mission.mavwire.builders import gcs_heartbeat, message_interval_command
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.modes import FlightMode
 from isac_mission.mavwire.signing import new_encoder, pack
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
@@ -69,7 +70,7 @@ from isac_mission.wire import (
     encode_clock,
     rejection_reason,
 )
-from sim.autopilot import AutopilotSettings, FlightMode
+from sim.autopilot.settings import AutopilotSettings
 from tests.support.loop_calls import call_on_loop
 from tests.support.mavlink_fuzz import mavlink_frames, random_datagrams, unknown_message
 from tests.support.ports import free_port_block
