@@ -42,7 +42,7 @@ from isac_mission.bus import ZenohBus
 from isac_mission.config import Scenario
 from isac_mission.timebase import SlotTimeline, reached
 from isac_mission.wire import Keys
-from sim.autopilot import Autopilot
+from sim.autopilot.endpoint import Autopilot
 from sim.clock import SimClock
 from sim.emulator import SensingEmulator
 from sim.lockstep import Lockstep

@@ -64,9 +64,10 @@ class LiveOptions:
     plan_safety_margin_m: float = 10.0
     plan_accel_fraction: float = 0.8
     link_outages: tuple[str, ...] = ()
+    """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S`
+    (sim.world_options)."""
     plan_budget_s: float | None = 1.0
     """Wall seconds a slot's planning may take (GroundSettings.plan_budget_s)."""
-    """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S` (sim.world_options)."""
 
     @property
     def trace_path(self) -> Path:

@@ -7,7 +7,7 @@ from collections.abc import AsyncIterator, Callable, Iterator
 import pytest
 
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
-from sim.autopilot import AutopilotSettings
+from sim.autopilot.settings import AutopilotSettings
 from tests.support.sim_harness import SIM_SPEED, SimRunner
 
 

@@ -32,6 +32,7 @@ from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.mavwire.builders import gcs_heartbeat, message_interval_command
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.modes import FlightMode
 from isac_mission.mavwire.signing import new_encoder, pack
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
@@ -40,7 +41,7 @@ from isac_mission.wire import (
     Keys,
     decode_telemetry,
 )
-from sim.autopilot import AutopilotSettings, FlightMode
+from sim.autopilot.settings import AutopilotSettings
 from tests.support.fuzz import FUZZ, WAIT_S
 from tests.support.loop_calls import call_on_loop
 from tests.support.mavlink_fuzz import mavlink_frames, random_datagrams, unknown_message
