@@ -95,6 +95,24 @@ def test_malformed_endpoints_are_refused(endpoint: str) -> None:
         BusSettings(listen=(endpoint,))
 
 
+def test_bus_settings_refuse_wrong_types_with_config_error_naming_the_setting() -> None:
+    with pytest.raises(ConfigError, match="zenoh multicast_scouting"):
+        BusSettings(multicast_scouting="yes")
+    with pytest.raises(ConfigError, match="zenoh mode: expected peer, client or router"):
+        BusSettings(mode="mesh")
+    with pytest.raises(ConfigError, match="zenoh connect_timeout_ms: must be > 0"):
+        BusSettings(connect_timeout_ms=0)
+    with pytest.raises(ConfigError, match="zenoh bogus"):
+        BusSettings(bogus=1)
+    with pytest.raises(ConfigError, match="expected a sequence of endpoints"):
+        BusSettings(connect="tcp/127.0.0.1:7447")
+    s = BusSettings(listen=["tcp/127.0.0.1:1"], connect=[])
+    assert (s.listen, s.connect) == (("tcp/127.0.0.1:1",), ())
+    assert s.with_changes(mode="client").mode == "client" and s.mode == "peer"
+    with pytest.raises(ConfigError, match="not loopback"):
+        s.with_changes(connect=("tcp/10.0.0.1:7447",))
+
+
 def test_keys_follow_the_design() -> None:
     k = Keys("paper")
     assert k.detections(0) == "isac/paper/detections/0"

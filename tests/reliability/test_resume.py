@@ -99,7 +99,7 @@ def _assert_every_slot_once(trace: Trace, n_slots: int) -> None:
 
 
 def _assert_continues_from(trace: Trace, last: SlotRecord, dt: float, kappa: float) -> None:
-    """Slot last+1 was computed from `last`'s estimate, P and J (DESIGN.md recursions)."""
+    """Slot last+1 was computed from `last`'s estimate, P and J (the recursions of docs/model.md)."""
     nxt = next(r for r in trace.slots if r.slot == last.slot + 1)
     F, W = cv_model(dt, kappa)
     x_pred = F @ np.asarray(last.target_est)
