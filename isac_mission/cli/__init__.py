@@ -2,9 +2,9 @@
 
 - `offline`: `check-config`, `simulate`
 - `sweep`: `sweep`
-- `live`: `run`, `serve` (the service side in `mission`; the embedded world in `embedded`, the
-  only module importing both `sim` and the service)
-- `world`: `sim` (the world alone)
+- `embedded`: `sim` (the world alone), and the world of `run` (`run_embedded`): the only module
+  importing `sim`, and so the only one importing both `sim` and the service
+- `live`: `run`, `serve` (the service side of a live mission is in `mission`)
 - `security`: `gen-certs`, `gen-users`
 
 Importing a command module registers its commands on `app`; the heavy imports stay inside the
@@ -20,7 +20,7 @@ from isac_mission.cli.app import app
 
 __all__ = ["app", "main"]
 
-COMMAND_GROUPS = ("offline", "sweep", "world", "live", "security")
+COMMAND_GROUPS = ("offline", "sweep", "embedded", "live", "security")
 """Command modules in `--help` order; importing one registers its commands on `app`."""
 
 for _group in COMMAND_GROUPS:

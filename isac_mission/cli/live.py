@@ -18,7 +18,6 @@ from isac_mission.cli.app import (
     err_console,
     load_or_exit,
 )
-from isac_mission.planning.slot import METHODS
 from isac_mission.quiet import quiet_highs_banner
 
 
@@ -48,6 +47,7 @@ def _live(
 
     from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve, summarize_live
     from isac_mission.errors import IsacError
+    from isac_mission.planning.slot import METHODS
     from isac_mission.service.ground.report import SlotEvent
 
     s = load_or_exit(config)

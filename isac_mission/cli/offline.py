@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, cast
+from typing import TYPE_CHECKING, Annotated, cast
 
 import typer
 from rich.table import Table
 
 from isac_mission.cli.app import ConfigArg, app, console, err_console, load_or_exit
-from isac_mission.planning.slot import METHODS, Method
 from isac_mission.quiet import quiet_highs_banner
+
+if TYPE_CHECKING:
+    from isac_mission.planning.slot import Method
 
 
 @app.command("check-config")
@@ -57,6 +59,7 @@ def simulate(
 ) -> None:
     """Offline closed loop (Section II-C) for every method, Monte Carlo with common random numbers."""
     from isac_mission.experiment.report import simulate_report
+    from isac_mission.planning.slot import METHODS
 
     s = load_or_exit(config)
     chosen = [m.strip() for m in methods.split(",") if m.strip()]
@@ -68,7 +71,7 @@ def simulate(
     out_dir = out if out is not None else Path("out") / f"simulate-{s.mission_id}"
     simulate_report(
         s,
-        [cast(Method, m) for m in chosen],
+        [cast("Method", m) for m in chosen],
         runs=runs,
         seed=s.seed if seed is None else seed,
         out_dir=out_dir,

@@ -52,7 +52,7 @@ def test_every_command_is_registered_in_help_order() -> None:
         "gen-certs",
         "gen-users",
     ]
-    assert COMMAND_GROUPS[:5] == ("offline", "sweep", "world", "live", "security")
+    assert COMMAND_GROUPS[:5] == ("offline", "sweep", "embedded", "live", "security")
 
 
 def test_check_config_takes_a_shipped_scenario_by_name() -> None:
@@ -67,3 +67,15 @@ def test_an_unknown_scenario_name_exits_2_naming_the_choices() -> None:
     assert result.exit_code == 2
     assert "no such file, nor a shipped scenario" in result.output
     assert "paper-literal" in result.output
+
+
+def test_starting_the_cli_loads_neither_the_simulator_nor_the_service() -> None:
+    code = (
+        "import sys, isac_mission.cli; "
+        "print(sorted({m.split('.')[0] if m.startswith('sim') else m for m in sys.modules "
+        "if m == 'sim' or m.startswith(('sim.', 'isac_mission.service', 'zenoh', 'cvxpy'))}))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    assert out.stdout.strip() == "[]"
