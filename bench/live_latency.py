@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import load_scenario
 from isac_mission.quiet import quiet_highs_banner
-from isac_mission.service.bus import tcp_loopback
 
 
 def _free_tcp_port() -> int:

@@ -18,9 +18,8 @@ from typing import Protocol
 import numpy as np
 
 from isac_mission.errors import MessageError
-from isac_mission.service.bus import Keys
 from isac_mission.types import Detections, FloatArray
-from isac_mission.wire import PlanMsg, decode_plan, detection_messages, encode_detection
+from isac_mission.wire import Keys, PlanMsg, decode_plan, detection_messages, encode_detection
 from sim.sensing import Sensor, equal_shares
 
 log = logging.getLogger(__name__)

@@ -38,10 +38,11 @@ from __future__ import annotations
 import asyncio
 import logging
 
+from isac_mission.bus import ZenohBus
 from isac_mission.config import Scenario
-from isac_mission.service.bus import Keys, ZenohBus
 from isac_mission.timebase import SlotTimeline, reached
-from sim.autopilot import Autopilot
+from isac_mission.wire import Keys
+from sim.autopilot.endpoint import Autopilot
 from sim.clock import SimClock
 from sim.emulator import SensingEmulator
 from sim.lockstep import Lockstep

@@ -14,8 +14,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.mavwire.modes import FlightMode
 from isac_mission.types import FloatArray
-from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
+from sim.autopilot.endpoint import Autopilot
+from sim.autopilot.settings import AutopilotSettings
 from sim.sensing import SensingModel, Sensor
 from sim.target import CvTarget, ScriptedTarget, TargetModel
 from sim.vehicle import VehicleLimits

@@ -8,8 +8,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from isac_mission.service.bus import BusSettings
-from sim.autopilot import GCS_BASE_PORT, OFFBOARD_BASE_PORT, PX4_SITL_ORIGIN, GeoPoint
+from isac_mission.bus import BusSettings
+from isac_mission.frames import PX4_SITL_ORIGIN, GeoPoint
+from isac_mission.mavwire.ports import GCS_BASE_PORT, OFFBOARD_BASE_PORT
 
 StartMode = Literal["immediate", "offboard"]
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import math
 
-from isac_mission.service.bus import Keys, ZenohBus
+from isac_mission.bus import ZenohBus
 from isac_mission.timebase import UNPACED_SPEED, SlotTimeline, reached
 from isac_mission.types import FloatArray
-from isac_mission.wire import ClockMsg, TruthMsg, encode_clock, encode_truth
+from isac_mission.wire import ClockMsg, Keys, TruthMsg, encode_clock, encode_truth
 
 
 class WorldOutputs:

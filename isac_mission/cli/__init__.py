@@ -6,6 +6,7 @@
   importing `sim`, and so the only one importing both `sim` and the service
 - `live`: `run`, `serve` (the service side of a live mission is in `mission`)
 - `security`: `gen-certs`, `gen-users`
+- `schema`: `schema` (the JSON Schema of every bus message)
 
 Importing a command module registers its commands on `app`; the heavy imports stay inside the
 commands, so `isac-mission --version` and `--help` are fast.
@@ -20,7 +21,7 @@ from isac_mission.cli.app import app
 
 __all__ = ["app", "main"]
 
-COMMAND_GROUPS = ("offline", "sweep", "embedded", "live", "security")
+COMMAND_GROUPS = ("offline", "sweep", "embedded", "live", "security", "schema")
 """Command modules in `--help` order; importing one registers its commands on `app`."""
 
 for _group in COMMAND_GROUPS:

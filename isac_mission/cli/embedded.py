@@ -66,7 +66,7 @@ def sim(
     import logging
     import signal
 
-    from isac_mission.service.bus_security import default_endpoint, secured_settings
+    from isac_mission.bus.security import default_endpoint, secured_settings
     from sim.world import run_world
     from sim.world_options import WorldOptions, parse_outages
 
@@ -140,9 +140,9 @@ async def run_embedded(
     on_status: Callable[[str], None] | None = None,
 ) -> LiveResult:
     """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh."""
+    from isac_mission.bus import ZenohBus
+    from isac_mission.bus.security import secured_settings
     from isac_mission.cli.mission import fly_mission, ground_endpoint
-    from isac_mission.service.bus import ZenohBus
-    from isac_mission.service.bus_security import secured_settings
     from sim.world import run_world
     from sim.world_options import WorldOptions, parse_outages
 

@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
+from isac_mission.bus import ZenohBus
+from isac_mission.bus.security import default_endpoint, secured_settings
 from isac_mission.config import Scenario
 from isac_mission.errors import IsacError
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
-from isac_mission.service.bus import ZenohBus
-from isac_mission.service.bus_security import default_endpoint, secured_settings
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.report import GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
@@ -64,9 +64,10 @@ class LiveOptions:
     plan_safety_margin_m: float = 10.0
     plan_accel_fraction: float = 0.8
     link_outages: tuple[str, ...] = ()
+    """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S`
+    (sim.world_options)."""
     plan_budget_s: float | None = 1.0
     """Wall seconds a slot's planning may take (GroundSettings.plan_budget_s)."""
-    """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S` (sim.world_options)."""
 
     @property
     def trace_path(self) -> Path:

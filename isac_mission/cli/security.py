@@ -17,9 +17,9 @@ def gen_certs(
     days: Annotated[int, typer.Option(min=1, help="Validity in days.")] = 365,
     force: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
 ) -> None:
-    """A local CA and a TLS certificate for 127.0.0.1 / localhost (needs the openssl command),
-    for security.zenoh.tls (README, "Security")."""
-    from isac_mission.service.certs import generate_certs
+    """A local CA and a TLS certificate for 127.0.0.1 / localhost (made with the
+    cryptography library), for security.zenoh.tls (README, "Security")."""
+    from isac_mission.bus.certs import generate_certs
 
     try:
         files = generate_certs(out_dir, days=days, force=force)
@@ -45,8 +45,8 @@ def gen_users(
     """A Zenoh users file (`user:password` lines, random passwords) for security.zenoh.users_file;
     by default the users ground, world, operator and observer. Prints the users, never the
     passwords."""
+    from isac_mission.bus.certs import generate_users_file
     from isac_mission.config import ZenohSecurityConfig
-    from isac_mission.service.certs import generate_users_file
 
     cfg = load_or_exit(config).security.zenoh if config is not None else ZenohSecurityConfig()
     try:

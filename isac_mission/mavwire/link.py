@@ -3,7 +3,7 @@
 The link works like MAVSDK's `udpin://127.0.0.1:14540+m`: it binds 127.0.0.1:(base + m), learns
 the vehicle's address from the first packet of the vehicle's system, and replies there. It is an
 `asyncio.DatagramProtocol`; each datagram goes through the one datagram parser
-(`parsing.parse_datagram`, pymavlink's `parse_buffer`), and every message is dispatched to the
+(`parsing.DatagramParser`, pymavlink's `parse_buffer`), and every message is dispatched to the
 handlers registered for its type (a dict keyed by message type). A handler that raises is logged and counted in `errors["handler_error"]`; it never stops
 the link. A message type without a handler is noted once in the log and counted in `ignored`.
 Bad input is counted per reason in `errors`: the parser's rejections (`garbage`, `bad_crc`,
@@ -52,7 +52,7 @@ from isac_mission.config import MavlinkSigningKey
 from isac_mission.errors import LinkError
 from isac_mission.mavwire.builders import Target
 from isac_mission.mavwire.commands import CommandProtocol
-from isac_mission.mavwire.parsing import Rejection, parse_datagram
+from isac_mission.mavwire.parsing import DatagramParser, Rejection
 from isac_mission.mavwire.ports import (
     AUTOPILOT_COMPONENT_ID,
     GCS_COMPONENT_ID,
@@ -124,6 +124,7 @@ class MavlinkLink(asyncio.DatagramProtocol):
                 signing.source,
                 signing.link_id,
             )
+        self._datagrams = DatagramParser(self._encoder)
         self._transport: asyncio.DatagramTransport | None = None
         self._address: Address | None = None
         self._system_id: int | None = system_id
@@ -205,7 +206,7 @@ class MavlinkLink(asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: Address) -> None:
         """Parse one datagram and dispatch its messages (UDP keeps packets whole); count what
         the parser refuses."""
-        for item in parse_datagram(self._encoder, data, addr):
+        for item in self._datagrams.parse(data, addr):
             if isinstance(item, Rejection):
                 self._count_error(item.reason, item.detail)
             else:

@@ -1,9 +1,9 @@
 """One datagram parser for both ends of a MAVLink link, with the reasons it refuses bytes.
 
-UDP keeps packets whole, so each datagram is parsed on its own by a fresh pymavlink parser
-(`signing.new_parser`, sharing the link's signing state: key, newest timestamp of every stream):
-nothing carries over, and a truncated or corrupt packet cannot swallow the next datagram.
-`parse_datagram` returns, in order, every message of the datagram and a `Rejection` for
+UDP keeps packets whole, so each datagram is parsed on its own (`DatagramParser`, with a pymavlink
+parser from `signing.new_parser`, sharing the link's signing state: key, newest timestamp of every
+stream): nothing carries over, and a truncated or corrupt packet cannot swallow the next datagram.
+`DatagramParser.parse` returns, in order, every message of the datagram and a `Rejection` for
 everything refused, with its reason:
 
 - `garbage`: bytes that are not MAVLink (no packet start);
@@ -49,7 +49,7 @@ REJECT_REASONS: tuple[RejectReason, ...] = (
     "parse_error",
     "truncated",
 )
-"""Every reason `parse_datagram` gives."""
+"""Every reason `DatagramParser.parse` gives."""
 
 
 @dataclass(frozen=True)
@@ -96,22 +96,33 @@ def rejection_of(msg: Any, parser: Any, addr: Address) -> Rejection | None:
     return None
 
 
-def parse_datagram(encoder: Any, data: bytes, addr: Address) -> list[Any]:
-    """The messages of one datagram from `addr`, in order, each either a pymavlink message of
-    the dialect or a `Rejection` (check with `isinstance(item, Rejection)`).
+class DatagramParser:
+    """The datagram parser of one link (its encoder's MAVLink address and signing state).
 
-    `encoder` is the link's `new_encoder()`; the parser shares its signing state.
+    One pymavlink parser is kept while datagrams parse cleanly and replaced by a fresh one after
+    a parse error or a datagram that ended inside a packet, so nothing carries over from one
+    datagram to the next: the same as a fresh parser per datagram, without building one each time.
     """
-    parser = new_parser(encoder)
-    refresh_signing_clock(parser)
-    try:
-        msgs = parser.parse_buffer(data) or []
-    except Exception as err:  # pymavlink raises on some malformed input even when robust
-        return [Rejection("parse_error", f"{err} from {addr}")]
-    items: list[Any] = []
-    for msg in msgs:
-        rejection = rejection_of(msg, parser, addr)
-        items.append(msg if rejection is None else rejection)
-    if parser.buf_len() > 0:
-        items.append(Rejection("truncated", f"{parser.buf_len()} bytes left over from {addr}"))
-    return items
+
+    def __init__(self, encoder: Any) -> None:
+        self._encoder = encoder
+        self._parser = new_parser(encoder)
+
+    def parse(self, data: bytes, addr: Address) -> list[Any]:
+        """The messages of one datagram from `addr`, in order, each either a pymavlink message
+        of the dialect or a `Rejection` (check with `isinstance(item, Rejection)`)."""
+        parser = self._parser
+        refresh_signing_clock(parser)
+        try:
+            msgs = parser.parse_buffer(data) or []
+        except Exception as err:  # pymavlink raises on some malformed input even when robust
+            self._parser = new_parser(self._encoder)
+            return [Rejection("parse_error", f"{err} from {addr}")]
+        items: list[Any] = []
+        for msg in msgs:
+            rejection = rejection_of(msg, parser, addr)
+            items.append(msg if rejection is None else rejection)
+        if parser.buf_len() > 0:
+            items.append(Rejection("truncated", f"{parser.buf_len()} bytes left over from {addr}"))
+            self._parser = new_parser(self._encoder)  # drop the partial packet
+        return items

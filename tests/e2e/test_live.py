@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 import yaml
 
+from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions, planning_scenario, summarize_live
 from isac_mission.config import Scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo
 from isac_mission.records import read_trace
-from isac_mission.service.bus import tcp_loopback
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import compare_pcrb
 from tests.support.live_cli import cli, serve_argv, sim_argv, start

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import load_scenario
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
-from isac_mission.wire import decode_detection
+from isac_mission.wire import Keys, decode_detection
 
 ROOT = Path(__file__).resolve().parents[2]
 START_TIMEOUT_S = 60.0  # interpreter start + imports on a loaded 2-core machine

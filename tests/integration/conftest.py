@@ -6,8 +6,8 @@ from collections.abc import AsyncIterator, Callable, Iterator
 
 import pytest
 
-from isac_mission.service.bus import BusSettings, ZenohBus, tcp_loopback
-from sim.autopilot import AutopilotSettings
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
+from sim.autopilot.settings import AutopilotSettings
 from tests.support.sim_harness import SIM_SPEED, SimRunner
 
 

@@ -15,7 +15,9 @@ from typing import TypeVar
 import numpy as np
 import pytest
 
-from sim.autopilot import AutopilotSettings, FlightMode, scenario_to_geodetic
+from isac_mission.frames import scenario_to_geodetic
+from isac_mission.mavwire.modes import FlightMode
+from sim.autopilot.settings import AutopilotSettings
 from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports
 
 mavsdk = pytest.importorskip("mavsdk.asyncio")

@@ -25,12 +25,11 @@ os.environ.setdefault("MAVLINK_DIALECT", "common")
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 
-from sim.autopilot import (
-    Autopilot,
-    AutopilotSettings,
-    FlightMode,
-    scenario_to_geodetic,
-)
+from isac_mission.frames import scenario_to_geodetic
+from isac_mission.mavwire.modes import FlightMode
+from sim.autopilot.endpoint import Autopilot
+from sim.autopilot.params import ParamProtocol
+from sim.autopilot.settings import AutopilotSettings
 from sim.vehicle import VehicleLimits
 from tests.support.sim_harness import SimRunner, free_udp_ports, wait_until
 
@@ -372,10 +371,10 @@ def test_gcs_link_streams_telemetry_and_accepts_commands(sim_runner) -> None:
 def test_handler_exception_is_counted_and_the_endpoint_keeps_working(
     fly, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    def boom(self: Autopilot, *args: Any) -> None:
+    def boom(self: ParamProtocol, *args: Any) -> None:
         raise RuntimeError("injected")
 
-    monkeypatch.setattr(Autopilot, "_on_param_request_list", boom)
+    monkeypatch.setattr(ParamProtocol, "on_request_list", boom)
     _runner, ap, client = fly()
     client.send(mavlink2.MAVLink_param_request_list_message(1, 1))
     wait_until(lambda: ap.rejected["handler_error"] == 1, 5.0, "handler error counted")

@@ -11,13 +11,13 @@ import contextlib
 import numpy as np
 import pytest
 
+from isac_mission.bus import BusSettings, ZenohBus
 from isac_mission.config import Scenario
+from isac_mission.mavwire.modes import FlightMode
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
-from isac_mission.service.bus import BusSettings, ZenohBus
 from isac_mission.types import SlotPlan, SolveReport
 from isac_mission.wire import PlanMsg, decode_detection, encode_plan
-from sim.autopilot import FlightMode
 from sim.world import World
 from sim.world_options import WorldOptions
 from tests.support.bridge_rig import (

@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from isac_mission.bus import ZenohBus
 from isac_mission.mavwire.builders import Target, hold_mode_command, message_interval_command
+from isac_mission.mavwire.modes import FlightMode
 from isac_mission.mavwire.signing import new_encoder, pack
-from isac_mission.service.bus import ZenohBus
-from sim.autopilot import FlightMode
 from tests.support.bridge_rig import (
     ALTITUDE_M,
     KEYS,

@@ -13,8 +13,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from isac_mission.service.bus import ZenohBus
-from sim.autopilot import FlightMode
+from isac_mission.bus import ZenohBus
+from isac_mission.mavwire.modes import FlightMode
 from tests.support.bridge_rig import (
     ALTITUDE_M,
     ARRIVE_TOL_M,

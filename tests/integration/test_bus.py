@@ -8,16 +8,9 @@ import socket
 
 import pytest
 
+from isac_mission.bus import DEFAULT_ENDPOINT, BusSettings, ZenohBus, make_config, tcp_loopback
 from isac_mission.errors import ConfigError
-from isac_mission.service.bus import (
-    DEFAULT_ENDPOINT,
-    BusSettings,
-    Keys,
-    ZenohBus,
-    make_config,
-    tcp_loopback,
-    uav_index,
-)
+from isac_mission.wire import Keys, uav_index
 
 TIMEOUT_S = 20.0
 
@@ -100,6 +93,24 @@ def test_non_loopback_endpoints_need_an_explicit_opt_in(endpoint: str) -> None:
 def test_malformed_endpoints_are_refused(endpoint: str) -> None:
     with pytest.raises(ConfigError, match="expected proto/host:port"):
         BusSettings(listen=(endpoint,))
+
+
+def test_bus_settings_refuse_wrong_types_with_config_error_naming_the_setting() -> None:
+    with pytest.raises(ConfigError, match="zenoh multicast_scouting"):
+        BusSettings(multicast_scouting="yes")
+    with pytest.raises(ConfigError, match="zenoh mode: expected peer, client or router"):
+        BusSettings(mode="mesh")
+    with pytest.raises(ConfigError, match="zenoh connect_timeout_ms: must be > 0"):
+        BusSettings(connect_timeout_ms=0)
+    with pytest.raises(ConfigError, match="zenoh bogus"):
+        BusSettings(bogus=1)
+    with pytest.raises(ConfigError, match="expected a sequence of endpoints"):
+        BusSettings(connect="tcp/127.0.0.1:7447")
+    s = BusSettings(listen=["tcp/127.0.0.1:1"], connect=[])
+    assert (s.listen, s.connect) == (("tcp/127.0.0.1:1",), ())
+    assert s.with_changes(mode="client").mode == "client" and s.mode == "peer"
+    with pytest.raises(ConfigError, match="not loopback"):
+        s.with_changes(connect=("tcp/10.0.0.1:7447",))
 
 
 def test_keys_follow_the_design() -> None:

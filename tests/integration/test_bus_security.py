@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import shutil
 import socket
 from collections.abc import AsyncIterator
 from dataclasses import replace
@@ -19,13 +18,14 @@ from pathlib import Path
 
 import pytest
 
+from isac_mission.bus import BusSettings, Subscription, ZenohBus, tcp_loopback
+from isac_mission.bus.certs import CertFiles, generate_certs, generate_users_file
+from isac_mission.bus.security import read_users_file, secured_settings
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions, summarize_live
 from isac_mission.config import Scenario, SecurityConfig, ZenohSecurityConfig, ZenohTlsConfig
 from isac_mission.errors import ConfigError
-from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus, tcp_loopback
-from isac_mission.service.bus_security import read_users_file, secured_settings
-from isac_mission.service.certs import CertFiles, generate_certs, generate_users_file
+from isac_mission.wire import Keys
 from tests.support.ports import free_port_block
 
 TIMEOUT_S = 20.0
@@ -34,8 +34,6 @@ REFUSED_TIMEOUT_S = 3.0
 MISSION = "sec"
 KEYS = Keys(MISSION)
 USERS = ("ground", "world", "operator", "observer")
-
-needs_openssl = pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")
 
 
 @pytest.fixture(scope="module")
@@ -49,8 +47,6 @@ def users_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def certs(tmp_path_factory: pytest.TempPathFactory) -> CertFiles:
     """A local CA and a certificate for 127.0.0.1 / localhost."""
-    if shutil.which("openssl") is None:
-        pytest.skip("needs the openssl command")
     return generate_certs(tmp_path_factory.mktemp("certs"))
 
 
@@ -74,8 +70,7 @@ def login(cfg: ZenohSecurityConfig, user: str, password: str | None = None) -> d
 def as_client(settings: BusSettings, **security: object) -> BusSettings:
     """`settings` in client mode (open fails at once without a link), security fields replaced."""
     assert settings.security is not None
-    return replace(
-        settings,
+    return settings.with_changes(
         mode="client",
         connect_timeout_ms=2000,
         security=replace(settings.security, **security),  # type: ignore[arg-type]
@@ -87,7 +82,7 @@ def leaf(
 ) -> BusSettings:
     """A session of `role` connecting to `endpoint` with the login in `env`."""
     s = secured_settings(cfg, MISSION, role, connect=(endpoint,), env=env)
-    return replace(s, mode=mode, connect_timeout_ms=2000 if mode == "client" else None)  # type: ignore[arg-type]
+    return s.with_changes(mode=mode, connect_timeout_ms=2000 if mode == "client" else None)
 
 
 @contextlib.asynccontextmanager
@@ -212,7 +207,6 @@ async def test_every_role_publishes_its_keys_and_everyone_reads_them(users_file:
                 assert [g for g in got if g in world_puts] == world_puts
 
 
-@needs_openssl
 async def test_tls_endpoint_needs_the_local_ca(
     users_file: Path, certs: CertFiles, tmp_path: Path
 ) -> None:
@@ -248,7 +242,6 @@ def test_a_tls_config_refuses_tcp_endpoints_and_names_the_fix(
         secured_settings(cfg, MISSION, "ground", listen=("tcp/127.0.0.1:7447",))
 
 
-@needs_openssl
 async def test_live_mission_flies_with_auth_acl_and_tls(
     paper: Scenario, users_file: Path, certs: CertFiles, tmp_path: Path
 ) -> None:
@@ -269,3 +262,26 @@ async def test_live_mission_flies_with_auth_acl_and_tls(
     summary = summarize_live(result)
     assert summary.slots == slots, result.report.last_error
     assert result.fleet_counters["plans applied"] >= slots
+
+
+def test_local_certificates_name_loopback_and_chain_to_the_local_ca(tmp_path: Path) -> None:
+    """gen-certs without any external program: the listener's certificate holds 127.0.0.1 and
+    localhost, is signed by the CA, is not itself a CA, and the private keys are owner-only."""
+    from cryptography import x509
+
+    files = generate_certs(tmp_path)
+    ca = x509.load_pem_x509_certificate(files.ca_file.read_bytes())
+    cert = x509.load_pem_x509_certificate(files.cert_file.read_bytes())
+    san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert [str(ip) for ip in san.get_values_for_type(x509.IPAddress)] == ["127.0.0.1"]
+    assert san.get_values_for_type(x509.DNSName) == ["localhost"]
+    assert cert.issuer == ca.subject
+    cert.verify_directly_issued_by(ca)
+    assert ca.extensions.get_extension_for_class(x509.BasicConstraints).value.ca
+    assert not cert.extensions.get_extension_for_class(x509.BasicConstraints).value.ca
+    for key in (files.ca_key_file, files.key_file):
+        assert key.stat().st_mode & 0o777 == 0o600
+    with pytest.raises(ConfigError, match="exists"):
+        generate_certs(tmp_path)
+    before = files.cert_file.read_bytes()
+    assert generate_certs(tmp_path, force=True).cert_file.read_bytes() != before

@@ -9,12 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
 from isac_mission.records import read_trace
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
-from isac_mission.wire import decode_health, decode_plan, decode_track
+from isac_mission.wire import Keys, decode_health, decode_plan, decode_track
 from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.independent.pcrb import compare_pcrb

@@ -26,6 +26,7 @@ import yaml
 
 os.environ.setdefault("MAVLINK20", "1")
 os.environ.setdefault("MAVLINK_DIALECT", "common")
+from isac_mission.bus import BusSettings, ZenohBus
 from isac_mission.config import (
     DEFAULT_SIGNING_KEY_ENV,
     MavlinkSigningKey,
@@ -36,14 +37,16 @@ from isac_mission.config import (
 from isac_mission.errors import LinkError
 from isac_mission.mavwire.builders import Target, arm_command, takeoff_command
 from isac_mission.mavwire.dialect import mavlink2
+from isac_mission.mavwire.modes import FlightMode
 from isac_mission.mavwire.signing import signing_timestamp
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.timebase import WallTime
-from sim.autopilot import Autopilot, AutopilotSettings, FlightMode
+from isac_mission.wire import Keys
+from sim.autopilot.endpoint import Autopilot
+from sim.autopilot.settings import AutopilotSettings
 from sim.world import World
 from sim.world_options import WorldOptions
 from tests.support.ports import free_port_block

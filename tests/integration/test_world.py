@@ -13,13 +13,14 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from isac_mission.bus import BusSettings, Subscription, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario, parse_scenario
-from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus, tcp_loopback
 from isac_mission.types import SlotPlan, SolveReport
 from isac_mission.wire import (
     AnyMsg,
     ClockMsg,
     DetectionMsg,
+    Keys,
     PlanMsg,
     TruthMsg,
     decode_any,

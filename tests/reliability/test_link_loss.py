@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.records import read_trace
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
-from isac_mission.wire import decode_health
+from isac_mission.wire import Keys, decode_health
 from tests.support.independent.constraints import check_constraints
 from tests.support.ports import free_port_block
 

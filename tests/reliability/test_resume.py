@@ -29,11 +29,11 @@ import pytest
 import yaml
 
 import isac_mission.records.writer as trace_mod
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.planning.slot import SolverKit
 from isac_mission.records import SlotRecord, Trace, TraceWriter, read_trace
-from isac_mission.service.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from sim.world import run_world
@@ -99,7 +99,7 @@ def _assert_every_slot_once(trace: Trace, n_slots: int) -> None:
 
 
 def _assert_continues_from(trace: Trace, last: SlotRecord, dt: float, kappa: float) -> None:
-    """Slot last+1 was computed from `last`'s estimate, P and J (DESIGN.md recursions)."""
+    """Slot last+1 was computed from `last`'s estimate, P and J (the recursions of docs/model.md)."""
     nxt = next(r for r in trace.slots if r.slot == last.slot + 1)
     F, W = cv_model(dt, kappa)
     x_pred = F @ np.asarray(last.target_est)

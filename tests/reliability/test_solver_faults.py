@@ -17,14 +17,14 @@ from pathlib import Path
 import cvxpy as cp
 import numpy as np
 
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.records import read_trace
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.types import SlotPlan
-from isac_mission.wire import ControlMsg, decode_plan, encode_control
+from isac_mission.wire import ControlMsg, Keys, decode_plan, encode_control
 from sim.world import run_world
 from sim.world_options import WorldOptions
 

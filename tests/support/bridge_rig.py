@@ -18,13 +18,14 @@ from typing import Any
 
 import numpy as np
 
+from isac_mission.bus import ZenohBus
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
-from isac_mission.service.bus import Keys, ZenohBus
 from isac_mission.timebase import SlotTimeline, reached
-from isac_mission.wire import ClockMsg, TelemetryMsg, decode_telemetry, encode_clock
-from sim.autopilot import Autopilot, AutopilotSettings
+from isac_mission.wire import ClockMsg, Keys, TelemetryMsg, decode_telemetry, encode_clock
+from sim.autopilot.endpoint import Autopilot
+from sim.autopilot.settings import AutopilotSettings
 from tests.support.sim_harness import SimRunner, free_udp_ports
 
 SPEED = 10.0

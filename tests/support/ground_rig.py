@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.radar import measure
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus, tcp_loopback
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.report import GroundReport
 from isac_mission.service.ground.settings import GroundSettings
@@ -32,6 +32,7 @@ from isac_mission.wire import (
     ClockMsg,
     DetectionMsg,
     HealthMsg,
+    Keys,
     PlanMsg,
     TrackMsg,
     decode_health,

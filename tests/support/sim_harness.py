@@ -16,7 +16,8 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-from sim.autopilot import Autopilot, AutopilotSettings
+from sim.autopilot.endpoint import Autopilot
+from sim.autopilot.settings import AutopilotSettings
 from sim.clock import SimClock
 from tests.support.loop_calls import call_on_loop
 

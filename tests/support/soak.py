@@ -36,9 +36,9 @@ from typing import Literal
 
 import numpy as np
 
+from isac_mission.bus import BusSettings, tcp_loopback
 from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve
 from isac_mission.config import Scenario
-from isac_mission.service.bus import BusSettings, tcp_loopback
 from isac_mission.service.ground.report import SlotEvent
 from sim.world import run_world
 from sim.world_options import WorldOptions

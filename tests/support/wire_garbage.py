@@ -25,8 +25,8 @@ from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 
+from isac_mission.bus import BusSettings, ZenohBus
 from isac_mission.config import Scenario
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.report import GroundReport
 from isac_mission.service.ground.settings import GroundSettings
@@ -34,6 +34,7 @@ from isac_mission.wire import (
     MAX_PAYLOAD_BYTES,
     ClockMsg,
     DetectionMsg,
+    Keys,
     TelemetryMsg,
     encode_clock,
     encode_detection,

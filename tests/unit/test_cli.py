@@ -79,3 +79,13 @@ def test_starting_the_cli_loads_neither_the_simulator_nor_the_service() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
     )
     assert out.stdout.strip() == "[]"
+
+
+def test_simulate_takes_a_shipped_scenario_by_name(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    argv = ["simulate", "paper", "--runs", "1", "--methods", "sd", "--workers", "1", "--no-plots"]
+    result = CliRunner().invoke(app, [*argv, "--out", str(out)], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    assert "paper: 1 runs" in result.output
+    assert (out / "summary.json").is_file()
+    assert len(list((out / "traces").glob("sd_run*.jsonl"))) == 1

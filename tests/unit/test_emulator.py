@@ -7,9 +7,8 @@ import json
 import numpy as np
 
 from isac_mission.config import parse_scenario
-from isac_mission.service.bus import Keys
 from isac_mission.types import SlotPlan, SolveReport
-from isac_mission.wire import PlanMsg, decode_detection, encode_plan
+from isac_mission.wire import Keys, PlanMsg, decode_detection, encode_plan
 from sim.emulator import SensingEmulator
 from sim.sensing import SensingModel, Sensor
 

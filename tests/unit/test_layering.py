@@ -42,7 +42,7 @@ def test_pure_modules_import_no_io(path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("library", "adapter"),
-    [("zenoh", "service/bus.py"), ("pymavlink", "mavwire/dialect.py")],
+    [("zenoh", "bus/session.py"), ("pymavlink", "mavwire/dialect.py")],
 )
 def test_each_io_library_has_one_adapter_in_the_package(library: str, adapter: str) -> None:
     users = {

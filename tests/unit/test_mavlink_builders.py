@@ -31,9 +31,13 @@ from isac_mission.mavwire.builders import (
 )
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.link import MavlinkLink
-from isac_mission.mavwire.modes import heartbeat_mode_name, px4_custom_mode, px4_mode_name
+from isac_mission.mavwire.modes import (
+    FlightMode,
+    heartbeat_mode_name,
+    px4_custom_mode,
+    px4_mode_name,
+)
 from isac_mission.mavwire.signing import new_encoder, pack
-from sim.autopilot import FlightMode
 
 VEHICLE = Target(system=3, component=1)
 VEHICLE_ADDR = ("127.0.0.1", 40000)

@@ -271,3 +271,55 @@ def test_track_carries_information_far_beyond_the_position_bound() -> None:
         decode_track(bad.replace(b'"J":[[1.0', b'"J":[[1e300', 1))
     with pytest.raises(MessageError, match=r"track\.x"):
         decode_track(bad.replace(b'"x":[0.0', b'"x":[2e9', 1))
+
+
+# ----------------------------------------------------------------------------- models
+
+
+def test_an_array_of_the_wrong_length_is_refused_as_such_whatever_it_holds() -> None:
+    truth = _obj(encode_truth(TruthMsg(1, 1.0, np.zeros(4))))
+    reason = _expect(_bytes({**truth, "target_x": [True, "x"]}), "truth.target_x", decode_truth)
+    assert reason == "truth.target_x: 2 values, expected 4"
+    track = _obj(encode_track(TrackMsg(7, 7.0, np.zeros(4), np.eye(4), np.eye(4), 1.0)))
+    reason = _expect(_bytes({**track, "P": [[1.0] * 4] * 3}), "track.P", decode_track)
+    assert reason == "track.P: 3 values, expected 4"
+
+
+def test_the_receivers_sizes_bound_the_indices_with_the_old_texts() -> None:
+    det = _obj(encode_detection(_detection()))
+    reason = _expect(_bytes({**det, "uav": -5}), "detection.uav", n_uavs=3)
+    assert reason == "detection.uav: -5 is outside [0, 2]"
+    reason = _expect(_bytes({**det, "range_m": -1e10}), "detection.range_m")
+    assert reason == "detection.range_m: -1e+10 is too large (limit 1e+09)"
+    plan = _obj(encode_plan(_plan()))
+    reason = _expect(_bytes({**plan, "assoc": [0, 1, 9]}), "plan.assoc[2]", decode_plan, n_bs=5)
+    assert reason == "plan.assoc[2]: 9 is outside [-1, 4]"
+
+
+def test_health_and_control_round_trip_and_are_checked() -> None:
+    health = wire.HealthMsg(3, 3.0, "ok", {"slots": 3}, "", {0: "active", 2: "excluded: lost"})
+    assert wire.decode_health(wire.encode_health(health)) == health
+    obj = _obj(wire.encode_health(health))
+    _expect(_bytes({**obj, "counters": {"x": -1}}), "health.counters.x", wire.decode_health)
+    _expect(_bytes({**obj, "vehicles": {"a": "active"}}), "health.vehicles.a", wire.decode_health)
+    control = wire.ControlMsg(-1, 0.5, {"rate_min_mbps": 2.0})
+    assert wire.decode_control(wire.encode_control(control)) == control
+    assert wire.decode_any(wire.encode_control(control)) == control
+    obj = _obj(wire.encode_control(control))
+    reason = _expect(_bytes({**obj, "command": "go"}), "control.command", wire.decode_control)
+    assert reason == "control.command: 'go' is not a command (expected 'set')"
+    _expect(_bytes({**obj, "params": {"x": 1}}), "control.params.x", wire.decode_control)
+    _expect(_bytes({**obj, "params": {"rate_min_mbps": 0}}), "control.params", wire.decode_control)
+
+
+def test_decode_any_names_the_field_of_the_message_it_recognised() -> None:
+    plan = _obj(encode_plan(_plan()))
+    _expect(_bytes({**plan, "solve_s": -1}), "plan.solve_s", decode_any)
+    _expect(_bytes({**plan, "schema": "isac/2"}), "schema", decode_any)
+    telemetry = _obj(
+        wire.encode_telemetry(
+            wire.TelemetryMsg(-1, 1.0, 0, np.zeros(2), 5.0, np.zeros(2), "hold", True, False, "ok")
+        )
+    )
+    reason = _expect(_bytes({**telemetry, "mode": "flying"}), "telemetry.mode", decode_any)
+    assert "'flying' is not one of" in reason

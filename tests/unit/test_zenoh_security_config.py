@@ -8,10 +8,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from isac_mission.config import ZenohSecurityConfig, ZenohTlsConfig, load_scenario
-from isac_mission.errors import ConfigError
-from isac_mission.service.bus import BusSecurity, BusSettings, Keys, acl_json, make_config
-from isac_mission.service.bus_security import (
+from isac_mission.bus import BusSecurity, BusSettings, acl_json, make_config
+from isac_mission.bus.certs import generate_users_file
+from isac_mission.bus.security import (
     bus_acl,
     bus_security,
     default_endpoint,
@@ -19,7 +18,9 @@ from isac_mission.service.bus_security import (
     resolve_login,
     secured_settings,
 )
-from isac_mission.service.certs import generate_users_file
+from isac_mission.config import ZenohSecurityConfig, ZenohTlsConfig, load_scenario
+from isac_mission.errors import ConfigError
+from isac_mission.wire import Keys
 
 ROOT = Path(__file__).resolve().parents[2]
 SECRET = "s3cret-Passw0rd"

@@ -14,10 +14,10 @@ import logging
 import time
 from collections.abc import Callable
 
+from isac_mission.bus import BusSettings, Subscription, ZenohBus
 from isac_mission.errors import IsacError, MessageError
-from isac_mission.service.bus import BusSettings, Keys, Subscription, ZenohBus
 from isac_mission.timebase import SimTime, SlotTimeline
-from isac_mission.wire import ClockMsg, decode_clock
+from isac_mission.wire import ClockMsg, Keys, decode_clock
 
 log = logging.getLogger(__name__)
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from isac_mission.bus import BusSettings, ZenohBus
 from isac_mission.config import Scenario
 from isac_mission.errors import IsacError, LinkError, MessageError
 from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
@@ -27,10 +28,9 @@ from isac_mission.service.bridge.clock_time import (
 from isac_mission.service.bridge.counters import FleetCounters
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
-from isac_mission.wire import PlanMsg, decode_plan
+from isac_mission.wire import Keys, PlanMsg, decode_plan
 
 log = logging.getLogger(__name__)
 

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from isac_mission.bus import BusSettings, ZenohBus
 from isac_mission.errors import LinkError
 from isac_mission.mavwire.builders import (
     arm_command,
@@ -42,10 +43,9 @@ from isac_mission.service.bridge.setpoints import SetpointStream
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.supervision import LinkWatch
 from isac_mission.service.bridge.telemetry import telemetry_message, vehicle_xy
-from isac_mission.service.bus import BusSettings, Keys, ZenohBus
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
-from isac_mission.wire import TelemetryMsg, encode_telemetry
+from isac_mission.wire import Keys, TelemetryMsg, encode_telemetry
 
 log = logging.getLogger(__name__)
 

@@ -17,11 +17,11 @@ from collections.abc import Callable
 
 import numpy as np
 
+from isac_mission.bus import Subscription, ZenohBus
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.planning.slot import SolverKit
 from isac_mission.records import SlotRecord, TraceWriter
-from isac_mission.service.bus import Keys, Subscription, ZenohBus
 from isac_mission.service.ground.assembler import DetectionAssembler
 from isac_mission.service.ground.exclusion import VehicleWatch
 from isac_mission.service.ground.fleet_plan import PlanningJob
@@ -34,6 +34,7 @@ from isac_mission.types import FloatArray, Gaussian, SlotPlan
 from isac_mission.wire import (
     MAX_REASON_CHARS,
     HealthMsg,
+    Keys,
     PlanMsg,
     TrackMsg,
     collect_detections,

@@ -15,17 +15,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
 
-from isac_mission.config import ZenohSecurityConfig, ZenohTopic
-from isac_mission.errors import ConfigError
-from isac_mission.service.bus import (
+from isac_mission.bus.settings import (
     DEFAULT_PORT,
     BusAcl,
     BusMode,
     BusRole,
     BusSecurity,
     BusSettings,
-    Keys,
 )
+from isac_mission.config import ZenohSecurityConfig, ZenohTopic
+from isac_mission.errors import ConfigError
+from isac_mission.wire.keys import Keys
 
 log = logging.getLogger(__name__)
 

@@ -1,0 +1,284 @@
+"""ZenohBus: a Zenoh session (`isac_mission.bus` is the only package that imports zenoh). A small typed pub/sub adapter.
+
+zenoh-python's API is synchronous and subscriber callbacks run on Zenoh-owned threads. The
+callback here only copies the key and the payload bytes and hands them to the asyncio loop with
+``loop.call_soon_threadsafe``; everything else happens on the loop. A subscription is an async
+iterator of ``(key, payload_bytes)`` and an async context manager that undeclares it on exit.
+
+Every session is configured explicitly (`bus.settings`, `bus.zenoh_config`): mode, multicast
+scouting off, explicit loopback listen and connect endpoints unless opted out.
+
+Close every bus (`close()`, or use it as a context manager): a process that exits with a
+callback subscriber still declared on an open session hangs at interpreter exit.
+
+Topology note (measured with zenoh 1.10): a peer or router hub forwards between *client* sessions
+connected to it, but not between *peer* sessions connected to it (peers are expected to mesh
+directly). A peer that connects to the ground loop reaches the ground loop; an observer that must
+see another leaf's data either runs in client mode or is the one the leaf connects to.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import AsyncIterator
+from types import TracebackType
+from typing import Any, Final
+
+import zenoh
+
+from isac_mission.bus.settings import BusSecurity, BusSettings
+from isac_mission.bus.zenoh_config import config_entries
+from isac_mission.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+
+def make_config(settings: BusSettings) -> zenoh.Config:
+    """The zenoh.Config for `settings` (`bus.zenoh_config.config_entries`, in order)."""
+    cfg = zenoh.Config()
+    for key, value in config_entries(settings).items():
+        cfg.insert_json5(key, value)
+    return cfg
+
+
+def _security_summary(sec: BusSecurity | None) -> str:
+    """What a log line may say about `sec`: the user name and which pieces are on, no secret."""
+    if sec is None:
+        return ""
+    parts = [f"user {sec.user}" if sec.user else "", "users file" if sec.users_file else ""]
+    parts += ["ACL" if sec.acl else "", "TLS" if sec.tls else ""]
+    shown = [p for p in parts if p]
+    return f" ({', '.join(shown)})" if shown else ""
+
+
+_CLOSED: Final = object()
+
+
+class Subscription:
+    """Samples of one key expression, delivered on the asyncio loop as (key, payload bytes).
+
+    Declared when created (by `ZenohBus.subscribe`, which must run on the loop); iterate with
+    ``async for``; ``async with`` or `close()` undeclares. When the queue (maxsize samples) is
+    full the oldest sample is dropped and counted in `dropped`. Iteration ends after `close()`.
+    """
+
+    def __init__(self, session: zenoh.Session, key_expr: str, maxsize: int) -> None:
+        self.key_expr = key_expr
+        self.dropped = 0
+        self.received = 0
+        self._loop = asyncio.get_running_loop()
+        self._queue: asyncio.Queue[Any] = asyncio.Queue(maxsize=maxsize)
+        self._closed = False
+        self._sub = session.declare_subscriber(key_expr, self._on_sample)
+
+    # Runs on a Zenoh thread: copy out and hand over, nothing else.
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        item = (str(sample.key_expr), sample.payload.to_bytes())
+        # RuntimeError: the loop is closed, the process is shutting down.
+        with contextlib.suppress(RuntimeError):
+            self._loop.call_soon_threadsafe(self._deliver, item)
+
+    def _deliver(self, item: Any) -> None:
+        if self._closed and item is not _CLOSED:
+            return
+        if self._queue.full():
+            self._queue.get_nowait()
+            self.dropped += 1
+        self._queue.put_nowait(item)
+
+    @property
+    def closed(self) -> bool:
+        """True after close()."""
+        return self._closed
+
+    def close(self) -> None:
+        """Undeclare the subscriber and end the iteration (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._sub.undeclare()  # type: ignore[no-untyped-call]
+        except Exception as err:  # session already closed: undeclare is moot
+            log.debug("undeclare %s: %s", self.key_expr, err)
+        try:
+            running = asyncio.get_running_loop()
+        except RuntimeError:
+            running = None
+        if running is self._loop:
+            self._deliver(_CLOSED)
+        else:
+            with contextlib.suppress(RuntimeError):
+                self._loop.call_soon_threadsafe(self._deliver, _CLOSED)
+
+    def __aiter__(self) -> Subscription:
+        return self
+
+    async def __anext__(self) -> tuple[str, bytes]:
+        if self._closed and self._queue.empty():
+            raise StopAsyncIteration
+        item = await self._queue.get()
+        if item is _CLOSED:
+            self._queue.put_nowait(_CLOSED)  # keep later __anext__ calls ending too
+            raise StopAsyncIteration
+        self.received += 1
+        key, data = item
+        return str(key), bytes(data)
+
+    async def get(self, timeout_s: float) -> tuple[str, bytes]:
+        """The next sample, or TimeoutError after timeout_s (wall seconds)."""
+        return await asyncio.wait_for(self.__anext__(), timeout_s)
+
+    async def __aenter__(self) -> Subscription:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+class ZenohBus:
+    """One Zenoh session with typed publish/subscribe. Create with `ZenohBus.open(settings)`."""
+
+    def __init__(self, session: zenoh.Session, settings: BusSettings) -> None:
+        self._session = session
+        self.settings = settings
+        self._subs: list[Subscription] = []
+        self._closed = False
+        self.published = 0
+
+    @classmethod
+    def open(cls, settings: BusSettings | None = None) -> ZenohBus:
+        """Open a session (blocking: about 0.5 s when a connect endpoint is up).
+
+        Raises ConfigError for invalid settings or when Zenoh refuses to open (client mode with
+        no reachable endpoint, a listen port in use, ...).
+        """
+        s = settings if settings is not None else BusSettings()
+        try:
+            session = zenoh.open(make_config(s))
+        except zenoh.ZError as err:
+            raise ConfigError(
+                f"zenoh: cannot open a {s.mode} session "
+                f"(listen {list(s.listen)}, connect {list(s.connect)}): {err}"
+            ) from None
+        log.info(
+            "zenoh %s session open: listen %s, connect %s%s",
+            s.mode,
+            s.listen,
+            s.connect,
+            _security_summary(s.security),
+        )
+        return cls(session, s)
+
+    @classmethod
+    async def open_async(cls, settings: BusSettings | None = None) -> ZenohBus:
+        """`open` in a worker thread, so the event loop keeps running meanwhile."""
+        return await asyncio.to_thread(cls.open, settings)
+
+    @property
+    def closed(self) -> bool:
+        """True after close()."""
+        return self._closed
+
+    def connected_sessions(self) -> int:
+        """How many peers and routers this session has a transport with now (0: not connected:
+        nothing up at the endpoint yet, or the login or certificate was refused)."""
+        info = self._session.info
+        return len(list(info.peers_zid())) + len(list(info.routers_zid()))
+
+    def publish(self, key: str, payload: bytes) -> None:
+        """Put payload bytes on `key` (non-blocking in practice; lost if nobody is connected)."""
+        if self._closed:
+            raise RuntimeError("publish on a closed ZenohBus")
+        self._session.put(key, payload)
+        self.published += 1
+
+    def subscribe(self, key_expr: str, *, maxsize: int = 1024) -> Subscription:
+        """Declare a subscriber now (call on the event loop); see `Subscription`."""
+        if self._closed:
+            raise RuntimeError("subscribe on a closed ZenohBus")
+        sub = Subscription(self._session, key_expr, maxsize)
+        self._subs = [s for s in self._subs if not s.closed]
+        self._subs.append(sub)
+        return sub
+
+    async def messages(
+        self, key_expr: str, *, maxsize: int = 1024
+    ) -> AsyncIterator[tuple[str, bytes]]:
+        """Async generator over (key, payload); undeclares the subscriber in `finally`.
+
+        The subscriber is declared at the first iteration: use `subscribe` when samples sent
+        before that must not be missed.
+        """
+        sub = self.subscribe(key_expr, maxsize=maxsize)
+        try:
+            async for item in sub:
+                yield item
+        finally:
+            sub.close()
+
+    async def wait_for_subscribers(self, key: str, timeout_s: float) -> bool:
+        """Wait (wall seconds) until some subscriber on the network matches `key`; True if so."""
+        loop = asyncio.get_running_loop()
+        matched = asyncio.Event()
+
+        def on_status(status: Any) -> None:  # Zenoh thread
+            if bool(getattr(status, "matching", False)):
+                with contextlib.suppress(RuntimeError):
+                    loop.call_soon_threadsafe(matched.set)
+
+        pub = self._session.declare_publisher(key)
+        listener = pub.declare_matching_listener(on_status)
+        try:
+            if bool(getattr(pub.matching_status, "matching", pub.matching_status)):
+                return True
+            try:
+                await asyncio.wait_for(matched.wait(), timeout_s)
+            except TimeoutError:
+                return False
+            return True
+        finally:
+            listener.undeclare()  # type: ignore[no-untyped-call]
+            pub.undeclare()  # type: ignore[no-untyped-call]
+
+    def close(self) -> None:
+        """Undeclare every subscription and close the session (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        for sub in self._subs:
+            sub.close()
+        self._subs.clear()
+        try:
+            self._session.close()  # type: ignore[no-untyped-call]
+        except Exception as err:
+            log.warning("zenoh session close: %s", err)
+        log.info("zenoh session closed")
+
+    def __enter__(self) -> ZenohBus:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    async def __aenter__(self) -> ZenohBus:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()

@@ -1,0 +1,164 @@
+"""Settings of one simulated vehicle, validated with pydantic; a bad value raises ConfigError.
+
+Units: m, s, Hz, m/s; ports are UDP on 127.0.0.1 (docs/service.md, "The simulated vehicles").
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, InstanceOf, ValidationError, model_validator
+
+from isac_mission.config import MavlinkSigningKey
+from isac_mission.errors import ConfigError
+from isac_mission.frames import PX4_SITL_ORIGIN, GeoPoint
+from isac_mission.mavwire.ports import GCS_BASE_PORT, OFFBOARD_BASE_PORT
+from sim.vehicle import VehicleLimits
+
+LossAction = Literal["none", "hold", "land"]
+"""What the vehicle does when the ground station's heartbeats stop (PX4 NAV_DLL_ACT)."""
+
+_POSITIVE = (
+    "takeoff_alt_m",
+    "land_speed_mps",
+    "offboard_min_rate_hz",
+    "offboard_loss_timeout_s",
+    "gcs_loss_timeout_s",
+    "telemetry_rate_hz",
+    "status_rate_hz",
+    "home_rate_hz",
+    "max_altitude_m",
+)
+
+
+class AutopilotSettings(BaseModel):
+    """Configuration of one simulated vehicle. Units: m, s, Hz, m/s; ports are UDP on 127.0.0.1.
+
+    Attributes:
+        index: 0-based vehicle index m; MAVLink system id m + 1.
+        offboard_port: Where the offboard client listens; None = 14540 + index.
+        gcs_port: Where the ground station listens; None = 14550 + index.
+        bind_port: Local port of the offboard link; 0 = ephemeral.
+        gcs_bind_port: Local port of the GCS link; 0 = ephemeral.
+        geo_origin: Geodetic position of the scenario origin (0, 0) on the ground.
+        local_origin_xy_m: Scenario-plane (x east, y north) origin of the local NED frame.
+        spawn_xy_m: Scenario-plane start position on the ground; None = the local origin.
+        spawn_yaw_rad: Initial heading, rad (0 = north).
+        takeoff_alt_m: MIS_TAKEOFF_ALT, altitude above ground of a takeoff without altitude.
+        limits: Kinematic limits of the airframe.
+        land_speed_mps: MPC_LAND_SPEED, descent rate of LAND near the ground.
+        land_slow_below_m: Below this height LAND descends at `land_speed_mps`, above it at the
+            maximum descent rate (PX4 MPC_LAND_ALT1).
+        offboard_min_rate_hz: Setpoint rate (simulation time) needed to enter OFFBOARD.
+        offboard_loss_timeout_s: COM_OF_LOSS_T.
+        offboard_loss_action: COM_OBL_RC_ACT: "hold" or "land".
+        gcs_loss_timeout_s: COM_DL_LOSS_T.
+        gcs_loss_action: NAV_DLL_ACT: "none", "hold" or "land".
+        disarm_after_land_s: COM_DISARM_LAND; <= 0 disables auto-disarm after landing.
+        disarm_preflight_s: COM_DISARM_PRFLT; <= 0 disables auto-disarm before takeoff.
+        telemetry_rate_hz: Rate of ATTITUDE, LOCAL_POSITION_NED and GLOBAL_POSITION_INT.
+        status_rate_hz: Rate of SYS_STATUS, EXTENDED_SYS_STATE and GPS_RAW_INT.
+        home_rate_hz: Rate of HOME_POSITION.
+        heartbeat_keepalive_wall_s: Wall-clock heartbeat period when simulation time stalls;
+            None disables it.
+        area_min_xy_m: Scenario-plane lower corner of the allowed area (geofence).
+        area_max_xy_m: Scenario-plane upper corner of the allowed area.
+        min_altitude_m: Lowest altitude a position setpoint may ask for (higher ones clamped up).
+        max_altitude_m: Highest altitude a position setpoint may ask for.
+        signing: MAVLink 2 signing key of both links; None = no signing (accept unsigned).
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    index: int = 0
+    offboard_port: int | None = None
+    gcs_port: int | None = None
+    bind_port: int = 0
+    gcs_bind_port: int = 0
+    geo_origin: InstanceOf[GeoPoint] = PX4_SITL_ORIGIN
+    local_origin_xy_m: tuple[float, float] = (0.0, 0.0)
+    spawn_xy_m: tuple[float, float] | None = None
+    spawn_yaw_rad: float = 0.0
+    takeoff_alt_m: float = 2.5
+    limits: InstanceOf[VehicleLimits] = Field(default_factory=VehicleLimits)
+    land_speed_mps: float = 0.7
+    land_slow_below_m: float = 10.0
+    offboard_min_rate_hz: float = 2.0
+    offboard_loss_timeout_s: float = 1.0
+    offboard_loss_action: Literal["hold", "land"] = "hold"
+    gcs_loss_timeout_s: float = 10.0
+    gcs_loss_action: LossAction = "hold"
+    disarm_after_land_s: float = 2.0
+    disarm_preflight_s: float = 10.0
+    telemetry_rate_hz: float = 20.0
+    status_rate_hz: float = 2.0
+    home_rate_hz: float = 0.5
+    heartbeat_keepalive_wall_s: float | None = 1.0
+    area_min_xy_m: tuple[float, float] = (-10_000.0, -10_000.0)
+    area_max_xy_m: tuple[float, float] = (10_000.0, 10_000.0)
+    min_altitude_m: float = 2.0
+    max_altitude_m: float = 500.0
+    signing: InstanceOf[MavlinkSigningKey] | None = None
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _raise_config_error(cls, data: Any, handler: Any) -> Any:
+        """A type error (pydantic's) becomes a ConfigError naming the field."""
+        try:
+            return handler(data)
+        except ValidationError as err:
+            raise ConfigError(_describe(err)) from None
+
+    @model_validator(mode="after")
+    def _check_values(self) -> AutopilotSettings:
+        """Every out-of-range value, one `AutopilotSettings: ...` line each (ConfigError)."""
+        problems: list[str] = []
+        if not 0 <= self.index <= 253:
+            problems.append(f"index must be in [0, 253] (got {self.index})")
+        for name in ("offboard_port", "gcs_port", "bind_port", "gcs_bind_port"):
+            port = getattr(self, name)
+            if port is not None and not 0 <= port <= 65535:
+                problems.append(f"{name} must be a UDP port (got {port})")
+        for name in _POSITIVE:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                problems.append(f"{name} must be finite and > 0 (got {value})")
+        if not (0.0 <= self.min_altitude_m < self.max_altitude_m):
+            problems.append(
+                f"min_altitude_m must be in [0, max_altitude_m) (got {self.min_altitude_m})"
+            )
+        if any(lo >= hi for lo, hi in zip(self.area_min_xy_m, self.area_max_xy_m, strict=True)):
+            problems.append(
+                f"area_min_xy_m {self.area_min_xy_m} must be below area_max_xy_m {self.area_max_xy_m}"
+            )
+        if self.heartbeat_keepalive_wall_s is not None and not self.heartbeat_keepalive_wall_s > 0:
+            problems.append("heartbeat_keepalive_wall_s must be > 0 or None")
+        if problems:
+            raise ConfigError("\n".join(f"AutopilotSettings: {p}" for p in problems))
+        return self
+
+    @property
+    def system_id(self) -> int:
+        """MAVLink system id: index + 1."""
+        return self.index + 1
+
+    @property
+    def offboard_dest_port(self) -> int:
+        """The offboard client's port (14540 + index unless configured)."""
+        return OFFBOARD_BASE_PORT + self.index if self.offboard_port is None else self.offboard_port
+
+    @property
+    def gcs_dest_port(self) -> int:
+        """The ground station's port (14550 + index unless configured)."""
+        return GCS_BASE_PORT + self.index if self.gcs_port is None else self.gcs_port
+
+
+def _describe(err: ValidationError) -> str:
+    """One `AutopilotSettings: field: reason (got value)` line per problem."""
+    lines = []
+    for e in err.errors():
+        where = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
+        lines.append(f"AutopilotSettings: {where}: {msg} (got {e.get('input')!r})")
+    return "\n".join(lines)
