@@ -7,5 +7,7 @@ datagram parser with the same rejection reasons.
 Modules, by job: `dialect` (MAVLink 2, common set, chosen before pymavlink is imported), `ports`
 (loopback, base ports, MAVLink ids), `modes` (PX4 custom-mode encoding and decoding), `builders`
 (pure message builders), `signing` (MAVLink 2 signing, encoders and packing), `parsing` (one
-datagram parser and its rejection reasons), `link` (the service's asyncio `MavlinkLink`).
+datagram parser and its rejection reasons), and the service's side of a link: `status` (what it
+knows of the vehicle), `commands` (COMMAND_LONG and its ACK) and `link` (the asyncio
+`MavlinkLink`).
 """
