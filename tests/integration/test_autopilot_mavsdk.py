@@ -18,7 +18,8 @@ import pytest
 from isac_mission.frames import scenario_to_geodetic
 from isac_mission.mavwire.modes import FlightMode
 from sim.autopilot.settings import AutopilotSettings
-from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports
+from tests.support.ports import free_udp_ports
+from tests.support.sim_harness import SimRunner, async_wait_until
 
 mavsdk = pytest.importorskip("mavsdk.asyncio")
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402

@@ -178,6 +178,20 @@ def det_text_replace(base: dict[str, Any], name: str, literal: str) -> bytes:
     return text.replace("123456.5", literal).encode()
 
 
+def _on_subscribe(bus: ZenohBus) -> asyncio.Event:
+    """An event set when something subscribes on `bus` (its `subscribe` is wrapped)."""
+    subscribed = asyncio.Event()
+    subscribe = bus.subscribe
+
+    def subscribe_and_tell(*args: Any, **kwargs: Any) -> Any:
+        sub = subscribe(*args, **kwargs)
+        subscribed.set()
+        return sub
+
+    bus.subscribe = subscribe_and_tell  # type: ignore[method-assign]
+    return subscribed
+
+
 class GroundThread:
     """A GroundLoop (scenario s, settings) on a Zenoh hub at `endpoint`, in its own thread and
     event loop. `start()` returns once the loop runs; `stop()` ends it and returns its report.
@@ -208,9 +222,13 @@ class GroundThread:
     async def _run(self) -> GroundReport:
         self._stop = asyncio.Event()
         with ZenohBus.open(BusSettings.hub(self.endpoint)) as bus:
+            subscribed = _on_subscribe(bus)
             self.loop = GroundLoop(self.s, bus, self.settings)
             task = asyncio.create_task(self.loop.run(self._stop))
-            await asyncio.sleep(0)  # run() subscribes at its first step
+            # Ready once run() has subscribed (or has ended without subscribing).
+            waiting = asyncio.ensure_future(subscribed.wait())
+            await asyncio.wait({task, waiting}, timeout=30.0, return_when=asyncio.FIRST_COMPLETED)
+            waiting.cancel()
             self._ready.set()
             return await task
 

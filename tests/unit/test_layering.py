@@ -47,7 +47,7 @@ def test_pure_modules_import_no_io(path: Path) -> None:
 def test_each_io_library_has_one_adapter_in_the_package(library: str, adapter: str) -> None:
     users = {
         p.relative_to(ROOT).as_posix()
-        for p in (ROOT / "isac_mission").rglob("*.py")
+        for p in [*(ROOT / "isac_mission").rglob("*.py"), *(ROOT / "sim").rglob("*.py")]
         if library in imported_roots(p)
     }
     assert users <= {f"isac_mission/{adapter}"}

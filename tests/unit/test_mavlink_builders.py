@@ -80,9 +80,15 @@ class RecordingTransport(asyncio.DatagramTransport):
     def __init__(self) -> None:
         super().__init__()
         self.sent: list[tuple[bytes, Any]] = []
+        self._sent_one = asyncio.Event()
 
     def sendto(self, data: Any, addr: Any = None) -> None:
         self.sent.append((bytes(data), addr))
+        self._sent_one.set()
+
+    async def wait_sent(self, timeout_s: float = 5.0) -> None:
+        """Until something has been sent (at most `timeout_s` s)."""
+        await asyncio.wait_for(self._sent_one.wait(), timeout_s)
 
     def is_closing(self) -> bool:
         return False
@@ -364,7 +370,7 @@ async def test_command_returns_on_accepted_ack() -> None:
     link, transport = make_link()
     link.datagram_received(vehicle_bytes(px4_heartbeat(0, False)), VEHICLE_ADDR)
     task = asyncio.create_task(link.command(arm_command(link.target), timeout_s=5.0))
-    await asyncio.sleep(0)  # let the command go out
+    await transport.wait_sent()  # the command went out
     link.datagram_received(ack(400, mavlink2.MAV_RESULT_IN_PROGRESS), VEHICLE_ADDR)
     link.datagram_received(ack(22, mavlink2.MAV_RESULT_ACCEPTED), VEHICLE_ADDR)  # not ours
     assert not task.done()
@@ -376,10 +382,10 @@ async def test_command_returns_on_accepted_ack() -> None:
 
 
 async def test_denied_command_raises_naming_command_and_result() -> None:
-    link, _ = make_link()
+    link, transport = make_link()
     link.datagram_received(vehicle_bytes(px4_heartbeat(0, False)), VEHICLE_ADDR)
     task = asyncio.create_task(link.command(offboard_mode_command(link.target), timeout_s=5.0))
-    await asyncio.sleep(0)
+    await transport.wait_sent()  # the command went out
     link.datagram_received(ack(176, mavlink2.MAV_RESULT_DENIED), VEHICLE_ADDR)
     with pytest.raises(LinkError, match=r"MAV_CMD_DO_SET_MODE.*MAV_RESULT_DENIED"):
         await asyncio.wait_for(task, 5.0)
