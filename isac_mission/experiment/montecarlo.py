@@ -89,7 +89,7 @@ def reduction_pct(proposed: float, benchmark: float) -> float:
 
 
 def outcome_record(o: SlotOutcome) -> SlotRecord:
-    """The trace line of one slot (DESIGN.md, "Trace")."""
+    """The trace line of one slot (docs/trace.md)."""
     rep = o.plan.report
     return SlotRecord(
         slot=o.slot,

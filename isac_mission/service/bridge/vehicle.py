@@ -309,6 +309,10 @@ class VehicleBridge:
             self.counters.heartbeats_sent += 1
 
     def _telemetry_tick(self) -> None:
+        if isinstance(self.time, ClockSimTime) and not self.time.ready:
+            # No simulation time to stamp with yet: telemetry stamped 0 would look minutes old
+            # once the world's clock arrives, and the ground loop would plan around every vehicle.
+            return
         st = self.link.status()
         self._supervise(st)
         msg = self.telemetry(st)

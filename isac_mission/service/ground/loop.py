@@ -157,20 +157,11 @@ class GroundLoop:
 
     def _internal_error(self, err: Exception) -> None:
         """A bug: counted, logged with its traceback, and the loop goes on."""
-        self.report.counters["internal errors"] += 1
-        self.report.last_error = f"internal error: {type(err).__name__}: {err}"[:MAX_REASON_CHARS]
-        log.exception("ground loop: internal error (the loop goes on)")
+        self.report.count_internal_error(err)
 
     def _reject(self, err: MessageError) -> None:
-        """Count an invalid payload under "rejected <reason>" (wire.rejection_reason), keep its
-        message as the last error, and log it (the first few of each reason, then every 100th:
-        a flood of garbage must not turn into a flood of log lines)."""
-        name = f"rejected {rejection_reason(err)}"
-        self.report.counters[name] += 1
-        self.report.last_error = str(err)[:MAX_REASON_CHARS]
-        n = self.report.counters[name]
-        if n <= 5 or n % 100 == 0:
-            log.warning("dropped message (%s #%d): %s", name, n, self.report.last_error)
+        """An invalid payload: counted by reason, kept as the last error, logged (report.py)."""
+        self.report.count_rejected(rejection_reason(err), err)
 
     # ------------------------------------------------------------------ inputs
 

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import logging
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from isac_mission.records import SlotRecord
+from isac_mission.wire import MAX_REASON_CHARS
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -60,3 +64,21 @@ class GroundReport:
     """Slot -> wall time (time.monotonic) its last detection arrived (the last SLOTS_KEPT)."""
     last_error: str = ""
     totals: MissionTotals = field(default_factory=MissionTotals)
+
+    def count_internal_error(self, err: Exception) -> None:
+        """A bug in the loop: counted, kept as the last error, logged with its traceback (call
+        from the `except` block)."""
+        self.counters["internal errors"] += 1
+        self.last_error = f"internal error: {type(err).__name__}: {err}"[:MAX_REASON_CHARS]
+        log.exception("ground loop: internal error (the loop goes on)")
+
+    def count_rejected(self, reason: str, err: Exception) -> None:
+        """An invalid payload: counted under "rejected <reason>" (wire.rejection_reason), its
+        message kept as the last error, and logged (the first few of each reason, then every
+        100th: a flood of garbage must not turn into a flood of log lines)."""
+        name = f"rejected {reason}"
+        self.counters[name] += 1
+        self.last_error = str(err)[:MAX_REASON_CHARS]
+        n = self.counters[name]
+        if n <= 5 or n % 100 == 0:
+            log.warning("dropped message (%s #%d): %s", name, n, self.last_error)

@@ -32,7 +32,7 @@ class GroundSettings(BaseModel):
     Frozen; an unknown or invalid field raises ConfigError naming it
     (`ground settings: plan_budget_s: Input should be greater than 0 (got -1.0)`)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     method: Method = "proposed"
     trace_path: Path | None = None
