@@ -62,3 +62,37 @@ def test_heartbeat_mode_is_decoded_only_for_px4_with_the_custom_mode_flag() -> N
     assert heartbeat_mode_name(mavlink2.MAV_AUTOPILOT_PX4, flag, custom) == "offboard"
     assert heartbeat_mode_name(mavlink2.MAV_AUTOPILOT_PX4, 0, custom) == "unknown"
     assert heartbeat_mode_name(mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, flag, custom) == "unknown"
+
+
+@pytest.mark.parametrize(
+    ("custom_mode", "name"),
+    [
+        (0x00060000, "offboard"),
+        (0x02040000, "takeoff"),
+        (0x03040000, "hold"),
+        (0x06040000, "land"),
+        (0x04040000, "mission"),
+        (0x05040000, "rtl"),
+        (0x00030000, "posctl"),
+        (0x00010000, "manual"),
+        (0x07040000, "auto"),
+        (0x00000000, "unknown"),
+        (0x00630000, "unknown"),
+    ],
+)
+def test_px4_custom_mode_decodes(custom_mode: int, name: str) -> None:
+    assert px4_mode_name(custom_mode) == name
+
+
+def test_px4_modes_agree_with_the_simulated_vehicle() -> None:
+    for mode in FlightMode:
+        assert px4_mode_name(mode.px4_custom_mode) == mode.value.lower()
+    assert px4_custom_mode(6) == FlightMode.OFFBOARD.px4_custom_mode
+    assert px4_custom_mode(4, 3) == FlightMode.HOLD.px4_custom_mode
+
+
+def test_heartbeat_mode_needs_px4_and_the_custom_mode_flag() -> None:
+    custom = mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    assert heartbeat_mode_name(mavlink2.MAV_AUTOPILOT_PX4, custom, 0x00060000) == "offboard"
+    assert heartbeat_mode_name(mavlink2.MAV_AUTOPILOT_PX4, 0, 0x00060000) == "unknown"
+    assert heartbeat_mode_name(mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, custom, 4) == "unknown"
