@@ -3,12 +3,9 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import os
 import signal
-import socket
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -16,41 +13,11 @@ import pytest
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import load_scenario
 from isac_mission.wire import Keys, decode_detection
+from tests.support.ports import free_tcp_port, udp_sinks
 
 ROOT = Path(__file__).resolve().parents[2]
 START_TIMEOUT_S = 60.0  # interpreter start + imports on a loaded 2-core machine
 EXIT_TIMEOUT_S = 30.0
-
-
-def free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
-
-
-@contextlib.contextmanager
-def udp_sinks(n: int) -> Iterator[int]:
-    """Bind n consecutive UDP ports on 127.0.0.1 for the vehicles to send to; yields the first."""
-    for _ in range(50):
-        base = free_tcp_port()
-        socks: list[socket.socket] = []
-        try:
-            for m in range(n):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                socks.append(s)
-                s.bind(("127.0.0.1", base + m))
-        except OSError:
-            for s in socks:
-                s.close()
-            continue
-        try:
-            yield base
-        finally:
-            for s in socks:
-                s.close()
-        return
-    raise RuntimeError("no block of free UDP ports")
 
 
 @pytest.fixture

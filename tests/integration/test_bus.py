@@ -4,22 +4,15 @@ from __future__ import annotations
 
 import asyncio
 import json
-import socket
 
 import pytest
 
 from isac_mission.bus import DEFAULT_ENDPOINT, BusSettings, ZenohBus, make_config, tcp_loopback
 from isac_mission.errors import ConfigError
 from isac_mission.wire import Keys, uav_index
+from tests.support.ports import free_tcp_port
 
 TIMEOUT_S = 20.0
-
-
-def free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 async def test_publish_subscribe_round_trip_between_two_peer_sessions() -> None:

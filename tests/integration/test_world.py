@@ -7,7 +7,7 @@ import contextlib
 import json
 import math
 import socket
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,40 +28,10 @@ from isac_mission.wire import (
 )
 from sim.world import World
 from sim.world_options import WorldOptions
+from tests.support.ports import free_tcp_port, udp_sinks
 
 TIMEOUT_S = 30.0
 SPEED = 20.0
-
-
-def free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
-
-
-@contextlib.contextmanager
-def udp_sinks(n: int) -> Iterator[int]:
-    """Bind n consecutive UDP ports on 127.0.0.1 (where the vehicles send); yields the first."""
-    for _ in range(50):
-        base = free_tcp_port()  # a random free-ish port number to start from
-        socks: list[socket.socket] = []
-        try:
-            for m in range(n):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                socks.append(s)
-                s.bind(("127.0.0.1", base + m))
-        except OSError:
-            for s in socks:
-                s.close()
-            continue
-        try:
-            yield base
-        finally:
-            for s in socks:
-                s.close()
-        return
-    raise RuntimeError("no block of free UDP ports")
 
 
 def scenario(m: int) -> Scenario:

@@ -45,7 +45,8 @@ from sim.autopilot.settings import AutopilotSettings
 from tests.support.fuzz import FUZZ, WAIT_S
 from tests.support.loop_calls import call_on_loop
 from tests.support.mavlink_fuzz import mavlink_frames, random_datagrams, unknown_message
-from tests.support.sim_harness import SimRunner, async_wait_until, free_udp_ports, wait_until
+from tests.support.ports import free_udp_ports
+from tests.support.sim_harness import SimRunner, async_wait_until, wait_until
 
 T = TypeVar("T")
 

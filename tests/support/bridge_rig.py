@@ -26,7 +26,8 @@ from isac_mission.timebase import SlotTimeline, reached
 from isac_mission.wire import ClockMsg, Keys, TelemetryMsg, decode_telemetry, encode_clock
 from sim.autopilot.endpoint import Autopilot
 from sim.autopilot.settings import AutopilotSettings
-from tests.support.sim_harness import SimRunner, free_udp_ports
+from tests.support.ports import free_udp_ports
+from tests.support.sim_harness import SimRunner
 
 SPEED = 10.0
 """Simulation seconds per wall second."""

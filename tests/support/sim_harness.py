@@ -10,7 +10,6 @@ passes.
 from __future__ import annotations
 
 import asyncio
-import socket
 import threading
 import time
 from collections.abc import Callable
@@ -25,20 +24,6 @@ T = TypeVar("T")
 
 SIM_SPEED = 4.0
 """Simulation seconds per wall second in these tests."""
-
-
-def free_udp_ports(n: int) -> list[int]:
-    """`n` distinct UDP ports on 127.0.0.1 that were free a moment ago."""
-    socks = []
-    try:
-        for _ in range(n):
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.bind(("127.0.0.1", 0))
-            socks.append(s)
-        return [int(s.getsockname()[1]) for s in socks]
-    finally:
-        for s in socks:
-            s.close()
 
 
 def wait_until(condition: Callable[[], T], timeout_s: float, what: str, poll_s: float = 0.01) -> T:
