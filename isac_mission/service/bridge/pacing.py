@@ -16,6 +16,9 @@ from isac_mission.timebase import SimTime
 MIN_WALL_PERIOD_S: Final = 0.001
 """Shortest wall sleep of a periodic loop (a very fast or unpaced simulation)."""
 
+SPEED_CHECK_WALL_S: Final = 0.05
+"""How often a waiting loop looks at the time source's speed again, wall s."""
+
 MIN_SPEED: Final = 1e-9
 """Floor of the time source's speed in wall-time divisions (a stopped clock)."""
 
@@ -35,9 +38,20 @@ async def run_paced(
             tick()
         except Exception as err:  # keep the loop alive; the caller counts and reports
             on_error(err)
-        period = max(1.0 / rate_hz / max(time.speed, MIN_SPEED), MIN_WALL_PERIOD_S)
+        ticked, speed = loop.time(), time.speed
+        period = _wall_period_s(rate_hz, speed)
         due += period
-        now = loop.time()
-        if due < now - period:  # fell behind: re-anchor instead of bursting
-            due = now
-        await asyncio.sleep(max(0.0, due - now))
+        if due < ticked - period:  # fell behind: re-anchor instead of bursting
+            due = ticked
+        # Sleep toward the deadline in slices: a change of speed (a ClockSimTime reads 1 until
+        # the world's first clock message) shortens the wait at once instead of after it.
+        while (now := loop.time()) < due:
+            await asyncio.sleep(min(due - now, SPEED_CHECK_WALL_S))
+            if time.speed != speed:
+                speed = time.speed
+                due = min(due, ticked + _wall_period_s(rate_hz, speed))
+
+
+def _wall_period_s(rate_hz: float, speed: float) -> float:
+    """Wall seconds between ticks at `rate_hz` simulation Hz and `speed`."""
+    return max(1.0 / rate_hz / max(speed, MIN_SPEED), MIN_WALL_PERIOD_S)
