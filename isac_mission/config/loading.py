@@ -11,24 +11,8 @@ from pydantic import ValidationError
 
 from isac_mission.config.resolve import resolve
 from isac_mission.config.scenario import Scenario, ScenarioFile
+from isac_mission.config.validation import validation_lines
 from isac_mission.errors import ConfigError
-
-
-def _format_validation_error(source: str, err: ValidationError) -> str:
-    """One `source: field.path: reason (got value)` line per error; security values never shown."""
-    lines = []
-    for e in err.errors():
-        where = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = e["msg"]
-        if e["type"] == "extra_forbidden":
-            msg = "unknown key"
-        elif msg.startswith("Value error, "):
-            msg = msg[len("Value error, ") :]
-        got = e.get("input")
-        secret = e["loc"][:1] == ("security",)  # never echo what might be a key or password
-        got_txt = "" if isinstance(got, dict) or secret else f" (got {got!r})"
-        lines.append(f"{source}: {where}: {msg}{got_txt}")
-    return "\n".join(lines)
 
 
 def parse_scenario(data: Any, source: str = "<config>") -> Scenario:
@@ -40,7 +24,7 @@ def parse_scenario(data: Any, source: str = "<config>") -> Scenario:
     try:
         spec = ScenarioFile.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(_format_validation_error(source, err)) from None
+        raise ConfigError(validation_lines(err, source)) from None
     try:
         return resolve(spec)
     except ConfigError as err:

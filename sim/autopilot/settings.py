@@ -6,11 +6,12 @@ Units: m, s, Hz, m/s; ports are UDP on 127.0.0.1 (docs/service.md, "The simulate
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, InstanceOf, ValidationError, model_validator
+from pydantic import Field, InstanceOf, model_validator
 
 from isac_mission.config import MavlinkSigningKey
+from isac_mission.config.validation import Settings
 from isac_mission.errors import ConfigError
 from isac_mission.frames import PX4_SITL_ORIGIN, GeoPoint
 from isac_mission.mavwire.ports import GCS_BASE_PORT, OFFBOARD_BASE_PORT
@@ -32,7 +33,7 @@ _POSITIVE = (
 )
 
 
-class AutopilotSettings(BaseModel):
+class AutopilotSettings(Settings):
     """Configuration of one simulated vehicle. Units: m, s, Hz, m/s; ports are UDP on 127.0.0.1.
 
     Attributes:
@@ -69,7 +70,7 @@ class AutopilotSettings(BaseModel):
         signing: MAVLink 2 signing key of both links; None = no signing (accept unsigned).
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    settings_name: ClassVar[str] = "AutopilotSettings"
 
     index: int = 0
     offboard_port: int | None = None
@@ -100,15 +101,6 @@ class AutopilotSettings(BaseModel):
     min_altitude_m: float = 2.0
     max_altitude_m: float = 500.0
     signing: InstanceOf[MavlinkSigningKey] | None = None
-
-    @model_validator(mode="wrap")
-    @classmethod
-    def _raise_config_error(cls, data: Any, handler: Any) -> Any:
-        """A type error (pydantic's) becomes a ConfigError naming the field."""
-        try:
-            return handler(data)
-        except ValidationError as err:
-            raise ConfigError(_describe(err)) from None
 
     @model_validator(mode="after")
     def _check_values(self) -> AutopilotSettings:
@@ -152,13 +144,3 @@ class AutopilotSettings(BaseModel):
     def gcs_dest_port(self) -> int:
         """The ground station's port (14550 + index unless configured)."""
         return GCS_BASE_PORT + self.index if self.gcs_port is None else self.gcs_port
-
-
-def _describe(err: ValidationError) -> str:
-    """One `AutopilotSettings: field: reason (got value)` line per problem."""
-    lines = []
-    for e in err.errors():
-        where = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
-        lines.append(f"AutopilotSettings: {where}: {msg} (got {e.get('input')!r})")
-    return "\n".join(lines)

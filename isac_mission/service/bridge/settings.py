@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import ClassVar
 
-from pydantic import BaseModel, ConfigDict, InstanceOf, ValidationError, model_validator
+from pydantic import InstanceOf, model_validator
 
 from isac_mission.config import MavlinkSigningKey
+from isac_mission.config.validation import Settings
 from isac_mission.errors import ConfigError
 from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
 
@@ -30,7 +31,7 @@ _NON_NEGATIVE = ("offboard_stream_s", "disarm_wait_s", "setpoint_lead_s")
 """Fields that must be finite and >= 0."""
 
 
-class BridgeSettings(BaseModel):
+class BridgeSettings(Settings):
     """One vehicle's bridge. Units: m, m/s, Hz; times in simulation seconds unless "wall".
 
     Frozen; every bad value is named, one `BridgeSettings: ...` line each, in one ConfigError
@@ -69,7 +70,7 @@ class BridgeSettings(BaseModel):
             `link.errors` counts them); None = no signing.
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    settings_name: ClassVar[str] = "BridgeSettings"
 
     index: int = 0
     port: int | None = None
@@ -96,15 +97,6 @@ class BridgeSettings(BaseModel):
     command_attempts: int = 3
     connect_timeout_s: float = 30.0
     signing: InstanceOf[MavlinkSigningKey] | None = None
-
-    @model_validator(mode="wrap")
-    @classmethod
-    def _raise_config_error(cls, data: Any, handler: Any) -> Any:
-        """A type error (pydantic's) becomes a ConfigError naming the field."""
-        try:
-            return handler(data)
-        except ValidationError as err:
-            raise ConfigError(_describe(err)) from None
 
     @model_validator(mode="after")
     def _check_values(self) -> BridgeSettings:
@@ -141,13 +133,3 @@ class BridgeSettings(BaseModel):
     def vehicle_system_id(self) -> int:
         """The vehicle's system id: `system_id`, or index + 1."""
         return self.index + 1 if self.system_id is None else self.system_id
-
-
-def _describe(err: ValidationError) -> str:
-    """One `BridgeSettings: field: reason (got value)` line per problem."""
-    lines = []
-    for e in err.errors():
-        where = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
-        lines.append(f"BridgeSettings: {where}: {msg} (got {e.get('input')!r})")
-    return "\n".join(lines)

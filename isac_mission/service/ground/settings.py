@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import ClassVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field
 
-from isac_mission.errors import ConfigError
+from isac_mission.config.validation import Settings
 from isac_mission.planning.slot import Method, plan_slot
 from isac_mission.service.ground.fleet_plan import Planner
 
 
-class GroundSettings(BaseModel):
+class GroundSettings(Settings):
     """method: planning strategy; trace_path: JSON Lines trace (None: no trace); resume: continue
     an existing trace from its last complete slot; detection_wait_s: simulation seconds after a
     slot boundary before a partial update; detection_wall_wait_s: the same bound in wall seconds,
@@ -32,7 +32,7 @@ class GroundSettings(BaseModel):
     Frozen; an unknown or invalid field raises ConfigError naming it
     (`ground settings: plan_budget_s: Input should be greater than 0 (got -1.0)`)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    settings_name: ClassVar[str] = "ground settings"
 
     method: Method = "proposed"
     trace_path: Path | None = None
@@ -46,21 +46,3 @@ class GroundSettings(BaseModel):
     vehicle_lost_wall_s: float = Field(1.0, gt=0.0)
     plan_rate_factor: float = Field(1.0, gt=0.0)
     planner: Planner = plan_slot
-
-    @model_validator(mode="wrap")
-    @classmethod
-    def _raise_config_error(cls, data: Any, handler: Any) -> Any:
-        try:
-            return handler(data)
-        except ValidationError as err:
-            raise ConfigError(_describe(err)) from None
-
-
-def _describe(err: ValidationError) -> str:
-    """One `ground settings: field: reason (got value)` line per problem."""
-    lines = []
-    for e in err.errors():
-        where = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
-        lines.append(f"ground settings: {where}: {msg} (got {e.get('input')!r})")
-    return "\n".join(lines)
