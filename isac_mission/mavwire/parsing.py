@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.ports import Address
@@ -38,17 +38,7 @@ RejectReason = Literal[
     "parse_error",
     "truncated",
 ]
-REJECT_REASONS: tuple[RejectReason, ...] = (
-    "garbage",
-    "bad_crc",
-    "bad_data",
-    "unsigned",
-    "bad_signature",
-    "replayed",
-    "unknown_message",
-    "parse_error",
-    "truncated",
-)
+REJECT_REASONS: tuple[RejectReason, ...] = get_args(RejectReason)
 """Every reason `DatagramParser.parse` gives."""
 
 
