@@ -45,7 +45,9 @@ class Detections:
 
 @dataclass(frozen=True)
 class SolveReport:
-    """How a slot plan was obtained: status is "ok" or "infeasible"; reason says why if not ok."""
+    """How a slot plan was obtained: status is "ok" or "infeasible"; reason says why if not ok,
+    or why an ok plan is the SCA's when the polish ran and was not kept; polish: what the polish
+    did ("" when it did not run); polish_iterations: IPOPT's iterations."""
 
     status: str
     reason: str = ""
@@ -54,6 +56,8 @@ class SolveReport:
     bandwidth_iterations: int = 0
     solve_s: float = 0.0
     objective_history: tuple[float, ...] = field(default_factory=tuple)
+    polish: str = ""
+    polish_iterations: int = 0
 
 
 @dataclass(frozen=True)

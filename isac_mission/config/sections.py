@@ -162,6 +162,14 @@ class PlannerConfig(Section):
         description="Keep every waypoint inside the operating area (the vehicles' geofence; "
         "not in the paper, docs/model.md).",
     )
+    polish: bool = Field(
+        False,
+        description="After Algorithm 2, solve the slot's exact problem with IPOPT from the SCA "
+        "point and keep the better feasible plan (docs/model.md, 'Polish').",
+    )
+    polish_max_iterations: int = Field(
+        50, ge=1, description="IPOPT's iteration cap of the polish (no wall-clock limit)."
+    )
     solver: str = Field("CLARABEL", description="cvxpy solver for the SOCP subproblems.")
     feasibility_tol_m: float = Field(
         1e-6, gt=0, description="Slack allowed when re-checking 14a-14j on a returned plan."

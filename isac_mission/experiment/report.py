@@ -33,6 +33,7 @@ TABLE_WIDTH_NOT_TERMINAL = 160
 
 LABELS = {
     "proposed": "Proposed",
+    "proposed-sca": "Proposed (SCA only)",
     "sd": "SD",
     "aba": "ABA",
     "crb": "CRB-criterion",

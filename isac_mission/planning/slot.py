@@ -4,7 +4,9 @@ One pure function per slot: (scenario via the kit, previous plan, predicted trac
 information) -> plan. No clock state, no RNG, no I/O: the offline simulation and the live service
 call the same function. The strategies share it:
 
-- proposed: positions by Algorithm 1 and shares by (P1.2.1), alternated (Algorithm 2);
+- proposed: positions by Algorithm 1 and shares by (P1.2.1), alternated (Algorithm 2), then,
+  when planner.polish is set, the exact problem polished from that point (planning/polish.py);
+- proposed-sca: Algorithm 2 alone, never polished (the paper's algorithm as printed);
 - sd: static deployment, UAVs stay where they are, shares optimised;
 - aba: average bandwidth (eta = 1/M), positions by Algorithm 1;
 - crb: the proposed optimiser with the measurement-only objective tr(J_M^-1);
@@ -24,12 +26,13 @@ from isac_mission.planning.association import AssociationLP, associate
 from isac_mission.planning.bandwidth import BandwidthSubproblem, optimise_shares
 from isac_mission.planning.communication import communication_optimal, lemma1_shares
 from isac_mission.planning.feasibility import SlotConstraints, capacity_ok, operating_area
+from isac_mission.planning.polish import PolishNLP
 from isac_mission.planning.positions import PositionSubproblem, optimise_positions
 from isac_mission.tracking.pcrb import PlanningObjective, SensingParams
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 
-Method = Literal["proposed", "sd", "aba", "crb", "comm"]
-METHODS: tuple[Method, ...] = ("proposed", "sd", "aba", "crb", "comm")
+Method = Literal["proposed", "proposed-sca", "sd", "aba", "crb", "comm"]
+METHODS: tuple[Method, ...] = ("proposed", "proposed-sca", "sd", "aba", "crb", "comm")
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,15 @@ class SolverKit:
         self.positions = PositionSubproblem(s, s.planner.solver, direct=fast, n_keep_out=n_keep_out)
         self.shares = BandwidthSubproblem(s.M, "closed-form" if fast else "HIGHS")
         self.association = AssociationLP(s.M, s.K, s.n_a, shortcut=fast)
+        self._polish: PolishNLP | None = None
+
+    @property
+    def polish(self) -> PolishNLP:
+        """The exact slot problem (planning/polish.py), built on first use and kept."""
+        if self._polish is None:
+            s = self.scenario
+            self._polish = PolishNLP(s, self.n_keep_out, s.planner.polish_max_iterations)
+        return self._polish
 
     def warm_up(self) -> None:
         """Solve every problem once so that the first real slot does not pay for compilation."""
@@ -243,12 +255,24 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         violated.append("14e capacity")
     if violated:
         return fallback("infeasible: no plan satisfies " + ", ".join(violated))
+    note, reason, n_polish = "", "", 0
+    if method == "proposed" and cfg.polish and moves:
+        polished = kit.polish.polish(Q, eta, objective, cons)
+        note, n_polish = polished.note, polished.iterations
+        if polished.accepted:
+            Q, eta = polished.uav_xy_m, polished.bandwidth_share
+            history.append(polished.value)
+        else:
+            reason = polished.note
     report = SolveReport(
         "ok",
+        reason,
         ao_iterations=n_ao,
         position_iterations=n_pos,
         bandwidth_iterations=n_bw,
         solve_s=elapsed(),
         objective_history=tuple(float(v) for v in history),
+        polish=note,
+        polish_iterations=n_polish,
     )
     return _plan(Q, assoc, eta, objective, report)

@@ -1,0 +1,274 @@
+"""The polish: the slot's exact non-convex problem solved by IPOPT from the SCA point.
+
+Algorithm 1's SCA stops at the first point where its convex inner approximation makes no more
+progress, which can be short of the slot's optimum. The polish solves the exact problem (P1.1
+with the bandwidth shares jointly, i.e. (P1) for the chosen association):
+
+    min_{Q, eta}  tr((J_pred + J_M(Q, eta))^-1)
+    s.t.  eta_m R~_m(q_m) >= R_th                 (14a, on the serving BS)
+          ||q_m - w_c(m)|| <= d_th                (14b, w_c(m) the BS nearest the SCA point)
+          sum eta = 1, eta >= 0                   (14c, 14d)
+          ||q_m - q_{m,n-1}|| <= V_max dt         (14h)
+          ||q_i - q_j|| >= D_s, ||q_m - k_l|| >= D_s (14i, and the keep-out points)
+          ||q_m - p_pred|| >= D_s                 (14j)
+          ||q_m - ballistic_m|| <= r_a            (planner.accel_limit_mps2, when set)
+          0 <= q <= area                          (planner.keep_in_area, as variable bounds)
+
+with CasADi's exact first and second derivatives (automatic differentiation) and its bundled IPOPT,
+started at the SCA plan. Each problem is built once per scenario, fleet size and number of
+keep-out points with symbolic parameters (the slot's data) and re-solved every slot; the
+caller keeps the polished plan only if the planner's own exact check (SlotConstraints.feasible)
+passes and tr(PCRB) is lower. Iteration caps only: no wall-clock limit.
+
+Variables are scaled: q_m = q_{m,n-1} + L z_m with L = V_max dt (m), so z is O(1); J is Jacobi-
+scaled by the SCA point's diagonal and f divided by the SCA value (both parameters), so the
+objective is O(1) even where J mixes entries of order 1e20 and 1. Distances are constrained
+squared, in units of L^2, tightened by SOLVER_MARGIN_M like the SCA subproblem.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.positions import SOLVER_MARGIN_M
+from isac_mission.tracking.pcrb import PlanningObjective
+from isac_mission.types import FloatArray
+
+# The rate constraint eta R~ / R_th - 1 >= RATE_MARGIN (relative), so that a solution within
+# IPOPT's tolerance still passes the exact 14a check (relative tolerance 1e-12).
+RATE_MARGIN = 1e-7
+# Shares stay at least this far from 0 (a_m is quadratic in eta: 0 is a stationary point).
+MIN_SHARE = 1e-9
+
+
+@dataclass(frozen=True)
+class PolishResult:
+    """One polish solve.
+
+    uav_xy_m [M, 2], bandwidth_share [M]: the NLP's answer (shares renormalised to sum 1);
+    value: tr(PCRB) of that answer by PlanningObjective.value; solver_status: IPOPT's
+    return_status; iterations: IPOPT iterations; accepted: True when the answer passed the exact
+    check and beats the start; note: what happened, for the plan's report.
+    """
+
+    uav_xy_m: FloatArray
+    bandwidth_share: FloatArray
+    value: float
+    solver_status: str
+    iterations: int
+    accepted: bool
+    note: str
+
+
+class PolishNLP:
+    """The exact slot problem for M UAVs and n_keep_out keep-out points, built once (symbolic
+    parameters) and solved per slot by `polish`."""
+
+    def __init__(self, scenario: Scenario, n_keep_out: int = 0, max_iterations: int = 50) -> None:
+        """max_iterations: IPOPT's iteration cap (planner.polish_max_iterations)."""
+        s = scenario
+        M = s.M
+        self.scenario = s
+        self.n_keep_out = n_keep_out
+        self.max_iterations = max_iterations
+        self.step_m = s.v_max * s.dt
+        L = self.step_m
+        z = ca.SX.sym("z", M, 2)
+        eta = ca.SX.sym("eta", M)
+        prev = ca.SX.sym("prev", M, 2)
+        serving = ca.SX.sym("serving", M, 2)
+        control = ca.SX.sym("control", M, 2)
+        ballistic = ca.SX.sym("ballistic", M, 2)
+        accel_r2 = ca.SX.sym("accel_r2")  # (radius / L)^2
+        keep_out = ca.SX.sym("keep_out", n_keep_out, 2)
+        x_pred = ca.SX.sym("x_pred", 4)
+        j_pred = ca.SX.sym("j_pred", 4, 4)
+        scale = ca.SX.sym("scale", 4)  # Jacobi scaling 1 / sqrt(diag J) at the SCA point
+        f_scale = ca.SX.sym("f_scale")  # f at the SCA point
+        params = [prev, serving, control, ballistic, accel_r2, keep_out, x_pred, j_pred, scale]
+        params.append(f_scale)
+        self._param_shapes = [(p.size1(), p.size2()) for p in params]
+
+        q = prev + L * z
+        J = j_pred
+        for m in range(M):
+            J = J + _information_terms(q[m, :].T, eta[m], x_pred, s)
+        D = ca.diag(scale)
+        Js = D @ J @ D
+        inv = ca.solve(Js, ca.SX.eye(4))
+        f_true = ca.dot(scale**2, ca.diag(inv))
+        objective = f_true / f_scale
+
+        def sq(v: ca.SX) -> ca.SX:
+            return ca.sumsqr(v) / L**2
+
+        g: list[ca.SX] = []
+        lbg: list[float] = []
+        ubg: list[float] = []
+        big = ca.inf
+        d_safe2 = ((s.d_safe + SOLVER_MARGIN_M) / L) ** 2 if s.d_safe > 0 else 0.0
+        for m in range(M):
+            qm = q[m, :]
+            rate = (eta[m] * s.B * ca.log1p(s.rho0 / (ca.sumsqr(qm - serving[m, :]) + s.dH**2))) / (
+                np.log(2.0) * s.r_th
+            ) - 1.0
+            g += [rate]
+            lbg += [RATE_MARGIN]
+            ubg += [big]
+            g += [sq(qm - control[m, :])]
+            lbg += [-big]
+            ubg += [(max(s.d_th - SOLVER_MARGIN_M, 0.0) / L) ** 2]
+            g += [ca.sumsqr(z[m, :])]
+            lbg += [-big]
+            ubg += [((L - SOLVER_MARGIN_M) / L) ** 2]
+            g += [sq(qm - x_pred[:2].T)]
+            lbg += [d_safe2]
+            ubg += [big]
+            g += [sq(qm - ballistic[m, :]) - accel_r2]
+            lbg += [-big]
+            ubg += [0.0]
+            for k in range(n_keep_out):
+                g += [sq(qm - keep_out[k, :])]
+                lbg += [d_safe2]
+                ubg += [big]
+        for i in range(M):
+            for j in range(i + 1, M):
+                g += [sq(q[i, :] - q[j, :])]
+                lbg += [d_safe2]
+                ubg += [big]
+        g += [ca.sum1(eta)]
+        lbg += [1.0]
+        ubg += [1.0]
+
+        x = ca.vertcat(ca.reshape(z, 2 * M, 1), eta)
+        p = ca.vertcat(*[ca.reshape(v, -1, 1) for v in params])
+        self._lbg = np.array(lbg, dtype=float)
+        self._ubg = np.array(ubg, dtype=float)
+        nlp = {"x": x, "p": p, "f": objective, "g": ca.vertcat(*g)}
+        opts: dict[str, Any] = {
+            "print_time": False,
+            "ipopt": {
+                "print_level": 0,
+                "sb": "yes",
+                "max_iter": max_iterations,
+                "tol": 1e-9,
+                "acceptable_iter": 0,  # no "acceptable" early stop: converge or hit the cap
+                "constr_viol_tol": 1e-9,
+                "bound_push": 1e-6,
+                "bound_frac": 1e-6,
+                "mu_init": 1e-4,
+                "hessian_approximation": "exact",
+            },
+        }
+        self.solver = ca.nlpsol("polish", "ipopt", nlp, opts)
+        # For tests: the objective tr(C) itself (not divided by f_scale), its gradient and Hessian
+        # with respect to x = (z [M, 2] column-major, eta [M]).
+        self.objective = ca.Function("f", [x, p], [f_true])
+        self.gradient = ca.Function("df", [x, p], [ca.gradient(f_true, x)])
+        self.hessian = ca.Function("d2f", [x, p], [ca.hessian(f_true, x)[0]])
+        self.constraints = ca.Function("g", [x, p], [ca.vertcat(*g)])
+
+    def pack(
+        self, xy: FloatArray, eta: FloatArray, objective: PlanningObjective, cons: SlotConstraints
+    ) -> tuple[FloatArray, FloatArray]:
+        """(x, p): the NLP's variables for plan (xy [M, 2], eta [M]) and its parameters for
+        this slot, with the scalings taken at that plan."""
+        s = self.scenario
+        M = s.M
+        L = self.step_m
+        z = (np.asarray(xy, dtype=float) - cons.prev_xy) / L
+        x = np.concatenate([z.reshape(-1, order="F"), np.asarray(eta, dtype=float)])
+        nearest = np.argmin(
+            np.linalg.norm(np.asarray(xy)[:, None, :] - cons.bs_xy[None], axis=-1), axis=1
+        )
+        if cons.ballistic_xy is None or not np.isfinite(cons.accel_radius_m):
+            ballistic, accel_r2 = cons.prev_xy, 4.0  # inactive: 14h already bounds |z| by 1
+        else:
+            radius = max(cons.accel_radius_m - SOLVER_MARGIN_M, 0.0)
+            ballistic, accel_r2 = cons.ballistic_xy, (radius / L) ** 2
+        keep_out = np.zeros((0, 2)) if cons.keep_out_xy is None else cons.keep_out_xy
+        J = objective._information(np.asarray(xy, dtype=float), np.asarray(eta, dtype=float))[0]
+        scale = 1.0 / np.sqrt(np.diag(J))
+        f0 = objective.value(xy, eta)
+        values = [
+            cons.prev_xy,
+            cons.serving_bs_xy,
+            cons.bs_xy[nearest],
+            ballistic,
+            np.array([accel_r2]),
+            keep_out,
+            objective.x_pred,
+            objective.J_pred,
+            scale,
+            np.array([f0 if np.isfinite(f0) and f0 > 0 else 1.0]),
+        ]
+        p = np.concatenate([np.asarray(v, dtype=float).reshape(-1, order="F") for v in values])
+        assert M * 2 + M == len(x)
+        return x, p
+
+    def unpack(self, x: FloatArray, cons: SlotConstraints) -> tuple[FloatArray, FloatArray]:
+        """(xy [M, 2], eta [M]) of the NLP variables x."""
+        M = self.scenario.M
+        z = np.asarray(x[: 2 * M]).reshape((M, 2), order="F")
+        return cons.prev_xy + self.step_m * z, np.asarray(x[2 * M :], dtype=float)
+
+    def polish(
+        self,
+        start_xy: FloatArray,
+        start_eta: FloatArray,
+        objective: PlanningObjective,
+        cons: SlotConstraints,
+    ) -> PolishResult:
+        """Solve from the SCA plan (start_xy [M, 2], start_eta [M]); the result says whether its
+        answer is accepted (feasible by cons.feasible and strictly better than the start)."""
+        s = self.scenario
+        f_start = objective.value(start_xy, start_eta)
+        x0, p = self.pack(start_xy, start_eta, objective, cons)
+        M = s.M
+        lo, hi = cons.area_bounds()
+        lbz = (lo[None, :] - cons.prev_xy) / self.step_m
+        ubz = (hi[None, :] - cons.prev_xy) / self.step_m
+        lbx = np.concatenate([lbz.reshape(-1, order="F"), np.full(M, MIN_SHARE)])
+        ubx = np.concatenate([ubz.reshape(-1, order="F"), np.ones(M)])
+        x0 = np.clip(x0, lbx, ubx)
+        sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg)
+        stats = self.solver.stats()
+        status = str(stats.get("return_status", "unknown"))
+        iterations = int(stats.get("iter_count", 0))
+        xy, eta = self.unpack(np.asarray(sol["x"], dtype=float).ravel(), cons)
+        eta = np.maximum(eta, 0.0)
+        eta = eta / eta.sum()
+        value = objective.value(xy, eta)
+
+        def result(accepted: bool, note: str) -> PolishResult:
+            return PolishResult(xy, eta, value, status, iterations, accepted, note)
+
+        if not stats.get("success", False):
+            return result(False, f"polish kept the SCA plan: IPOPT {status} after {iterations} it")
+        if not bool(cons.feasible(xy[None], eta[None])[0]):
+            bad = ", ".join(cons.describe_violations(xy, eta))
+            return result(False, f"polish kept the SCA plan: IPOPT answer violates {bad}")
+        if not value < f_start:
+            return result(False, "polish kept the SCA plan: no improvement")
+        return result(True, f"polished: {f_start:.6g} -> {value:.6g} in {iterations} it")
+
+
+def _information_terms(q: ca.SX, eta: ca.SX, x_pred: ca.SX, s: Scenario) -> ca.SX:
+    """J_M's terms [4, 4] of one UAV at q [2] with share eta (eq. 8, as PlanningObjective)."""
+    r = x_pred[:2] - q
+    d2 = ca.sumsqr(r)
+    d = ca.sqrt(d2)
+    u = r / d
+    w = x_pred[2:]
+    v_r = ca.dot(u, w)
+    g = ca.vertcat(u, 0.0, 0.0)
+    k = ca.vertcat((w - v_r * u) / d, u)
+    a = s.radar_gain * (eta * s.B) ** 2 / (s.alpha_d * d2**2)
+    b = s.radar_gain * s.Ts**2 / (s.alpha_v * d2**2)
+    return a * (g @ g.T) + b * (k @ k.T)
