@@ -16,9 +16,9 @@ The exact problem of one slot is the one `plan_slot` enforces, with the slot's a
 Slots: `--slots` slots sampled evenly from `--seeds` closed-loop runs of the `proposed` method
 (the scenario's default, noise seeds seed + r), at M = 3 (config/paper.yaml) and at M = 6
 (bench/planner.py's ring scenario, K = 8, N_a = 2). Each slot's input (q_{n-1}, x_pred, prior,
-velocities, keep-out points) is replayed through `plan_slot` with the polish off (the paper's SCA
-alone) and on (SCA + polish), `--repeats` times each, interleaved; the time of a slot is the
-minimum of its repeats (plan_slot's report.solve_s).
+velocities, keep-out points) is replayed through `plan_slot` as `proposed-sca` (the paper's SCA
+alone) and as `proposed` with the polish on (SCA + polish), `--repeats` times each, interleaved
+in alternating order; the time of a slot is the minimum of its repeats (report.solve_s).
 
 Reference: scipy SLSQP (not the polish's IPOPT) from `--starts` random feasible starts drawn
 without the planner (uniform in each UAV's 14h disk, or its dynamics disk, rejection on every
@@ -26,10 +26,10 @@ position constraint; shares = the 14a floors plus a Dirichlet share of the rest)
 slot. 14b is smooth per start: each UAV keeps to the control disk of the BS nearest its start
 point (the starts sample the union). Fixed settings: squared-distance constraints tightened by
 1 mm (the planner's margin), 14a by 1e-9 relative, the area as variable bounds, analytic
-gradients of f and of every constraint, ftol 1e-12, at most 300 iterations. An answer counts only
-if `SlotConstraints.feasible` (the planner's check) and this script's own loop check both accept
-it. A slot where no start gives a feasible answer, or where the plan is not `ok`, is a miss:
-its ratio is +inf.
+gradients of f and of every constraint, f divided by its value at the start, ftol 1e-10, at most
+300 iterations. An answer counts only if `SlotConstraints.feasible` (the planner's check) and
+this script's own loop check both accept it. A slot where no start gives a feasible answer, or
+where the plan is not `ok`, is a miss: its ratio is +inf.
 
 Printed per M: the ratio plan / best (median, p95, p99, worst, share within 1 % and 5 %, misses)
 for the default plan (the scenario's planner.polish; the ring takes paper.yaml's), the SCA alone
