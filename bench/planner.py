@@ -254,7 +254,7 @@ def main() -> None:
     ref = {c.m: float(np.median(c.times_s)) for c in cells if c.solver == "reference"}
     print("per-slot planning time and memory (one closed-loop run per cell, seed 100)")
     head = (
-        f"{'M':>3} {'K':>3} {'N_a':>3} {'slots':>5} {'method':<9} {'solver':<15} {'median ms':>9} "
+        f"{'M':>3} {'K':>3} {'N_a':>3} {'slots':>5} {'method':<12} {'solver':<15} {'median ms':>9} "
         f"{'p95 ms':>8} {'ratio':>6} {'vs ref':>6} {'ok %':>5} {'peak KiB':>9} {'mem ratio':>9}"
     )
     print(head)
@@ -264,7 +264,7 @@ def main() -> None:
         p95 = float(np.percentile(c.times_s, 95))
         n_a = math.ceil(c.m / c.k) + 1
         print(
-            f"{c.m:>3} {c.k:>3} {n_a:>3} {len(c.times_s):>5} {c.method:<9} {c.solver:<15} "
+            f"{c.m:>3} {c.k:>3} {n_a:>3} {len(c.times_s):>5} {c.method:<12} {c.solver:<15} "
             f"{med * 1e3:>9.1f} {p95 * 1e3:>8.1f} {med / base:>6.2f} {ref[c.m] / med:>6.2f} "
             f"{c.ok_fraction:>5.0%} {c.peak_kib:>9.0f} {c.peak_kib / mem_base:>9.2f}"
         )
