@@ -5,7 +5,8 @@
 - the polished plan against grids at M = 1 (the whole feasible disk) and M = 2 (each UAV's disk
   with the other fixed, and the share);
 - a slot where the SCA stops short is polished to the grid's optimum;
-- a capped solve keeps the SCA plan and says so in the report;
+- a capped solve, and an answer the exact check rejects, keep the SCA plan and say so in the
+  report;
 - every plan of a simulate trace (paper.yaml, polish on) passes the independent 14a-14j, N_a
   checker of tests/support/independent/.
 """
@@ -199,3 +200,26 @@ def test_every_polished_plan_of_a_simulate_trace_passes_the_independent_check(
                 == []
             )
     assert polished > total // 2
+
+
+def test_an_answer_the_exact_check_rejects_keeps_the_sca_plan(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    s = _scenario(3)
+    kit, inputs = _slot_inputs(s)
+    inp = inputs[10]
+    sca = plan_slot(inp, kit, "proposed-sca")
+    nlp = kit.polish
+    unpack = nlp.unpack
+
+    def too_far(x: np.ndarray, cons: SlotConstraints) -> tuple[np.ndarray, np.ndarray]:
+        xy, eta = unpack(x, cons)
+        return xy + np.array([3 * s.v_max * s.dt, 0.0]), eta  # breaks 14h
+
+    monkeypatch.setattr(nlp, "unpack", too_far)
+    plan = plan_slot(inp, kit, "proposed")
+    assert plan.report.status == "ok"
+    assert plan.report.reason.startswith("polish kept the SCA plan: IPOPT answer violates")
+    assert "14h max speed" in plan.report.reason
+    np.testing.assert_array_equal(plan.uav_xy_m, sca.uav_xy_m)
+    assert plan.pcrb_trace == sca.pcrb_trace
