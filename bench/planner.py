@@ -20,6 +20,10 @@ cell median at the same M (the speed-up of the performance work).
 The second table replays the proposed method's own slot inputs through the reference kit: the
 largest waypoint difference and the relative difference of the plan's tr(PCRB).
 
+The third table replays the proposed method's slot inputs through `proposed-sca` (Algorithm 2
+alone) and `proposed` (Algorithm 2 + the polish, planning/polish.py), interleaved slot by slot:
+median plan time of each, their ratio, IPOPT's iterations and the polish's gain in tr(PCRB).
+
 Run: python bench/planner.py [--slots 20] [--slots-24 6] [--quick]
      python bench/planner.py --compare-tree DIR [--rounds 3]   (before/after, docs/performance.md)
      python bench/planner.py --profile M                       (cProfile of the proposed method)
@@ -61,7 +65,7 @@ def scenario(m: int, k: int, n_a: int, slots: int, solver: str = "CLARABEL") -> 
             "radio": {"bs_capacity": n_a},
             "base_stations": {"count": k},
             "uavs": {"start_xy_m": start.round(1).tolist()},
-            "planner": {"solver": solver},
+            "planner": {"solver": solver, "polish": True},
         },
         f"bench M={m}",
     )
@@ -250,7 +254,7 @@ def main() -> None:
     ref = {c.m: float(np.median(c.times_s)) for c in cells if c.solver == "reference"}
     print("per-slot planning time and memory (one closed-loop run per cell, seed 100)")
     head = (
-        f"{'M':>3} {'K':>3} {'N_a':>3} {'slots':>5} {'method':<9} {'solver':<15} {'median ms':>9} "
+        f"{'M':>3} {'K':>3} {'N_a':>3} {'slots':>5} {'method':<12} {'solver':<15} {'median ms':>9} "
         f"{'p95 ms':>8} {'ratio':>6} {'vs ref':>6} {'ok %':>5} {'peak KiB':>9} {'mem ratio':>9}"
     )
     print(head)
@@ -260,7 +264,7 @@ def main() -> None:
         p95 = float(np.percentile(c.times_s, 95))
         n_a = math.ceil(c.m / c.k) + 1
         print(
-            f"{c.m:>3} {c.k:>3} {n_a:>3} {len(c.times_s):>5} {c.method:<9} {c.solver:<15} "
+            f"{c.m:>3} {c.k:>3} {n_a:>3} {len(c.times_s):>5} {c.method:<12} {c.solver:<15} "
             f"{med * 1e3:>9.1f} {p95 * 1e3:>8.1f} {med / base:>6.2f} {ref[c.m] / med:>6.2f} "
             f"{c.ok_fraction:>5.0%} {c.peak_kib:>9.0f} {c.peak_kib / mem_base:>9.2f}"
         )
@@ -279,7 +283,44 @@ def main() -> None:
             dq50, dq, dtr50, dtr, n = agreement(c, len(c.times_s))
             print(f"{c.m:>3} {n:>5} {dq50:>13.2e} {dq:>10.2e} {dtr50:>+11.1e} {dtr:>+12.1e}")
     print("d tr = tr(PCRB) of the default plan / reference plan - 1 (negative: default better)")
+    polish_table(cells)
     print(f"\ntotal {time.perf_counter() - t_start:.0f} s")
+
+
+def polish_table(cells: list[Cell], repeats: int = 3) -> None:
+    """Polish on/off on the proposed cells' own inputs, interleaved (SCA, then SCA + polish, per
+    slot, `repeats` times; the median of each slot's repeats)."""
+    print("\npolish on/off, same inputs, interleaved (proposed-sca vs proposed)")
+    print(
+        f"{'M':>3} {'slots':>5} {'SCA ms':>8} {'SCA+polish ms':>13} {'ratio':>6} "
+        f"{'IPOPT it':>8} {'median gain':>11} {'largest gain':>12} {'kept':>5}"
+    )
+    for c in cells:
+        if c.method != "proposed" or c.solver != "CLARABEL":
+            continue
+        s = scenario(c.m, c.k, math.ceil(c.m / c.k) + 1, len(c.times_s))
+        kit = SolverKit(s)
+        kit.warm_up()
+        t_sca, t_pol, iters, gain, kept = [], [], [], [], []
+        for inp in c.inputs:
+            a_s, b_s = [], []
+            for _ in range(repeats):
+                a = plan_slot(inp, kit, "proposed-sca")
+                b = plan_slot(inp, kit, "proposed")
+                a_s.append(a.report.solve_s)
+                b_s.append(b.report.solve_s)
+            t_sca.append(np.median(a_s))
+            t_pol.append(np.median(b_s))
+            iters.append(b.report.polish_iterations)
+            gain.append(1 - b.pcrb_trace / a.pcrb_trace)
+            kept.append(b.report.polish.startswith("polished"))
+        med_a, med_b = float(np.median(t_sca)), float(np.median(t_pol))
+        print(
+            f"{c.m:>3} {len(c.inputs):>5} {med_a * 1e3:>8.1f} {med_b * 1e3:>13.1f} "
+            f"{med_b / med_a:>6.2f} {np.median(iters):>8.0f} {np.median(gain):>11.2%} "
+            f"{np.max(gain):>12.2%} {np.mean(kept):>5.0%}"
+        )
+    print("gain = 1 - tr(PCRB) polished / SCA; kept = share of slots where the polish was kept")
 
 
 if __name__ == "__main__":

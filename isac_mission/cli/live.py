@@ -173,7 +173,9 @@ def _live(
     console.print(f"trace: {result.trace_path}")
 
 
-MethodOpt = Annotated[str, typer.Option(help="Planning method: proposed, sd, aba, crb, comm.")]
+MethodOpt = Annotated[
+    str, typer.Option(help="Planning method: proposed, proposed-sca, sd, aba, crb, comm.")
+]
 SpeedOpt = Annotated[float, typer.Option(help="Simulation seconds per wall second.")]
 
 

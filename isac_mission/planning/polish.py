@@ -46,6 +46,19 @@ RATE_MARGIN = 1e-7
 # Shares stay at least this far from 0 (a_m is quadratic in eta: 0 is a stationary point).
 MIN_SHARE = 1e-9
 
+IPOPT_OPTIONS: dict[str, Any] = {
+    "print_level": 0,
+    "sb": "yes",
+    "tol": 1e-9,
+    "acceptable_iter": 0,  # no "acceptable" early stop: converge or hit the cap
+    "constr_viol_tol": 1e-9,
+    "bound_push": 1e-6,  # start at the SCA point, not pushed into the interior
+    "bound_frac": 1e-6,
+    "mu_init": 1e-4,  # the start is near-optimal: a small barrier from the first iteration
+    "hessian_approximation": "exact",
+}
+"""IPOPT's options of the polish (max_iter comes from planner.polish_max_iterations)."""
+
 
 @dataclass(frozen=True)
 class PolishResult:
@@ -153,18 +166,7 @@ class PolishNLP:
         nlp = {"x": x, "p": p, "f": objective, "g": ca.vertcat(*g)}
         opts: dict[str, Any] = {
             "print_time": False,
-            "ipopt": {
-                "print_level": 0,
-                "sb": "yes",
-                "max_iter": max_iterations,
-                "tol": 1e-9,
-                "acceptable_iter": 0,  # no "acceptable" early stop: converge or hit the cap
-                "constr_viol_tol": 1e-9,
-                "bound_push": 1e-6,
-                "bound_frac": 1e-6,
-                "mu_init": 1e-4,
-                "hessian_approximation": "exact",
-            },
+            "ipopt": {**IPOPT_OPTIONS, "max_iter": max_iterations},
         }
         self.solver = ca.nlpsol("polish", "ipopt", nlp, opts)
         # For tests: the objective tr(C) itself (not divided by f_scale), its gradient and Hessian

@@ -5,21 +5,27 @@
 - the polished plan against grids at M = 1 (the whole feasible disk) and M = 2 (each UAV's disk
   with the other fixed, and the share);
 - a slot where the SCA stops short is polished to the grid's optimum;
-- a capped solve keeps the SCA plan and says so in the report;
-- every polished plan of a closed-loop run passes the independent 14a-14j check.
+- a capped solve, and an answer the exact check rejects, keep the SCA plan and say so in the
+  report;
+- every plan of a simulate trace (paper.yaml, polish on) passes the independent 14a-14j, N_a
+  checker of tests/support/independent/.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from isac_mission.config import Scenario, parse_scenario
+from isac_mission.config import Scenario, load_scenario, parse_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
+from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
 from isac_mission.planning.feasibility import SlotConstraints
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import PlanningObjective
 from tests.numerics.test_planner import _independent_violations
+from tests.support.independent.constraints import check_constraints
 
 
 def _scenario(M: int, **planner: object) -> Scenario:
@@ -172,18 +178,48 @@ def test_sca_method_never_polishes_and_polish_never_loses() -> None:
         assert plan.pcrb_trace <= sca.pcrb_trace
 
 
-def test_every_polished_plan_of_a_closed_loop_run_passes_the_independent_check() -> None:
+def test_every_polished_plan_of_a_simulate_trace_passes_the_independent_check(
+    tmp_path: Path,
+) -> None:
+    s = load_scenario("paper")
+    assert s.planner.polish
+    run_monte_carlo(s, ["proposed"], runs=2, seed=11, trace_dir=tmp_path)
+    polished = total = 0
+    for run in range(2):
+        path = trace_path(tmp_path, "proposed", run)
+        assert check_constraints(path) == []
+        # The same slots replayed: the polish was kept on most of them.
+        kit = SolverKit(s)
+        _, inputs = record_slot_inputs(s, "proposed", draw_run_noise(s, 11 + run), kit)
+        for inp in inputs[::5]:
+            plan = plan_slot(inp, kit, "proposed")
+            total += 1
+            polished += plan.report.polish.startswith("polished")
+            assert (
+                _independent_violations(s, inp, plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav)
+                == []
+            )
+    assert polished > total // 2
+
+
+def test_an_answer_the_exact_check_rejects_keeps_the_sca_plan(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     s = _scenario(3)
-    kit = SolverKit(s)
-    _, inputs = record_slot_inputs(s, "proposed", draw_run_noise(s, 5), kit)
-    polished = 0
-    for inp in inputs:
-        plan = plan_slot(inp, kit, "proposed")
-        if plan.report.status != "ok":
-            continue
-        polished += plan.report.polish.startswith("polished")
-        assert (
-            _independent_violations(s, inp, plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav)
-            == []
-        )
-    assert polished > len(inputs) // 2
+    kit, inputs = _slot_inputs(s)
+    inp = inputs[10]
+    sca = plan_slot(inp, kit, "proposed-sca")
+    nlp = kit.polish
+    unpack = nlp.unpack
+
+    def too_far(x: np.ndarray, cons: SlotConstraints) -> tuple[np.ndarray, np.ndarray]:
+        xy, eta = unpack(x, cons)
+        return xy + np.array([3 * s.v_max * s.dt, 0.0]), eta  # breaks 14h
+
+    monkeypatch.setattr(nlp, "unpack", too_far)
+    plan = plan_slot(inp, kit, "proposed")
+    assert plan.report.status == "ok"
+    assert plan.report.reason.startswith("polish kept the SCA plan: IPOPT answer violates")
+    assert "14h max speed" in plan.report.reason
+    np.testing.assert_array_equal(plan.uav_xy_m, sca.uav_xy_m)
+    assert plan.pcrb_trace == sca.pcrb_trace

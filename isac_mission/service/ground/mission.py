@@ -1,6 +1,6 @@
 """The ground loop's state, without I/O: belief, bound, and the plan for the next slot.
 
-Slot convention (as sim/world.py and codec.py): plan n carries the waypoints flown during
+Slot convention (as sim/world.py and wire/codec.py): plan n carries the waypoints flown during
 (n-1, n] and the shares used for slot n's detections; after the detections of slot n are folded in,
 the ground plans slot n+1. `MissionState` runs the slot recursion of `tracking/cycle.py`, as
 `experiment/closed_loop.py` does offline, split at the points where the live service waits for the
