@@ -24,6 +24,7 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.planning.association import AssociationLP, associate
 from isac_mission.planning.bandwidth import BandwidthSubproblem, optimise_shares
+from isac_mission.planning.basins import screen_leaders
 from isac_mission.planning.communication import communication_optimal, lemma1_shares
 from isac_mission.planning.feasibility import SlotConstraints, capacity_ok, operating_area
 from isac_mission.planning.polish import PolishNLP
@@ -216,6 +217,8 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
     history = [f]
     n_pos = n_bw = n_ao = 0
     search = {"epsilon": cfg.epsilon, "step": cfg.line_search_step}
+    note, reason, n_polish = "", "", 0
+    polish = method == "proposed" and cfg.polish and moves
     for ao_iteration in range(1, cfg.max_ao_iterations + 1):
         n_ao = ao_iteration
         if moves:
@@ -255,8 +258,7 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         violated.append("14e capacity")
     if violated:
         return fallback("infeasible: no plan satisfies " + ", ".join(violated))
-    note, reason, n_polish = "", "", 0
-    if method == "proposed" and cfg.polish and moves:
+    if polish:
         polished = kit.polish.polish(Q, eta, objective, cons)
         note, n_polish = polished.note, polished.iterations
         if polished.accepted:
@@ -264,6 +266,16 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
             history.append(polished.value)
         else:
             reason = polished.note
+        # The other basins: the band's leader moved to another UAV (planning/basins.py).
+        f_best = history[-1]
+        for leader, start_eta in screen_leaders(Q, eta, objective, f_best):
+            other = kit.polish.polish(Q, start_eta, objective, cons)
+            n_polish += other.iterations
+            if other.accepted and other.value < f_best:
+                Q, eta, f_best = other.uav_xy_m, other.bandwidth_share, other.value
+                history.append(other.value)
+                note = f"{other.note} (leader UAV {leader})"
+                reason = ""
     report = SolveReport(
         "ok",
         reason,
