@@ -219,6 +219,7 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
     search = {"epsilon": cfg.epsilon, "step": cfg.line_search_step}
     note, reason, n_polish = "", "", 0
     polish = method == "proposed" and cfg.polish and moves
+    polished_early, n_early = False, 0
     for ao_iteration in range(1, cfg.max_ao_iterations + 1):
         n_ao = ao_iteration
         if moves:
@@ -251,6 +252,16 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         history.append(f_new)
         decrease = (f - f_new) / f if np.isfinite(f) else np.inf
         f = f_new
+        if polish and ao_iteration == 1 and decrease > cfg.epsilon:
+            # The polish after the first AO iteration (docs/model.md, "The polish"): kept when
+            # it gains more than epsilon on that point; otherwise Algorithm 2 resumes.
+            early = kit.polish.polish(Q, eta, objective, cons)
+            if early.accepted and f_new - early.value > cfg.epsilon * f_new:
+                Q, eta, polished_early = early.uav_xy_m, early.bandwidth_share, True
+                note, n_polish = early.note, early.iterations
+                history.append(early.value)
+                break
+            n_early = early.iterations
         if decrease <= cfg.epsilon or not (moves and method != "aba"):
             break
     violated = cons.describe_violations(Q, eta)
@@ -258,14 +269,15 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         violated.append("14e capacity")
     if violated:
         return fallback("infeasible: no plan satisfies " + ", ".join(violated))
-    if polish:
+    if polish and not polished_early:
         polished = kit.polish.polish(Q, eta, objective, cons)
-        note, n_polish = polished.note, polished.iterations
+        note, n_polish = polished.note, n_early + polished.iterations
         if polished.accepted:
             Q, eta = polished.uav_xy_m, polished.bandwidth_share
             history.append(polished.value)
         else:
             reason = polished.note
+    if polish:
         # The other basins: the band's leader moved to another UAV (planning/basins.py).
         f_best = history[-1]
         for leader, start_eta in screen_leaders(Q, eta, objective, f_best):
