@@ -4,8 +4,10 @@ One pure function per slot: (scenario via the kit, previous plan, predicted trac
 information) -> plan. No clock state, no RNG, no I/O: the offline simulation and the live service
 call the same function. The strategies share it:
 
-- proposed: positions by Algorithm 1 and shares by (P1.2.1), alternated (Algorithm 2), then,
-  when planner.polish is set, the exact problem polished from that point (planning/polish.py);
+- proposed: positions by Algorithm 1 and shares by (P1.2.1), alternated (Algorithm 2), with,
+  when planner.polish is set, the exact problem polished (planning/polish.py) after the first AO
+  iteration (kept if it gains more than epsilon there, else Algorithm 2 resumes and is polished
+  at its end), then from the best other leader of the band (planning/basins.py);
 - proposed-sca: Algorithm 2 alone, never polished (the paper's algorithm as printed);
 - sd: static deployment, UAVs stay where they are, shares optimised;
 - aba: average bandwidth (eta = 1/M), positions by Algorithm 1;
@@ -31,6 +33,11 @@ from isac_mission.planning.polish import PolishNLP
 from isac_mission.planning.positions import PositionSubproblem, optimise_positions
 from isac_mission.tracking.pcrb import PlanningObjective, SensingParams
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
+
+EARLY_POLISH_GAIN = 1e-6
+"""The early polish (after AO iteration 1) is kept only if it lowers tr(PCRB) by more than this
+(relative) there: a smaller gain means Algorithm 2 had nearly converged, and its end point (which
+the polish may then match only to IPOPT's tolerance) is polished instead."""
 
 Method = Literal["proposed", "proposed-sca", "sd", "aba", "crb", "comm"]
 METHODS: tuple[Method, ...] = ("proposed", "proposed-sca", "sd", "aba", "crb", "comm")
@@ -254,11 +261,11 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         f = f_new
         if polish and ao_iteration == 1 and decrease > cfg.epsilon:
             # The polish after the first AO iteration (docs/model.md, "The polish"): kept when
-            # it gains more than epsilon on that point; otherwise Algorithm 2 resumes.
+            # it gains more than EARLY_POLISH_GAIN on that point; otherwise Algorithm 2 resumes.
             early = kit.polish.polish(Q, eta, objective, cons)
-            if early.accepted and f_new - early.value > cfg.epsilon * f_new:
+            if early.accepted and f_new - early.value > EARLY_POLISH_GAIN * f_new:
                 Q, eta, polished_early = early.uav_xy_m, early.bandwidth_share, True
-                note, n_polish = early.note, early.iterations
+                note, n_polish = f"{early.note} after AO iteration 1", early.iterations
                 history.append(early.value)
                 break
             n_early = early.iterations
