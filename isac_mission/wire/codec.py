@@ -244,6 +244,8 @@ def encode_telemetry(msg: TelemetryMsg) -> bytes:
         landed=bool(msg.landed),
         link=msg.link,
     )
+    if msg.published_wall_s is not None:
+        obj["published_wall_s"] = float(msg.published_wall_s)
     data = dumps(obj)
     decode_telemetry(data)
     return data
@@ -261,6 +263,7 @@ def _telemetry(w: TelemetryWire) -> TelemetryMsg:
         armed=w.armed,
         landed=w.landed,
         link=w.link,
+        published_wall_s=w.published_wall_s,
     )
 
 
@@ -279,6 +282,8 @@ def encode_track(msg: TrackMsg) -> bytes:
         J=[finite_floats(r, f"track.J[{i}]") for i, r in enumerate(np.asarray(msg.J))],
         pcrb_trace=float(msg.pcrb_trace),
     )
+    if msg.published_wall_s is not None:
+        obj["published_wall_s"] = float(msg.published_wall_s)
     data = dumps(obj)
     decode_track(data)
     return data
@@ -292,6 +297,7 @@ def _track(w: TrackWire) -> TrackMsg:
         P=np.array(w.P, dtype=float),
         J=np.array(w.J, dtype=float),
         pcrb_trace=w.pcrb_trace,
+        published_wall_s=w.published_wall_s,
     )
 
 

@@ -75,7 +75,8 @@ class TelemetryMsg:
 
     position_xy_m [2] and velocity_xy_mps [2] in the scenario plane (x east, y north); altitude_m
     above the scenario ground; mode is a flight-mode name (wire.models.TELEMETRY_MODES); link is "ok" or "lost".
-    slot is the last slot the bridge knows of (-1 before the mission).
+    slot is the last slot the bridge knows of (-1 before the mission). published_wall_s: wall
+    clock (Unix time, s) at which it was published, None when not stamped.
     """
 
     slot: int
@@ -88,6 +89,7 @@ class TelemetryMsg:
     armed: bool
     landed: bool
     link: str
+    published_wall_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -95,6 +97,7 @@ class TrackMsg:
     """The ground's estimate after slot `slot` (`isac/<mission>/track`).
 
     x [4] EKF state, P [4, 4] its covariance, J [4, 4] the PCRB information, pcrb_trace = tr(J^-1).
+    published_wall_s: wall clock (Unix time, s) at which it was published, None when not stamped.
     """
 
     slot: int
@@ -103,6 +106,7 @@ class TrackMsg:
     P: FloatArray
     J: FloatArray
     pcrb_trace: float
+    published_wall_s: float | None = None
 
 
 @dataclass(frozen=True)

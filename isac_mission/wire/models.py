@@ -60,6 +60,17 @@ LINK_STATES: Final = frozenset(get_args(LinkState))
 CONTROL_PARAMS: Final = {"rate_min_mbps": (1e-3, 1e5)}
 """Operator-settable planning parameters and their accepted ranges (`isac/<mission>/control`)."""
 MAX_COUNTERS: Final = 200
+MAX_WALL_S: Final = 1.0e11
+"""Largest wall-clock stamp accepted (Unix time, s): the year 5138."""
+PublishedWall = Annotated[
+    float | None,
+    Field(
+        default=None,
+        ge=0.0,
+        le=MAX_WALL_S,
+        description="Wall clock (Unix time, s) at which the publisher put the message; optional.",
+    ),
+]
 
 CHOICES.update(
     mode=("{value!r} is not one of {allowed}", TELEMETRY_MODES),
@@ -198,6 +209,7 @@ class TelemetryWire(Envelope):
     armed: bool
     landed: bool
     link: LinkState = Field(description="The MAVLink link: ok or lost.")
+    published_wall_s: PublishedWall = None
 
     @field_validator("uav", mode="before")
     @classmethod
@@ -213,6 +225,7 @@ class TrackWire(Envelope):
     P: Matrix4 = Field(description="EKF covariance.")
     J: Matrix4 = Field(description="PCRB information.")
     pcrb_trace: NonNegative = Field(description="tr(J^-1) (m^2 + m^2/s^2).")
+    published_wall_s: PublishedWall = None
 
 
 class HealthWire(Envelope):

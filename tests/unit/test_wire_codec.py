@@ -323,3 +323,29 @@ def test_decode_any_names_the_field_of_the_message_it_recognised() -> None:
     )
     reason = _expect(_bytes({**telemetry, "mode": "flying"}), "telemetry.mode", decode_any)
     assert "'flying' is not one of" in reason
+
+
+def test_telemetry_and_track_carry_an_optional_wall_clock_publish_stamp() -> None:
+    """published_wall_s (Unix time, s) round-trips, may be absent, and is checked like a field."""
+    tel = wire.TelemetryMsg(
+        4, 4.0, 1, np.array([1.0, 2.0]), 30.0, np.array([0.5, 0.0]), "offboard", True, False, "ok"
+    )
+    assert "published_wall_s" not in _obj(wire.encode_telemetry(tel))
+    assert wire.decode_telemetry(wire.encode_telemetry(tel)).published_wall_s is None
+    stamped = wire.TelemetryMsg(**{**tel.__dict__, "published_wall_s": 1.8e9 + 0.25})
+    assert wire.decode_telemetry(wire.encode_telemetry(stamped)).published_wall_s == 1.8e9 + 0.25
+    obj = _obj(wire.encode_telemetry(stamped))
+    for bad in ("now", -1.0, True, 1e12):
+        _expect(
+            _bytes({**obj, "published_wall_s": bad}),
+            "telemetry.published_wall_s",
+            wire.decode_telemetry,
+        )
+    track = TrackMsg(7, 7.0, np.zeros(4), np.eye(4), np.eye(4), 1.0, published_wall_s=1.9e9)
+    assert decode_track(encode_track(track)).published_wall_s == 1.9e9
+    assert (
+        decode_track(
+            encode_track(TrackMsg(7, 7.0, np.zeros(4), np.eye(4), np.eye(4), 1.0))
+        ).published_wall_s
+        is None
+    )

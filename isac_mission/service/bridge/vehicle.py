@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import math
+import time
 from collections import deque
 from collections.abc import Sequence
 
@@ -317,7 +319,8 @@ class VehicleBridge:
         self._supervise(st)
         msg = self.telemetry(st)
         if msg is not None and self._bus is not None:
-            self._bus.publish(self.keys.telemetry(self.index), encode_telemetry(msg))
+            stamped = dataclasses.replace(msg, published_wall_s=time.time())
+            self._bus.publish(self.keys.telemetry(self.index), encode_telemetry(stamped))
             self.counters.telemetry_published += 1
 
     def _supervise(self, st: VehicleStatus) -> None:

@@ -263,6 +263,7 @@ class GroundLoop:
                     self.state.belief.P,
                     self.state.bound.J,
                     self.state.bound.trace,
+                    published_wall_s=time.time(),
                 )
             ),
         )
