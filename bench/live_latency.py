@@ -47,7 +47,9 @@ def main() -> None:
             out_dir=Path(tmp),
             zenoh_endpoint=tcp_loopback(_free_tcp_port()),
             mavlink_base_port=24540,
-            gcs_base_port=24550,
+            mavlink_local_base_port=24580,
+            gcs_port=24550,
+            gcs_local_base_port=28570,
         )
         result = asyncio.run(run_embedded(s, opts, asyncio.Event()))
     lat = np.array(result.detection_to_setpoint_s) * 1e3

@@ -4,8 +4,9 @@
 
 - a `SimClock` (ticks of 1 / tick_hz simulation seconds at `speed` x real time) steps the M
   autopilots (`sim.autopilot.Autopilot`, one per UAV: spawned on the ground at the scenario's
-  start points, MAVLink on 127.0.0.1, offboard link to mavlink_base_port + m and GCS link to
-  gcs_base_port + m) and drives everything else;
+  start points, MAVLink on 127.0.0.1 in PX4 SITL's layout: offboard link from
+  mavlink_local_base_port + m to mavlink_base_port + m, GCS link from gcs_local_base_port + m
+  to gcs_port) and drives everything else;
 - at each slot boundary t = t0 + n dt it advances the target to slot n (slot 0 is x0), draws and
   publishes every UAV's detection from the vehicles' actual horizontal positions
   (`sim.emulator.SensingEmulator`), and publishes `truth` and `clock`;

@@ -59,7 +59,9 @@ def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> Aut
     return AutopilotSettings(
         index=m,
         offboard_port=options.mavlink_base_port + m,
-        gcs_port=options.gcs_base_port + m,
+        bind_port=options.mavlink_local_base_port and options.mavlink_local_base_port + m,
+        gcs_port=options.gcs_port,
+        gcs_bind_port=options.gcs_local_base_port and options.gcs_local_base_port + m,
         geo_origin=options.geo_origin,
         local_origin_xy_m=(0.0, 0.0),
         spawn_xy_m=(float(start[0]), float(start[1])),

@@ -10,7 +10,13 @@ from typing import Literal
 
 from isac_mission.bus import BusSettings
 from isac_mission.frames import PX4_SITL_ORIGIN, GeoPoint
-from isac_mission.mavwire.ports import GCS_BASE_PORT, OFFBOARD_BASE_PORT
+from isac_mission.mavwire.ports import (
+    GCS_LOCAL_BASE_PORT,
+    GCS_PORT,
+    OFFBOARD_BASE_PORT,
+    OFFBOARD_LOCAL_BASE_PORT,
+    check_base_port,
+)
 
 StartMode = Literal["immediate", "offboard"]
 
@@ -59,7 +65,11 @@ class WorldOptions:
     lockstep_timeout_s: wall seconds to wait for that plan before going on.
     seed: seed of the target and sensing noise (None: the scenario's seed).
     bus: Zenoh settings (default: peer connecting to tcp/127.0.0.1:7447).
-    mavlink_base_port / gcs_base_port: vehicle m sends to 127.0.0.1:(base + m).
+    PX4 SITL's port layout (docs/service.md, "Ports"), every port UDP on 127.0.0.1:
+    mavlink_base_port: vehicle m sends its offboard link to base + m (14540 + m);
+    mavlink_local_base_port: ... from local port base + m (14580 + m; 0: ephemeral);
+    gcs_port: every vehicle sends its ground-station link to this one port (14550)...
+    gcs_local_base_port: ... from local port base + m (18570 + m; 0: ephemeral).
     tick_hz: physics rate (simulation Hz); clock_rate_hz: clock publication rate (simulation Hz).
     start: "immediate" or "offboard" (see `sim.world`: slot 0 at t = 0, or once every vehicle
     is up in OFFBOARD); start_altitude_tol_m: |alt - H| allowed for an "offboard" start.
@@ -77,7 +87,9 @@ class WorldOptions:
     seed: int | None = None
     bus: BusSettings = field(default_factory=BusSettings)
     mavlink_base_port: int = OFFBOARD_BASE_PORT
-    gcs_base_port: int = GCS_BASE_PORT
+    mavlink_local_base_port: int = OFFBOARD_LOCAL_BASE_PORT
+    gcs_port: int = GCS_PORT
+    gcs_local_base_port: int = GCS_LOCAL_BASE_PORT
     tick_hz: float = 50.0
     clock_rate_hz: float = 10.0
     start: StartMode = "immediate"
@@ -100,10 +112,14 @@ class WorldOptions:
             raise ValueError(f"clock_rate_hz must be finite and > 0, got {self.clock_rate_hz}")
         if self.start not in ("immediate", "offboard"):
             raise ValueError(f"start must be immediate or offboard, got {self.start!r}")
-        for name in ("mavlink_base_port", "gcs_base_port"):
-            port = getattr(self, name)
-            if not 1 <= port <= 65535 - 254:
-                raise ValueError(f"{name} must leave room for 254 vehicles, got {port}")
+        for name in ("mavlink_base_port", "mavlink_local_base_port", "gcs_local_base_port"):
+            problem = check_base_port(name, getattr(self, name))
+            if problem is not None:
+                raise ValueError(problem)
+        if self.mavlink_base_port == 0:
+            raise ValueError("mavlink_base_port must be a port, got 0")
+        if not 1 <= self.gcs_port <= 65535:
+            raise ValueError(f"gcs_port must be a UDP port, got {self.gcs_port}")
 
 
 @dataclass

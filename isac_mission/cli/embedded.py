@@ -18,7 +18,19 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from isac_mission.cli.app import ConfigArg, InjectLinkLossOpt, app, err_console, load_or_exit
+from isac_mission.cli.ports import (
+    GcsLocalBasePortOpt,
+    GcsPortOpt,
+    MavlinkBasePortOpt,
+    MavlinkLocalBasePortOpt,
+)
 from isac_mission.errors import ConfigError
+from isac_mission.mavwire.ports import (
+    GCS_LOCAL_BASE_PORT,
+    GCS_PORT,
+    OFFBOARD_BASE_PORT,
+    OFFBOARD_LOCAL_BASE_PORT,
+)
 
 if TYPE_CHECKING:
     from isac_mission.cli.mission import LiveOptions, LiveResult
@@ -50,12 +62,10 @@ def sim(
         ),
     ] = None,
     zenoh_mode: Annotated[str, typer.Option(help="Zenoh mode: peer, client or router.")] = "peer",
-    mavlink_base_port: Annotated[
-        int, typer.Option(help="Vehicle m sends offboard MAVLink to 127.0.0.1:(P + m).")
-    ] = 14540,
-    gcs_base_port: Annotated[
-        int, typer.Option(help="Vehicle m sends GCS MAVLink to 127.0.0.1:(P + m).")
-    ] = 14550,
+    mavlink_base_port: MavlinkBasePortOpt = OFFBOARD_BASE_PORT,
+    mavlink_local_base_port: MavlinkLocalBasePortOpt = OFFBOARD_LOCAL_BASE_PORT,
+    gcs_port: GcsPortOpt = GCS_PORT,
+    gcs_local_base_port: GcsLocalBasePortOpt = GCS_LOCAL_BASE_PORT,
     start: Annotated[
         str,
         typer.Option(help="Slot 0 begins: immediate, or offboard (all vehicles up in OFFBOARD)."),
@@ -94,7 +104,9 @@ def sim(
             seed=seed,
             bus=bus,
             mavlink_base_port=mavlink_base_port,
-            gcs_base_port=gcs_base_port,
+            mavlink_local_base_port=mavlink_local_base_port,
+            gcs_port=gcs_port,
+            gcs_local_base_port=gcs_local_base_port,
             start=start,  # type: ignore[arg-type]
             link_outages=parse_outages(inject_link_loss or [], s.M),
         )
@@ -159,7 +171,9 @@ async def run_embedded(
         seed=opts.seed,
         bus=world_bus,
         mavlink_base_port=opts.mavlink_base_port,
-        gcs_base_port=opts.gcs_base_port,
+        mavlink_local_base_port=opts.mavlink_local_base_port,
+        gcs_port=opts.gcs_port,
+        gcs_local_base_port=opts.gcs_local_base_port,
         start="offboard",
         link_outages=parse_outages(opts.link_outages, s.M),
     )

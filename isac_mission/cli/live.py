@@ -18,6 +18,18 @@ from isac_mission.cli.app import (
     err_console,
     load_or_exit,
 )
+from isac_mission.cli.ports import (
+    GcsLocalBasePortOpt,
+    GcsPortOpt,
+    MavlinkBasePortOpt,
+    MavlinkLocalBasePortOpt,
+)
+from isac_mission.mavwire.ports import (
+    GCS_LOCAL_BASE_PORT,
+    GCS_PORT,
+    OFFBOARD_BASE_PORT,
+    OFFBOARD_LOCAL_BASE_PORT,
+)
 from isac_mission.quiet import quiet_highs_banner
 
 
@@ -33,7 +45,9 @@ def _live(
     zenoh_listen: str | None,
     zenoh_connect: list[str],
     mavlink_base_port: int,
-    gcs_base_port: int,
+    mavlink_local_base_port: int,
+    gcs_port: int,
+    gcs_local_base_port: int,
     resume: bool,
     plan_budget: float,
     link_outages: list[str],
@@ -78,7 +92,9 @@ def _live(
         zenoh_endpoint=zenoh_listen,
         zenoh_connect=tuple(zenoh_connect),
         mavlink_base_port=mavlink_base_port,
-        gcs_base_port=gcs_base_port,
+        mavlink_local_base_port=mavlink_local_base_port,
+        gcs_port=gcs_port,
+        gcs_local_base_port=gcs_local_base_port,
         resume=resume,
         plan_budget_s=plan_budget if plan_budget > 0 else None,
         link_outages=tuple(link_outages),
@@ -198,12 +214,10 @@ def run(
             "tls/127.0.0.1:7447 with security.zenoh.tls)."
         ),
     ] = None,
-    mavlink_base_port: Annotated[
-        int, typer.Option(help="Vehicle m's offboard port: base + m.")
-    ] = 14540,
-    gcs_base_port: Annotated[
-        int, typer.Option(help="Vehicle m's ground-station port: base + m.")
-    ] = 14550,
+    mavlink_base_port: MavlinkBasePortOpt = OFFBOARD_BASE_PORT,
+    mavlink_local_base_port: MavlinkLocalBasePortOpt = OFFBOARD_LOCAL_BASE_PORT,
+    gcs_port: GcsPortOpt = GCS_PORT,
+    gcs_local_base_port: GcsLocalBasePortOpt = GCS_LOCAL_BASE_PORT,
     plan_budget: PlanBudgetOpt = 1.0,
     inject_link_loss: InjectLinkLossOpt = None,
 ) -> None:
@@ -220,7 +234,9 @@ def run(
         zenoh_listen=zenoh_listen,
         zenoh_connect=[],
         mavlink_base_port=mavlink_base_port,
-        gcs_base_port=gcs_base_port,
+        mavlink_local_base_port=mavlink_local_base_port,
+        gcs_port=gcs_port,
+        gcs_local_base_port=gcs_local_base_port,
         resume=False,
         plan_budget=plan_budget,
         link_outages=inject_link_loss or [],
@@ -243,8 +259,12 @@ def serve(
         list[str] | None, typer.Option(help="Zenoh endpoints to connect to.")
     ] = None,
     mavlink_base_port: Annotated[
-        int, typer.Option(help="Vehicle m's offboard port: base + m.")
-    ] = 14540,
+        int,
+        typer.Option(
+            help="The bridge of vehicle m listens on 127.0.0.1:(P + m) (PX4 SITL's offboard "
+            "ports: 14540)."
+        ),
+    ] = OFFBOARD_BASE_PORT,
     resume: Annotated[
         bool, typer.Option(help="Continue the trace in --out after its last slot.")
     ] = False,
@@ -263,7 +283,9 @@ def serve(
         zenoh_listen=zenoh_listen,
         zenoh_connect=zenoh_connect or [],
         mavlink_base_port=mavlink_base_port,
-        gcs_base_port=14550,
+        mavlink_local_base_port=OFFBOARD_LOCAL_BASE_PORT,
+        gcs_port=GCS_PORT,
+        gcs_local_base_port=GCS_LOCAL_BASE_PORT,
         resume=resume,
         plan_budget=plan_budget,
         link_outages=[],

@@ -24,6 +24,12 @@ from isac_mission.bus import ZenohBus
 from isac_mission.bus.security import default_endpoint, secured_settings
 from isac_mission.config import Scenario
 from isac_mission.errors import IsacError
+from isac_mission.mavwire.ports import (
+    GCS_LOCAL_BASE_PORT,
+    GCS_PORT,
+    OFFBOARD_BASE_PORT,
+    OFFBOARD_LOCAL_BASE_PORT,
+)
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
@@ -40,7 +46,9 @@ class LiveOptions:
     method: planning strategy; seed: world noise seed (None: the scenario's); out_dir: trace and
     plots; zenoh_endpoint: where the ground loop listens (the world and observers connect; None:
     `tcp/127.0.0.1:7447`, or `tls/...` when the scenario's security.zenoh has TLS on);
-    mavlink_base_port / gcs_base_port: vehicle m's offboard / ground-station ports (base + m);
+    mavlink_base_port, mavlink_local_base_port, gcs_port, gcs_local_base_port: PX4 SITL's port
+    layout (vehicle m: offboard link from 14580 + m to 14540 + m, where the bridges listen;
+    ground-station link from 18570 + m to 14550; local ports of the embedded world only);
     resume: continue an existing trace (serve); plan_speed_fraction: the planner's speed budget
     as a fraction of V_max, the headroom a vehicle with finite acceleration needs to be at each
     waypoint by the slot's end; plan_rate_factor, plan_safety_margin_m: the planner asks for
@@ -56,8 +64,10 @@ class LiveOptions:
     out_dir: Path = Path("out/run")
     zenoh_endpoint: str | None = None
     zenoh_connect: tuple[str, ...] = ()
-    mavlink_base_port: int = 14540
-    gcs_base_port: int = 14550
+    mavlink_base_port: int = OFFBOARD_BASE_PORT
+    mavlink_local_base_port: int = OFFBOARD_LOCAL_BASE_PORT
+    gcs_port: int = GCS_PORT
+    gcs_local_base_port: int = GCS_LOCAL_BASE_PORT
     resume: bool = False
     plan_speed_fraction: float = 0.9
     plan_rate_factor: float = 1.05

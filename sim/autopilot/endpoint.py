@@ -3,10 +3,12 @@
 One `Autopilot` is one vehicle: the flight logic (`flight`) around the kinematic core in
 `sim/vehicle.py`, and two UDP MAVLink links (`link`) as PX4 SITL has them:
 
-- the offboard link binds `bind_port` (default ephemeral) and sends to `offboard_port` (default
-  14540 + index) where the offboard client listens (`udpin://127.0.0.1:14540` for MAVSDK);
-- the GCS link binds `gcs_bind_port` (default ephemeral) and sends to `gcs_port` (default
-  14550 + index) for a ground station.
+- the offboard link binds `bind_port` (default 14580 + index) and sends to `offboard_port`
+  (default 14540 + index) where the offboard client listens (`udpin://127.0.0.1:14540` for
+  MAVSDK, the service's bridge);
+- the GCS link binds `gcs_bind_port` (default 18570 + index) and sends to `gcs_port` (default
+  14550, the same for every vehicle) for the ground stations: one QGroundControl or MAVProxy
+  on 14550 sees the whole fleet, told apart by system id.
 
 Both links stream telemetry (`telemetry`), accept every command (`commands`, `params`,
 `mission`), and also answer whoever speaks to them (the sender's address joins the link's
@@ -166,8 +168,8 @@ class Autopilot:
         loop = asyncio.get_running_loop()
         s = self.settings
         for name, bind, dest in (
-            ("offboard", s.bind_port, s.offboard_dest_port),
-            ("gcs", s.gcs_bind_port, s.gcs_dest_port),
+            ("offboard", s.offboard_local_port, s.offboard_dest_port),
+            ("gcs", s.gcs_local_port, s.gcs_dest_port),
         ):
             link = VehicleLink(
                 self._sysid,

@@ -14,7 +14,12 @@ from isac_mission.config import MavlinkSigningKey
 from isac_mission.config.validation import Settings
 from isac_mission.errors import ConfigError
 from isac_mission.frames import PX4_SITL_ORIGIN, GeoPoint
-from isac_mission.mavwire.ports import GCS_BASE_PORT, OFFBOARD_BASE_PORT
+from isac_mission.mavwire.ports import (
+    GCS_LOCAL_BASE_PORT,
+    GCS_PORT,
+    OFFBOARD_BASE_PORT,
+    OFFBOARD_LOCAL_BASE_PORT,
+)
 from sim.vehicle import VehicleLimits
 
 LossAction = Literal["none", "hold", "land"]
@@ -38,10 +43,13 @@ class AutopilotSettings(Settings):
 
     Attributes:
         index: 0-based vehicle index m; MAVLink system id m + 1.
-        offboard_port: Where the offboard client listens; None = 14540 + index.
-        gcs_port: Where the ground station listens; None = 14550 + index.
-        bind_port: Local port of the offboard link; 0 = ephemeral.
-        gcs_bind_port: Local port of the GCS link; 0 = ephemeral.
+        offboard_port: Where the offboard client listens; None = 14540 + index (PX4 SITL).
+        gcs_port: Where the ground station listens; None = 14550 (PX4 SITL: one port for the
+            whole fleet).
+        bind_port: Local port of the offboard link; None = 14580 + index (PX4 SITL), 0 =
+            ephemeral.
+        gcs_bind_port: Local port of the GCS link; None = 18570 + index (PX4 SITL), 0 =
+            ephemeral.
         geo_origin: Geodetic position of the scenario origin (0, 0) on the ground.
         local_origin_xy_m: Scenario-plane (x east, y north) origin of the local NED frame.
         spawn_xy_m: Scenario-plane start position on the ground; None = the local origin.
@@ -75,8 +83,8 @@ class AutopilotSettings(Settings):
     index: int = 0
     offboard_port: int | None = None
     gcs_port: int | None = None
-    bind_port: int = 0
-    gcs_bind_port: int = 0
+    bind_port: int | None = None
+    gcs_bind_port: int | None = None
     geo_origin: InstanceOf[GeoPoint] = PX4_SITL_ORIGIN
     local_origin_xy_m: tuple[float, float] = (0.0, 0.0)
     spawn_xy_m: tuple[float, float] | None = None
@@ -142,5 +150,17 @@ class AutopilotSettings(Settings):
 
     @property
     def gcs_dest_port(self) -> int:
-        """The ground station's port (14550 + index unless configured)."""
-        return GCS_BASE_PORT + self.index if self.gcs_port is None else self.gcs_port
+        """The ground station's port (14550, for every vehicle, unless configured)."""
+        return GCS_PORT if self.gcs_port is None else self.gcs_port
+
+    @property
+    def offboard_local_port(self) -> int:
+        """The offboard link's local port (14580 + index unless configured; 0 = ephemeral)."""
+        return OFFBOARD_LOCAL_BASE_PORT + self.index if self.bind_port is None else self.bind_port
+
+    @property
+    def gcs_local_port(self) -> int:
+        """The GCS link's local port (18570 + index unless configured; 0 = ephemeral)."""
+        return (
+            GCS_LOCAL_BASE_PORT + self.index if self.gcs_bind_port is None else self.gcs_bind_port
+        )

@@ -4,6 +4,7 @@ PX4-like vehicles, and the real `mavsdk` package as a ground-station observer.""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import os
 import re
 import signal
@@ -24,23 +25,20 @@ from isac_mission.records import read_trace
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import compare_pcrb
 from tests.support.live_cli import cli, serve_argv, sim_argv, start
-from tests.support.ports import free_port_block
+from tests.support.ports import SitlPorts, free_port_block, sitl_ports
 
 ROOT = Path(__file__).resolve().parents[2]
 LIVE_TOL_M = 1.0
 """Tolerance of the constraint re-check on telemetry positions (the issue allows at most 1 m)."""
 
 
-def _ports(m: int) -> tuple[str, int, int]:
-    return (
-        tcp_loopback(free_port_block(1, socket.SOCK_STREAM)),
-        free_port_block(m),
-        free_port_block(m),
-    )
+def _ports(m: int) -> tuple[str, SitlPorts]:
+    """A free Zenoh endpoint, and PX4 SITL's MAVLink port layout for m vehicles on free ports."""
+    return tcp_loopback(free_port_block(1, socket.SOCK_STREAM)), sitl_ports(m)
 
 
 def test_run_cli_flies_all_60_slots_within_the_constraints(tmp_path: Path) -> None:
-    endpoint, mav, gcs = _ports(3)
+    endpoint, ports = _ports(3)
     out = tmp_path / "run"
     proc = subprocess.run(
         cli(
@@ -52,10 +50,7 @@ def test_run_cli_flies_all_60_slots_within_the_constraints(tmp_path: Path) -> No
             str(out),
             "--zenoh-listen",
             endpoint,
-            "--mavlink-base-port",
-            str(mav),
-            "--gcs-base-port",
-            str(gcs),
+            *ports.cli_args(),
         ),
         cwd=ROOT,
         capture_output=True,
@@ -81,15 +76,14 @@ async def test_live_location_rmse_is_close_to_simulate_over_five_seeds(
     seeds = range(1, 6)
     live_sq: list[float] = []
     for seed in seeds:
-        endpoint, mav, gcs = _ports(paper.M)
+        endpoint, ports = _ports(paper.M)
         opts = LiveOptions(
             speed=25.0,
             lockstep=True,
             seed=seed,
             out_dir=tmp_path / f"s{seed}",
             zenoh_endpoint=endpoint,
-            mavlink_base_port=mav,
-            gcs_base_port=gcs,
+            **ports.world_kwargs(),
         )
         result = await asyncio.wait_for(run_embedded(paper, opts, asyncio.Event()), timeout=300)
         summary = summarize_live(result)
@@ -117,10 +111,10 @@ def test_serve_and_sim_as_two_processes_complete_a_mission(tmp_path: Path) -> No
     cfg["timing"]["duration_s"] = 15
     config = tmp_path / "short.yaml"
     config.write_text(yaml.safe_dump(cfg))
-    endpoint, mav, gcs = _ports(3)
+    endpoint, ports = _ports(3)
     out = tmp_path / "serve"
-    serve = start(serve_argv(config, out, endpoint, mav))
-    sim = start(sim_argv(config, endpoint, mav, gcs))
+    serve = start(serve_argv(config, out, endpoint, ports.offboard_base))
+    sim = start(sim_argv(config, endpoint, ports))
     try:
         serve_out, serve_err = serve.communicate(timeout=300)
         assert serve.returncode == 0, serve_err[-3000:]
@@ -139,8 +133,8 @@ def test_serve_and_sim_as_two_processes_complete_a_mission(tmp_path: Path) -> No
 
 
 async def test_ground_station_observer_sees_offboard_flight_along_the_plan(tmp_path: Path) -> None:
-    """A MAVSDK program on vehicle 0's ground-station link watches it fly the planned waypoints
-    in OFFBOARD while the service (`isac-mission run`, its own process) flies the mission.
+    """A MAVSDK program on the ground-station port watches vehicle 0 (system 1) fly the planned
+    waypoints in OFFBOARD while the service (`isac-mission run`, its own process) flies the mission.
 
     The service runs as its own process; this process is the ground station."""
     mavsdk = pytest.importorskip("mavsdk.asyncio")
@@ -150,7 +144,7 @@ async def test_ground_station_observer_sees_offboard_flight_along_the_plan(tmp_p
     cfg["timing"]["duration_s"] = 12
     config = tmp_path / "short.yaml"
     config.write_text(yaml.safe_dump(cfg))
-    gcs = free_port_block(3)
+    gcs = sitl_ports(1).gcs
     out = tmp_path / "run"
     config_gs = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
     observer = mavsdk.Mavsdk(config_gs)
@@ -162,8 +156,9 @@ async def test_ground_station_observer_sees_offboard_flight_along_the_plan(tmp_p
         async with asyncio.timeout(240):
             system = None
             while system is None:
+                # Every vehicle's ground-station link reaches this one port: pick system 1.
                 for candidate in await observer.get_systems():
-                    if await candidate.has_autopilot():
+                    if await candidate.has_autopilot() and await candidate.get_system_id() == 1:
                         system = candidate
                 await asyncio.sleep(0.05)
             telemetry = TelemetryAsync(system)
@@ -208,8 +203,10 @@ def _start_run(
     gcs: int | None = None,
     stdout: int = subprocess.PIPE,
 ) -> subprocess.Popen[str]:
-    """`isac-mission run CONFIG --speed 5` on free loopback ports (gcs: a given GCS base port)."""
-    endpoint, mav, free_gcs = _ports(3)
+    """`isac-mission run CONFIG --speed 5` on free loopback ports (gcs: a given GCS port)."""
+    endpoint, ports = _ports(3)
+    if gcs is not None:
+        ports = dataclasses.replace(ports, gcs=gcs)
     return subprocess.Popen(
         cli(
             "run",
@@ -220,10 +217,7 @@ def _start_run(
             str(out),
             "--zenoh-listen",
             endpoint,
-            "--mavlink-base-port",
-            str(mav),
-            "--gcs-base-port",
-            str(free_gcs if gcs is None else gcs),
+            *ports.cli_args(),
         ),
         cwd=ROOT,
         stdout=stdout,

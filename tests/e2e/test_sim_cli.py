@@ -38,7 +38,7 @@ async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
     scenario = load_scenario(config_path)
     endpoint = tcp_loopback(free_tcp_port())
     keys = Keys(scenario.mission_id)
-    with udp_sinks(scenario.M) as mav_base, udp_sinks(scenario.M) as gcs_base:
+    with udp_sinks(scenario.M) as mav_base, udp_sinks(1) as gcs_port:
         observer = await ZenohBus.open_async(BusSettings.hub(endpoint))
         try:
             sub = observer.subscribe(keys.detections_all)
@@ -54,8 +54,12 @@ async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
                 endpoint,
                 "--mavlink-base-port",
                 str(mav_base),
-                "--gcs-base-port",
-                str(gcs_base),
+                "--mavlink-local-base-port",
+                "0",
+                "--gcs-port",
+                str(gcs_port),
+                "--gcs-local-base-port",
+                "0",
                 cwd=ROOT,
                 env={**os.environ, "PYTHONUNBUFFERED": "1"},
                 stdout=asyncio.subprocess.PIPE,

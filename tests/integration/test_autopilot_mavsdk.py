@@ -44,6 +44,8 @@ def settings_for(
         index=index,
         offboard_port=offboard_port,
         gcs_port=gcs_port,
+        bind_port=0,
+        gcs_bind_port=0,
         takeoff_alt_m=TAKEOFF_ALT_M,
         local_origin_xy_m=spawn_xy,
         spawn_xy_m=spawn_xy,

@@ -28,7 +28,7 @@ from tests.support.bridge_rig import (
     TIMEOUT_S,
     distance_m,
 )
-from tests.support.ports import free_port_block
+from tests.support.ports import sitl_ports
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -55,8 +55,7 @@ async def test_fleet_prepares_follows_plans_and_lands_three_vehicles_of_the_worl
     options = WorldOptions(
         speed=SPEED,
         bus=BusSettings(connect=(endpoint,)),
-        mavlink_base_port=free_port_block(n_uavs),
-        gcs_base_port=free_port_block(n_uavs),
+        **sitl_ports(n_uavs).world_kwargs(),
         start="offboard",
     )
     world = World(scenario, options)

@@ -26,7 +26,7 @@ from isac_mission.cli.mission import LiveOptions, summarize_live
 from isac_mission.config import Scenario, SecurityConfig, ZenohSecurityConfig, ZenohTlsConfig
 from isac_mission.errors import ConfigError
 from isac_mission.wire import Keys
-from tests.support.ports import free_port_block
+from tests.support.ports import free_port_block, sitl_ports
 
 TIMEOUT_S = 20.0
 REFUSED_TIMEOUT_S = 3.0
@@ -255,8 +255,7 @@ async def test_live_mission_flies_with_auth_acl_and_tls(
         lockstep=True,
         out_dir=tmp_path / "run",
         zenoh_endpoint=f"tls/127.0.0.1:{port}",
-        mavlink_base_port=free_port_block(s.M),
-        gcs_base_port=free_port_block(s.M),
+        **sitl_ports(s.M).world_kwargs(),
     )
     result = await asyncio.wait_for(run_embedded(s, opts, asyncio.Event()), timeout=300)
     summary = summarize_live(result)

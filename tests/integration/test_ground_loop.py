@@ -18,6 +18,7 @@ from isac_mission.wire import Keys, decode_health, decode_plan, decode_track
 from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.independent.pcrb import compare_pcrb
+from tests.support.ports import sitl_ports
 
 
 async def _mission(
@@ -44,6 +45,7 @@ async def _mission(
             lockstep=True,
             lockstep_timeout_s=20.0,
             bus=BusSettings(connect=(endpoint,)),
+            **sitl_ports(3).world_kwargs(),  # free ports, not PX4's own
             seed=3,
         )
         async with asyncio.TaskGroup() as tg:

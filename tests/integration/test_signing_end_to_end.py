@@ -30,7 +30,7 @@ from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
 from sim.world import World
 from sim.world_options import WorldOptions
-from tests.support.ports import free_port_block
+from tests.support.ports import sitl_ports
 from tests.support.signing_peer import (
     ALTITUDE_M,
     HEX_KEY,
@@ -111,8 +111,7 @@ async def test_signed_fleet_of_the_world_takes_off_follows_setpoints_and_lands(
     options = WorldOptions(
         speed=SPEED,
         bus=BusSettings(connect=(hub.settings.listen[0],)),
-        mavlink_base_port=free_port_block(n),
-        gcs_base_port=free_port_block(n),
+        **sitl_ports(n).world_kwargs(),
         start="offboard",
     )
     world = World(world_cfg, options)

@@ -67,7 +67,7 @@ class Rig:
 async def running_world(s: Scenario, **opts: object) -> AsyncIterator[Rig]:
     endpoint = tcp_loopback(free_tcp_port())
     keys = Keys(s.mission_id)
-    with udp_sinks(s.M) as mav_base, udp_sinks(s.M) as gcs_base:
+    with udp_sinks(s.M) as mav_base, udp_sinks(1) as gcs_base:
         observer = await ZenohBus.open_async(BusSettings.hub(endpoint))
         try:
             sub = observer.subscribe(keys.everything)
@@ -76,7 +76,9 @@ async def running_world(s: Scenario, **opts: object) -> AsyncIterator[Rig]:
                 tick_hz=20.0,
                 bus=BusSettings(connect=(endpoint,)),
                 mavlink_base_port=mav_base,
-                gcs_base_port=gcs_base,
+                mavlink_local_base_port=0,
+                gcs_port=gcs_base,
+                gcs_local_base_port=0,
                 **opts,  # type: ignore[arg-type]
             )
             world = World(s, options)

@@ -22,7 +22,7 @@ from isac_mission.config import Scenario
 from isac_mission.records import read_trace
 from isac_mission.wire import Keys, decode_health
 from tests.support.independent.constraints import check_constraints
-from tests.support.ports import free_port_block
+from tests.support.ports import free_port_block, sitl_ports
 
 LOST = 1
 OUTAGE_START_S, OUTAGE_S = 12.0, 5.0
@@ -47,8 +47,7 @@ async def test_vehicle_link_loss_mid_mission_is_planned_around_and_readmitted(
         seed=3,
         out_dir=tmp_path,
         zenoh_endpoint=endpoint,
-        mavlink_base_port=free_port_block(s.M),
-        gcs_base_port=free_port_block(s.M),
+        **sitl_ports(s.M).world_kwargs(),
         link_outages=(f"{LOST}:{OUTAGE_START_S}:{OUTAGE_S}",),
     )
     health: list[dict[int, str]] = []

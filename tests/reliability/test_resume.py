@@ -40,7 +40,7 @@ from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.independent.pcrb import bound_update, compare_pcrb, cv_model, jacobian
 from tests.support.live_cli import serve_argv, sim_argv, start
-from tests.support.ports import free_port_block
+from tests.support.ports import free_port_block, sitl_ports
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -236,6 +236,7 @@ async def test_restarted_ground_loop_continues_with_the_next_slot(
         lockstep=True,
         lockstep_timeout_s=60.0,
         bus=BusSettings(connect=(endpoint,)),
+        **sitl_ports(3).world_kwargs(),  # free ports, not PX4's own
         seed=3,
     )
     stop_world = asyncio.Event()
@@ -290,17 +291,17 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(tmp_path: P
     config = tmp_path / "resume.yaml"
     config.write_text(yaml.safe_dump(cfg))
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
-    mav, gcs = free_port_block(3), free_port_block(3)
+    ports = sitl_ports(3)
     out = tmp_path / "serve"
     path = out / "trace_proposed.jsonl"
-    serve_cmd = serve_argv(config, out, endpoint, mav)
+    serve_cmd = serve_argv(config, out, endpoint, ports.offboard_base)
 
     def start_serve(*extra: str) -> subprocess.Popen[str]:
         return start([*serve_cmd, *extra])
 
     first = start_serve()
     sim = start(
-        sim_argv(config, endpoint, mav, gcs, "--lockstep", "--lockstep-timeout", "3"),
+        sim_argv(config, endpoint, ports, "--lockstep", "--lockstep-timeout", "3"),
         stdout=subprocess.DEVNULL,
     )
     procs = [first, sim]

@@ -27,6 +27,7 @@ from isac_mission.types import SlotPlan
 from isac_mission.wire import ControlMsg, Keys, decode_plan, encode_control
 from sim.world import run_world
 from sim.world_options import WorldOptions
+from tests.support.ports import sitl_ports
 
 ERROR_SLOT, SLOW_SLOT = 3, 5
 BUDGET_S = 0.4
@@ -93,6 +94,7 @@ async def test_solver_error_timeout_and_infeasible_slots_fall_back_and_recover(
             lockstep=True,
             lockstep_timeout_s=20.0,
             bus=BusSettings(connect=(endpoint,)),
+            **sitl_ports(3).world_kwargs(),  # free ports, not PX4's own
             seed=5,
         )
         stop_world = asyncio.Event()

@@ -28,7 +28,7 @@ from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.service.ground.report import SlotEvent
-from tests.support.ports import free_port_block
+from tests.support.ports import free_port_block, sitl_ports
 
 
 @dataclass
@@ -54,8 +54,7 @@ async def _live_run(
         lockstep=False,
         out_dir=tmp,
         zenoh_endpoint=endpoint,
-        mavlink_base_port=free_port_block(s.M),
-        gcs_base_port=free_port_block(s.M),
+        **sitl_ports(s.M).world_kwargs(),
     )
     times = SlotTimes()
 

@@ -92,7 +92,12 @@ class MavRig:
 async def mav_rig(free_tcp_port: int) -> AsyncIterator[MavRig]:
     bridge_port, gcs_port = free_udp_ports(2)
     settings_ = AutopilotSettings(
-        index=0, offboard_port=bridge_port, gcs_port=gcs_port, spawn_xy_m=(50.0, 80.0)
+        index=0,
+        offboard_port=bridge_port,
+        gcs_port=gcs_port,
+        bind_port=0,
+        gcs_bind_port=0,
+        spawn_xy_m=(50.0, 80.0),
     )
     runner = SimRunner([settings_], speed=SPEED).start()
     hub = await ZenohBus.open_async(BusSettings.hub(tcp_loopback(free_tcp_port)))

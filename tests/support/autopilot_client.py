@@ -194,7 +194,7 @@ def make_settings(index: int = 0, **overrides: Any) -> tuple[AutopilotSettings, 
         offboard_port=offboard_port,
         gcs_port=gcs_port,
         takeoff_alt_m=TAKEOFF_ALT_M,
-        **overrides,
+        **({"bind_port": 0, "gcs_bind_port": 0} | overrides),
     )
     return settings, offboard_port, gcs_port
 

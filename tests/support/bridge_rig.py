@@ -146,7 +146,7 @@ def make_rig(sim_runner: Callable[..., SimRunner], hub: ZenohBus) -> Callable[..
                 offboard_port=ports[m],
                 gcs_port=ports[n + m],
                 spawn_xy_m=spawn_xy_m[m],
-                **overrides,
+                **({"bind_port": 0, "gcs_bind_port": 0} | overrides),
             )
             for m in range(n)
         ]

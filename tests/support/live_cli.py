@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from tests.support.ports import SitlPorts
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -42,9 +44,9 @@ def serve_argv(config: Path, out: Path, endpoint: str, mav: int, *extra: str) ->
     )
 
 
-def sim_argv(config: Path, endpoint: str, mav: int, gcs: int, *extra: str) -> list[str]:
-    """`sim CONFIG --speed 10 --start offboard` connecting to `endpoint`, vehicle m on the
-    offboard port mav + m and the GCS port gcs + m."""
+def sim_argv(config: Path, endpoint: str, ports: SitlPorts, *extra: str) -> list[str]:
+    """`sim CONFIG --speed 10 --start offboard` connecting to `endpoint`, its vehicles on the
+    MAVLink ports `ports` (PX4 SITL's layout on free ports)."""
     return cli(
         "sim",
         str(config),
@@ -54,9 +56,6 @@ def sim_argv(config: Path, endpoint: str, mav: int, gcs: int, *extra: str) -> li
         "offboard",
         "--zenoh-connect",
         endpoint,
-        "--mavlink-base-port",
-        str(mav),
-        "--gcs-base-port",
-        str(gcs),
+        *ports.cli_args(),
         *extra,
     )

@@ -9,6 +9,9 @@ binds it, so callers that can retry on `OSError` should.
 - `free_udp_ports(n)`: n distinct UDP ports (not necessarily consecutive).
 - `free_port_block(n, kind)`: a base port such that base .. base + n - 1 are all free (vehicle m
   uses base + m: MAVLink vehicle ports, ground-station ports).
+- `sitl_ports(n)`: a `SitlPorts`, PX4 SITL's four port families (offboard and ground-station
+  destinations, and the vehicles' local ports) on free ports, as `WorldOptions` / `LiveOptions`
+  keyword arguments (`world_kwargs()`) or CLI options (`cli_args()`).
 - `udp_sinks(n)`: n consecutive UDP ports bound (and so kept) for the duration of a `with` block,
   for a test that must receive what vehicles send to base + m; yields the base.
 """
@@ -16,6 +19,7 @@ binds it, so callers that can retry on `OSError` should.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import random
 import socket
 from collections.abc import Iterator
@@ -106,3 +110,62 @@ def udp_sinks(n: int, tries: int = 50) -> Iterator[int]:
                 s.close()
         return
     raise RuntimeError(f"no block of {n} free UDP ports")
+
+
+@dataclasses.dataclass(frozen=True)
+class SitlPorts:
+    """PX4 SITL's MAVLink port layout on free ports (docs/service.md, "Ports"): vehicle m sends its
+    offboard link from `offboard_local_base + m` to `offboard_base + m` and its ground-station
+    link from `gcs_local_base + m` to `gcs` (one port for the fleet)."""
+
+    offboard_base: int
+    offboard_local_base: int
+    gcs: int
+    gcs_local_base: int
+
+    def world_kwargs(self) -> dict[str, int]:
+        """The port fields of `WorldOptions` and `LiveOptions`."""
+        return {
+            "mavlink_base_port": self.offboard_base,
+            "mavlink_local_base_port": self.offboard_local_base,
+            "gcs_port": self.gcs,
+            "gcs_local_base_port": self.gcs_local_base,
+        }
+
+    def cli_args(self) -> list[str]:
+        """The port options of `isac-mission run` / `sim`."""
+        return [
+            "--mavlink-base-port",
+            str(self.offboard_base),
+            "--mavlink-local-base-port",
+            str(self.offboard_local_base),
+            "--gcs-port",
+            str(self.gcs),
+            "--gcs-local-base-port",
+            str(self.gcs_local_base),
+        ]
+
+
+def sitl_ports(n: int, tries: int = 50) -> SitlPorts:
+    """Free, non-overlapping UDP ports for a fleet of n vehicles in PX4 SITL's layout (three blocks
+    of n and one single port, all probed bound at once). RuntimeError after `tries` attempts."""
+    for _ in range(tries):
+        bases = [free_port_block(n) for _ in range(3)]
+        socks: list[socket.socket] = []
+        try:
+            for base in bases:
+                for port in range(base, base + n):
+                    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                    socks.append(s)
+                    s.bind((LOOPBACK, port))
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            socks.append(s)
+            s.bind((LOOPBACK, 0))
+            gcs = int(s.getsockname()[1])
+        except OSError:  # two blocks overlap, or a port was taken meanwhile
+            continue
+        finally:
+            for s in socks:
+                s.close()
+        return SitlPorts(bases[0], bases[1], gcs, bases[2])
+    raise RuntimeError(f"no free SITL port layout for {n} vehicles")

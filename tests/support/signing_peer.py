@@ -135,7 +135,13 @@ def signed_vehicle(
     """One simulated vehicle (system 1) with signing `key`, its telemetry sent to free ports."""
     offboard_port, gcs_port = free_udp_ports(2)
     settings = AutopilotSettings(
-        index=0, offboard_port=offboard_port, gcs_port=gcs_port, takeoff_alt_m=5.0, signing=key
+        index=0,
+        offboard_port=offboard_port,
+        gcs_port=gcs_port,
+        bind_port=0,
+        gcs_bind_port=0,
+        takeoff_alt_m=5.0,
+        signing=key,
     )
     return sim_runner([settings]).autopilots[0]
 

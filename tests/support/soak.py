@@ -42,7 +42,7 @@ from isac_mission.config import Scenario
 from isac_mission.service.ground.report import SlotEvent
 from sim.world import run_world
 from sim.world_options import WorldOptions
-from tests.support.ports import free_port_block
+from tests.support.ports import free_port_block, sitl_ports
 
 TargetKind = Literal["loop", "cv"]
 
@@ -157,15 +157,14 @@ async def run_soak(
     Give `soak_scenario` and `run_soak` the same `loop_radius_m`.
     """
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
-    mav, gcs = free_port_block(s.M), free_port_block(s.M)
+    ports = sitl_ports(s.M)
     opts = LiveOptions(
         speed=speed,
         lockstep=lockstep,
         seed=seed,
         out_dir=out_dir,
         zenoh_endpoint=endpoint,
-        mavlink_base_port=mav,
-        gcs_base_port=gcs,
+        **ports.world_kwargs(),
     )
     world_opts = WorldOptions(
         speed=speed,
@@ -173,8 +172,7 @@ async def run_soak(
         lockstep_timeout_s=60.0,
         seed=seed,
         bus=BusSettings(connect=(endpoint,)),
-        mavlink_base_port=mav,
-        gcs_base_port=gcs,
+        **ports.world_kwargs(),
         start="offboard",
         target_waypoints_xy_m=loop_waypoints(s.N, s.dt, loop_radius_m)
         if target == "loop"

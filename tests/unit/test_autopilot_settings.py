@@ -16,7 +16,12 @@ from sim.vehicle import VehicleLimits
 def test_defaults_are_px4_sitl_instance_m() -> None:
     s = AutopilotSettings(index=2)
     assert s.system_id == 3
-    assert (s.offboard_dest_port, s.gcs_dest_port) == (14542, 14552)
+    # PX4 multi-vehicle SITL: offboard 14580 + i -> 14540 + i, GCS 18570 + i -> 14550 (shared).
+    assert (s.offboard_local_port, s.offboard_dest_port) == (14582, 14542)
+    assert (s.gcs_local_port, s.gcs_dest_port) == (18572, 14550)
+    assert AutopilotSettings(index=0).gcs_dest_port == 14550
+    ephemeral = AutopilotSettings(index=2, bind_port=0, gcs_bind_port=0)
+    assert (ephemeral.offboard_local_port, ephemeral.gcs_local_port) == (0, 0)
     assert s.geo_origin == PX4_SITL_ORIGIN
     assert s.limits == VehicleLimits()
     assert AutopilotSettings(index=2, offboard_port=20000, gcs_port=20001).gcs_dest_port == 20001
