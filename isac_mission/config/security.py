@@ -12,7 +12,16 @@ from isac_mission.config.sections import Section
 from isac_mission.config.signing import MavlinkSigningConfig
 
 ZenohTopic = Literal[
-    "plan", "track", "health", "clock", "truth", "detections", "telemetry", "control"
+    "plan",
+    "track",
+    "health",
+    "clock",
+    "truth",
+    "detections",
+    "telemetry",
+    "control",
+    "control/reply",
+    "fleet",
 ]
 """The key expressions of docs/bus.md by name: `isac/<mission>/<topic>[/<m>]`."""
 _NAME_PATTERN = r"^[A-Za-z0-9_.-]+$"
@@ -43,7 +52,8 @@ class ZenohRoleConfig(Section):
 def _default_roles() -> dict[str, ZenohRoleConfig]:
     return {
         "ground": ZenohRoleConfig(
-            users=["ground"], publishes=["plan", "track", "health", "telemetry"]
+            users=["ground"],
+            publishes=["plan", "track", "health", "telemetry", "control/reply", "fleet"],
         ),
         "world": ZenohRoleConfig(
             users=["world"], publishes=["clock", "truth", "detections", "telemetry"]

@@ -5,7 +5,8 @@ strict JSON, and the JSON Schema of every message (docs/bus.md). Imports neither
 - `envelope`: limits, the size guard, strict parsing, the common fields, `rejection_reason`;
 - `models`: the pydantic model of each payload type and the union `WireMessage`;
 - `messages`: the domain dataclasses (numpy arrays, NaN for missing);
-- `codec`: bytes <-> domain messages (`encode_*`, `decode_*`, `decode_any`);
+- `codec`: bytes <-> domain messages (`encode_*`, `decode_*`, `decode_any`); `control_models`
+  and `control_codec`: the operator's requests, their replies and the fleet commands;
 - `keys`: `Keys(mission)`, the key expressions; `schema`: JSON Schema export;
 - `strict_json`: strict JSON shared with `records/`.
 """
@@ -14,7 +15,6 @@ from isac_mission.wire.codec import (
     collect_detections,
     decode_any,
     decode_clock,
-    decode_control,
     decode_detection,
     decode_health,
     decode_plan,
@@ -23,7 +23,6 @@ from isac_mission.wire.codec import (
     decode_truth,
     detection_messages,
     encode_clock,
-    encode_control,
     encode_detection,
     encode_health,
     encode_plan,
@@ -31,6 +30,17 @@ from isac_mission.wire.codec import (
     encode_track,
     encode_truth,
 )
+from isac_mission.wire.control_codec import (
+    RequestRead,
+    decode_control,
+    decode_control_reply,
+    decode_fleet,
+    encode_control,
+    encode_control_reply,
+    encode_fleet,
+    read_request,
+)
+from isac_mission.wire.control_models import CONTROL_COMMANDS, FLEET_COMMANDS, MAX_ID_CHARS
 from isac_mission.wire.envelope import (
     MAX_ABS,
     MAX_ABS_COVARIANCE,
@@ -51,7 +61,9 @@ from isac_mission.wire.messages import (
     AnyMsg,
     ClockMsg,
     ControlMsg,
+    ControlReplyMsg,
     DetectionMsg,
+    FleetMsg,
     HealthMsg,
     PlanMsg,
     TelemetryMsg,
@@ -67,11 +79,14 @@ from isac_mission.wire.models import (
 )
 
 __all__ = [
+    "CONTROL_COMMANDS",
     "CONTROL_PARAMS",
+    "FLEET_COMMANDS",
     "LINK_STATES",
     "MAX_ABS",
     "MAX_ABS_COVARIANCE",
     "MAX_COUNTERS",
+    "MAX_ID_CHARS",
     "MAX_PAYLOAD_BYTES",
     "MAX_REASON_CHARS",
     "MAX_SLOT",
@@ -83,10 +98,13 @@ __all__ = [
     "AnyMsg",
     "ClockMsg",
     "ControlMsg",
+    "ControlReplyMsg",
     "DetectionMsg",
+    "FleetMsg",
     "HealthMsg",
     "Keys",
     "PlanMsg",
+    "RequestRead",
     "TelemetryMsg",
     "TrackMsg",
     "TruthMsg",
@@ -95,7 +113,9 @@ __all__ = [
     "decode_any",
     "decode_clock",
     "decode_control",
+    "decode_control_reply",
     "decode_detection",
+    "decode_fleet",
     "decode_health",
     "decode_plan",
     "decode_telemetry",
@@ -105,7 +125,9 @@ __all__ = [
     "dumps",
     "encode_clock",
     "encode_control",
+    "encode_control_reply",
     "encode_detection",
+    "encode_fleet",
     "encode_health",
     "encode_plan",
     "encode_telemetry",
@@ -113,6 +135,7 @@ __all__ = [
     "encode_truth",
     "envelope",
     "loads",
+    "read_request",
     "rejection_reason",
     "uav_index",
 ]

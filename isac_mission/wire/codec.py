@@ -19,6 +19,8 @@ from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from isac_mission.errors import MessageError
 from isac_mission.types import Detections, FloatArray, SlotPlan, SolveReport
+from isac_mission.wire.control_codec import control_msg, control_reply_msg, fleet_msg
+from isac_mission.wire.control_models import ControlReplyWire, ControlWire, FleetWire
 from isac_mission.wire.envelope import (
     MAX_REASON_CHARS,
     MAX_STATUS_CHARS,
@@ -30,7 +32,6 @@ from isac_mission.wire.envelope import (
 from isac_mission.wire.messages import (
     AnyMsg,
     ClockMsg,
-    ControlMsg,
     DetectionMsg,
     HealthMsg,
     PlanMsg,
@@ -41,7 +42,6 @@ from isac_mission.wire.messages import (
 from isac_mission.wire.models import (
     MODELS,
     ClockWire,
-    ControlWire,
     DetectionWire,
     HealthWire,
     PlanWire,
@@ -243,6 +243,7 @@ def encode_telemetry(msg: TelemetryMsg) -> bytes:
         armed=bool(msg.armed),
         landed=bool(msg.landed),
         link=msg.link,
+        override=msg.override[:MAX_STATUS_CHARS],
     )
     if msg.published_wall_s is not None:
         obj["published_wall_s"] = float(msg.published_wall_s)
@@ -264,6 +265,7 @@ def _telemetry(w: TelemetryWire) -> TelemetryMsg:
         landed=w.landed,
         link=w.link,
         published_wall_s=w.published_wall_s,
+        override=w.override,
     )
 
 
@@ -306,7 +308,7 @@ def decode_track(payload: Payload) -> TrackMsg:
     return _track(_validate(TrackWire, "track", loads(payload), {}))
 
 
-# --------------------------------------------------------------------------- health, control
+# --------------------------------------------------------------------------- health
 
 
 def encode_health(msg: HealthMsg) -> bytes:
@@ -339,24 +341,6 @@ def decode_health(payload: Payload) -> HealthMsg:
     return _health(_validate(HealthWire, "health", loads(payload), {}))
 
 
-def encode_control(msg: ControlMsg) -> bytes:
-    """Payload of `isac/<mission>/control`."""
-    obj = envelope("control", msg.slot, msg.t_s)
-    obj.update(command="set", params={k: float(v) for k, v in msg.params.items()})
-    data = dumps(obj)
-    decode_control(data)
-    return data
-
-
-def _control(w: ControlWire) -> ControlMsg:
-    return ControlMsg(slot=w.slot, t_s=w.t, params={k: float(v) for k, v in w.params.items()})
-
-
-def decode_control(payload: Payload) -> ControlMsg:
-    """Validate a control payload: command "set" and known parameters within their ranges."""
-    return _control(_validate(ControlWire, "control", loads(payload), {}))
-
-
 # --------------------------------------------------------------------------- dispatch
 
 
@@ -368,7 +352,9 @@ _CONVERT: Final[dict[type[BaseModel], Any]] = {
     TelemetryWire: _telemetry,
     TrackWire: _track,
     HealthWire: _health,
-    ControlWire: _control,
+    ControlWire: control_msg,
+    ControlReplyWire: control_reply_msg,
+    FleetWire: fleet_msg,
 }
 
 

@@ -79,6 +79,16 @@ class Keys:
         """`isac/<mission>/control`: an operator's commands to the ground loop."""
         return f"{self.prefix}/control"
 
+    @property
+    def control_reply(self) -> str:
+        """`isac/<mission>/control/reply`: the ground loop's answer to each request."""
+        return f"{self.prefix}/control/reply"
+
+    @property
+    def fleet(self) -> str:
+        """`isac/<mission>/fleet`: the ground loop's commands to the bridges (hold, land, ...)."""
+        return f"{self.prefix}/fleet"
+
 
 def _index(m: int) -> int:
     if isinstance(m, bool) or not isinstance(m, int) or m < 0:

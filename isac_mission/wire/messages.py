@@ -90,6 +90,9 @@ class TelemetryMsg:
     landed: bool
     link: str
     published_wall_s: float | None = None
+    override: str = ""
+    """Why the service does not fly the vehicle ("operator: HOLD", "RTL: low battery", ...);
+    "" while it does."""
 
 
 @dataclass(frozen=True)
@@ -124,15 +127,70 @@ class HealthMsg:
 
 @dataclass(frozen=True)
 class ControlMsg:
-    """An operator's command (`isac/<mission>/control`): set planning parameters from the next
-    planned slot on. params: name (wire.models.CONTROL_PARAMS) -> value; rate_min_mbps is R_th in Mbit/s."""
+    """An operator's request (`isac/<mission>/control`), answered on `control/reply`.
+
+    request_id: chosen by the sender (1 to 64 characters), repeated in the reply; command: "set",
+    "hold", "resume", "land" or "release" (wire.control_models); uav: the vehicle index, or None
+    for every vehicle (hold, land, resume; release names one; set takes none); params (set
+    only): name (wire.CONTROL_PARAMS) -> value, rate_min_mbps is R_th in Mbit/s, from the next
+    planned slot on.
+    """
 
     slot: int
     t_s: float
-    params: dict[str, float]
+    request_id: str
+    command: str
+    uav: int | None = None
+    params: dict[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def set_params(cls, slot: int, t_s: float, request_id: str, **params: float) -> ControlMsg:
+        """A `set` request, e.g. ControlMsg.set_params(3, 30.0, "r1", rate_min_mbps=20.0)."""
+        return cls(slot, t_s, request_id, "set", None, dict(params))
+
+
+@dataclass(frozen=True)
+class ControlReplyMsg:
+    """The ground loop's answer to one request (`isac/<mission>/control/reply`).
+
+    request_id: the request's id (None when it could not be read); command: as sent (None when
+    unreadable); accepted: executed (True) or refused, nothing executed (False); reason: why (a
+    refusal names the field at fault first); effect: what the ground loop did; vehicles: the
+    vehicle indices it acted on.
+    """
+
+    slot: int
+    t_s: float
+    request_id: str | None
+    command: str | None
+    accepted: bool
+    reason: str
+    effect: str
+    vehicles: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
+class FleetMsg:
+    """The ground loop's command to the bridges (`isac/<mission>/fleet`) on an operator's request
+    `request_id`: command "hold", "resume", "land" or "release" for the vehicles `uavs`."""
+
+    slot: int
+    t_s: float
+    request_id: str
+    command: str
+    uavs: tuple[int, ...]
 
 
 AnyMsg = (
-    DetectionMsg | ClockMsg | TruthMsg | PlanMsg | TelemetryMsg | TrackMsg | HealthMsg | ControlMsg
+    DetectionMsg
+    | ClockMsg
+    | TruthMsg
+    | PlanMsg
+    | TelemetryMsg
+    | TrackMsg
+    | HealthMsg
+    | ControlMsg
+    | ControlReplyMsg
+    | FleetMsg
 )
 """Any decoded message (`wire.codec.decode_any`)."""

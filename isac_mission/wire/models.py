@@ -20,6 +20,14 @@ from typing import Annotated, Any, Final, Literal, get_args
 import numpy as np
 from pydantic import BeforeValidator, Field, ValidationInfo, field_validator
 
+from isac_mission.wire.control_models import (
+    CONTROL_PARAMS as CONTROL_PARAMS,
+)
+from isac_mission.wire.control_models import (
+    ControlReplyWire,
+    ControlWire,
+    FleetWire,
+)
 from isac_mission.wire.envelope import (
     MAX_ABS,
     MAX_ABS_COVARIANCE,
@@ -30,7 +38,7 @@ from isac_mission.wire.envelope import (
     SHARE_SUM_TOL,
     Envelope,
 )
-from isac_mission.wire.refusal import CHOICES, int_problem, length_of, number_problem, refuse
+from isac_mission.wire.refusal import CHOICES, int_problem, length_of, refuse
 
 Number = Annotated[float, Field(ge=-MAX_ABS, le=MAX_ABS)]
 NonNegative = Annotated[float, Field(ge=0.0, le=MAX_ABS)]
@@ -57,8 +65,6 @@ TelemetryMode = Literal[
 TELEMETRY_MODES: Final = frozenset(get_args(TelemetryMode))
 LinkState = Literal["ok", "lost"]
 LINK_STATES: Final = frozenset(get_args(LinkState))
-CONTROL_PARAMS: Final = {"rate_min_mbps": (1e-3, 1e5)}
-"""Operator-settable planning parameters and their accepted ranges (`isac/<mission>/control`)."""
 MAX_COUNTERS: Final = 200
 MAX_WALL_S: Final = 1.0e11
 """Largest wall-clock stamp accepted (Unix time, s): the year 5138."""
@@ -75,7 +81,6 @@ PublishedWall = Annotated[
 CHOICES.update(
     mode=("{value!r} is not one of {allowed}", TELEMETRY_MODES),
     link=("{value!r} is not one of {allowed}", LINK_STATES),
-    command=("{value!r} is not a command (expected 'set')", frozenset({"set"})),
 )
 
 
@@ -210,6 +215,11 @@ class TelemetryWire(Envelope):
     landed: bool
     link: LinkState = Field(description="The MAVLink link: ok or lost.")
     published_wall_s: PublishedWall = None
+    override: Status = Field(
+        default="",
+        description="Why the service does not fly the vehicle ('operator: HOLD', 'RTL: low "
+        "battery', 'landed', ...); '' while it does (docs/service.md, 'Operator override').",
+    )
 
     @field_validator("uav", mode="before")
     @classmethod
@@ -260,31 +270,6 @@ class HealthWire(Envelope):
         return value
 
 
-class ControlWire(Envelope):
-    """An operator's command (`isac/<mission>/control`): set planning parameters from the next
-    planned slot on; rate_min_mbps is R_th in Mbit/s."""
-
-    type: Literal["control"]
-    slot: SlotOrBefore
-    command: Literal["set"]
-    params: dict[str, float] = Field(description="Parameter name -> value (CONTROL_PARAMS).")
-
-    @field_validator("params", mode="before")
-    @classmethod
-    def _known_params(cls, value: Any) -> Any:
-        if not isinstance(value, dict) or not value:
-            raise refuse("control.params: expected a non-empty object")
-        for name, x in value.items():
-            if name not in CONTROL_PARAMS:
-                known = ", ".join(sorted(CONTROL_PARAMS))
-                raise refuse(f"control.params.{name}: unknown parameter (known: {known})")
-            lo, hi = CONTROL_PARAMS[name]
-            problem = number_problem(x, lo=lo, hi=hi)
-            if problem:
-                raise refuse(f"control.params.{name}: {problem}")
-        return value
-
-
 WireMessage = Annotated[
     DetectionWire
     | ClockWire
@@ -293,7 +278,9 @@ WireMessage = Annotated[
     | TelemetryWire
     | TrackWire
     | HealthWire
-    | ControlWire,
+    | ControlWire
+    | ControlReplyWire
+    | FleetWire,
     Field(discriminator="type"),
 ]
 """Any bus payload, told apart by its `type`."""
@@ -307,5 +294,7 @@ MODELS: Final[dict[str, type[Envelope]]] = {
     "track": TrackWire,
     "health": HealthWire,
     "control": ControlWire,
+    "control_reply": ControlReplyWire,
+    "fleet": FleetWire,
 }
 """Message type -> its model."""

@@ -79,14 +79,18 @@ async def test_solver_error_timeout_and_infeasible_slots_fall_back_and_recover(
                         raised = True
                         bus.publish(
                             keys.control,
-                            encode_control(ControlMsg(8, 0.0, {"rate_min_mbps": 5000.0})),
+                            encode_control(
+                                ControlMsg.set_params(8, 0.0, "raise", rate_min_mbps=5000.0)
+                            ),
                         )
                     if raised and not restored and msg.plan.report.status == "infeasible":
                         restored = True
                         infeasible_seen.set()
                         bus.publish(
                             keys.control,
-                            encode_control(ControlMsg(msg.slot, 0.0, {"rate_min_mbps": 10.0})),
+                            encode_control(
+                                ControlMsg.set_params(msg.slot, 0.0, "restore", rate_min_mbps=10.0)
+                            ),
                         )
 
         opts = WorldOptions(

@@ -13,7 +13,18 @@ from isac_mission.wire import MAX_UAVS, SCHEMA, DetectionMsg, encode_detection
 from isac_mission.wire.models import MODELS
 from isac_mission.wire.schema import UNION_NAME, message_schemas, union_schema, write_schemas
 
-KINDS = ("detection", "clock", "truth", "plan", "telemetry", "track", "health", "control")
+KINDS = (
+    "detection",
+    "clock",
+    "truth",
+    "plan",
+    "telemetry",
+    "track",
+    "health",
+    "control",
+    "control_reply",
+    "fleet",
+)
 
 
 def test_every_message_type_has_a_schema_with_the_envelope() -> None:

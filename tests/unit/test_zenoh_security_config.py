@@ -60,7 +60,14 @@ def test_off_by_default_and_settings_stay_unsecured_loopback() -> None:
 def test_a_scenario_file_turns_it_on_with_the_default_roles(tmp_path: Path) -> None:
     cfg = load_with(tmp_path, {"enabled": True, "users_file": "secrets/users.txt"})
     assert cfg.enabled and cfg.users_file == Path("secrets/users.txt")
-    assert cfg.roles["ground"].publishes == ["plan", "track", "health", "telemetry"]
+    assert cfg.roles["ground"].publishes == [
+        "plan",
+        "track",
+        "health",
+        "telemetry",
+        "control/reply",
+        "fleet",
+    ]
     assert cfg.roles["world"].publishes == ["clock", "truth", "detections", "telemetry"]
     assert cfg.roles["operator"].publishes == ["control"]
     assert cfg.roles["observer"].publishes == []
@@ -174,6 +181,8 @@ def test_acl_denies_by_default_and_lets_each_role_put_on_its_keys(users_file: Pa
         "isac/paper/track",
         "isac/paper/health",
         "isac/paper/telemetry/*",
+        "isac/paper/control/reply",
+        "isac/paper/fleet",
     ]
     assert rules["publish-world"]["key_exprs"] == [
         "isac/paper/clock",

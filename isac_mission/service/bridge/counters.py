@@ -15,6 +15,8 @@ class BridgeCounters:
     link_losses: int = 0
     link_interruptions: int = 0
     offboard_reentries: int = 0
+    overrides: int = 0
+    """Times the vehicle was found not to be the service's to fly (override.py)."""
     loop_errors: int = 0
     last_error: str = ""
 
@@ -26,4 +28,6 @@ class FleetCounters:
     plans_applied: int = 0
     plans_stale: int = 0
     plans_invalid: int = 0
+    fleet_invalid: int = 0
+    """Refused `fleet` commands."""
     last_error: str = ""

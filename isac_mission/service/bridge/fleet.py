@@ -30,7 +30,7 @@ from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
-from isac_mission.wire import Keys, PlanMsg, decode_plan
+from isac_mission.wire import Keys, PlanMsg, decode_fleet, decode_plan
 
 log = logging.getLogger(__name__)
 
@@ -244,8 +244,14 @@ class BridgeFleet:
         return True
 
     async def follow_plans(self) -> None:
-        """Apply every valid plan published on `isac/<mission>/plan` until cancelled (invalid
-        payloads are counted, logged and dropped)."""
+        """Apply every valid plan published on `isac/<mission>/plan`, and carry out the ground
+        loop's fleet commands (`isac/<mission>/fleet`), until cancelled (invalid payloads are
+        counted, logged and dropped)."""
+        async with asyncio.TaskGroup() as tg:
+            tg.create_task(self._follow_fleet_commands())
+            await self._follow_plan_key()
+
+    async def _follow_plan_key(self) -> None:
         n = len(self.bridges)
         async with self.bus.subscribe(self.keys.plan, maxsize=16) as sub:
             async for _key, payload in sub:
@@ -257,3 +263,31 @@ class BridgeFleet:
                     log.warning("plan dropped: %s", err)
                     continue
                 self.on_plan(plan)
+
+    async def _follow_fleet_commands(self) -> None:
+        """hold, resume, land, release for the listed vehicles, each as its own task."""
+        n = len(self.bridges)
+        running: set[asyncio.Task[None]] = set()
+        try:
+            await self._fleet_loop(n, running)
+        finally:
+            for task in running:
+                task.cancel()
+
+    async def _fleet_loop(self, n: int, running: set[asyncio.Task[None]]) -> None:
+        async with self.bus.subscribe(self.keys.fleet, maxsize=16) as sub:
+            async for _key, payload in sub:
+                try:
+                    msg = decode_fleet(payload, n_uavs=n)
+                except MessageError as err:
+                    self.counters.fleet_invalid += 1
+                    self.counters.last_error = str(err)
+                    log.warning("fleet command dropped: %s", err)
+                    continue
+                for m in msg.uavs:
+                    task = asyncio.create_task(
+                        self.bridges[m].on_fleet(msg.command, msg.request_id),
+                        name=f"fleet-{msg.command}-{m}",
+                    )
+                    running.add(task)
+                    task.add_done_callback(running.discard)

@@ -61,6 +61,9 @@ class OffboardEntry:
         self.counters = vehicle.counters
         self.want = False
         """True while the bridge flies the mission in OFFBOARD (a re-entry is wanted)."""
+        self.awaiting = False
+        """True from the bridge's OFFBOARD command until the vehicle reports OFFBOARD (a mode
+        other than OFFBOARD meanwhile is no override: override.py)."""
         self._origin = np.array(settings.origin_xy_m, dtype=float)
 
     @property
@@ -115,6 +118,7 @@ class OffboardEntry:
         assert here is not None
         if not plan_arrived():
             stream.hover(here)  # the setpoint starts where the vehicle is
+        self.awaiting = True
         await vehicle.command(offboard_mode_command(self.link.target))
         self.want = True
         await vehicle.wait(lambda st: st.mode == "offboard", s.phase_timeout_s, "OFFBOARD")
@@ -154,9 +158,10 @@ class OffboardEntry:
             )
             if not self.want:
                 return
+            self.awaiting = True
             await vehicle.command(offboard_mode_command(self.link.target))
             self.counters.offboard_reentries += 1
-            log.info("vehicle %d: back in OFFBOARD after the link loss", self.index)
+            log.info("vehicle %d: back in OFFBOARD", self.index)
         except LinkError as err:
             self.counters.last_error = str(err)
             log.warning("vehicle %d: could not re-enter OFFBOARD: %s", self.index, err)

@@ -5,6 +5,9 @@ the setpoint's hold time and the link latency, and sent in the vehicle's local N
 the leg's velocity as feed-forward. A new goal starts its leg where the setpoint is, so the
 velocity feed-forward is continuous across slots when the plan is. The stream only sends while
 started (`start`/`stop`), once the vehicle's address is known and a mission altitude is set.
+While `follow_vehicle` is on (the vehicle is not the service's: an operator's mode, its own
+failsafe, an operator's hold), the setpoint is the vehicle's own position, altitude included, at
+rest, so that a plain switch back to OFFBOARD leaves it where it is; goals are still kept.
 """
 
 from __future__ import annotations
@@ -75,6 +78,8 @@ class SetpointStream:
         TIMESTAMPS_KEPT plans (latency figures)."""
         self._origin = np.array(settings.origin_xy_m, dtype=float)
         self._streaming = False
+        self.follow_vehicle = False
+        """Send the vehicle's own position instead of the leg (see the module doc)."""
 
     @property
     def streaming(self) -> bool:
@@ -141,14 +146,20 @@ class SetpointStream:
         if self.link.vehicle_address is None:
             return
         now = self.time.now_s()
-        xy, v = self.leg.sample(self.carrot_time_s())
-        msg = position_target_local_ned(
-            self.link.target,
-            scenario_to_ned(xy, self.altitude_m, self._origin),
-            scenario_to_ned_velocity(v) if self.settings.velocity_feed_forward else None,
-            self.settings.yaw_rad,
-            time_boot_ms=round(now * 1000.0),
-        )
+        here = self.link.status().position_ned_m if self.follow_vehicle else None
+        if here is not None:
+            msg = position_target_local_ned(
+                self.link.target, here, None, self.settings.yaw_rad, time_boot_ms=round(now * 1e3)
+            )
+        else:
+            xy, v = self.leg.sample(self.carrot_time_s())
+            msg = position_target_local_ned(
+                self.link.target,
+                scenario_to_ned(xy, self.altitude_m, self._origin),
+                scenario_to_ned_velocity(v) if self.settings.velocity_feed_forward else None,
+                self.settings.yaw_rad,
+                time_boot_ms=round(now * 1000.0),
+            )
         if self.link.send(msg):
             self.counters.setpoints_sent += 1
             wall = time.monotonic()

@@ -39,11 +39,27 @@ class LinkWatch:
         self._reentry_watch_until_s = -math.inf
         """After the vehicle's stream resumes from a gap, re-enter OFFBOARD until this time if
         the vehicle reports the offboard-loss hold (the gap may be shorter than link loss)."""
+        self._gap_until_s = -math.inf
+        """Until this time a mode change is put down to the last gap (override.py)."""
 
     @property
     def index(self) -> int:
         """Vehicle index m."""
         return self.settings.index
+
+    @property
+    def _window_s(self) -> float:
+        """How long after a gap a mode change is the gap's: 3 x interruption_after_s + 2 s."""
+        return 3.0 * self.settings.interruption_after_s + 2.0
+
+    def gap_recent(self, st: VehicleStatus, now_s: float) -> bool:
+        """True while a mode change may be the offboard-loss action of a link gap: the link is
+        lost, the position stream has stopped for more than interruption_after_s, or a gap
+        ended less than 3 x interruption_after_s + 2 s ago."""
+        stalled = (
+            st.position_s is None or now_s - st.position_s > self.settings.interruption_after_s
+        )
+        return st.lost or stalled or now_s <= self._gap_until_s
 
     def observe(
         self, st: VehicleStatus, now_s: float, want_offboard: bool, reentry_idle: bool
@@ -65,6 +81,7 @@ class LinkWatch:
             return start
         regained = self._ever_ok
         self._ever_ok = True
+        self._gap_until_s = now_s + self._window_s
         if regained:
             log.info("vehicle %d: link regained (mode %s)", self.index, st.mode)
             # A re-entry the interruption watch has just asked for is the one to run.
@@ -83,7 +100,8 @@ class LinkWatch:
                     st.position_s - last,
                 )
                 self.counters.link_interruptions += 1
-                self._reentry_watch_until_s = now_s + 3.0 * self.settings.interruption_after_s + 2.0
+                self._reentry_watch_until_s = now_s + self._window_s
+                self._gap_until_s = now_s + self._window_s
         if (
             now_s <= self._reentry_watch_until_s
             and not st.lost

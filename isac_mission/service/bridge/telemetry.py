@@ -35,10 +35,15 @@ def vehicle_xy(st: VehicleStatus, origin_xy_m: FloatArray | Sequence[float]) -> 
 
 
 def telemetry_message(
-    st: VehicleStatus, origin_xy_m: FloatArray | Sequence[float], uav: int, slot: int
+    st: VehicleStatus,
+    origin_xy_m: FloatArray | Sequence[float],
+    uav: int,
+    slot: int,
+    override: str = "",
 ) -> TelemetryMsg | None:
     """Vehicle `uav`'s telemetry message at `slot` (None before its first position and
-    velocity). t_s is the simulation time at which the position arrived."""
+    velocity). t_s is the simulation time at which the position arrived; `override`: why the
+    service does not fly it (override.py), "" while it does."""
     if st.position_ned_m is None or st.velocity_ned_mps is None:
         return None
     xy, alt = ned_to_scenario(st.position_ned_m, origin_xy_m)
@@ -53,4 +58,5 @@ def telemetry_message(
         armed=st.armed,
         landed=st.landed,
         link="lost" if st.lost else "ok",
+        override=override,
     )

@@ -5,7 +5,9 @@ The bridge owns a `MavlinkLink` (UDP 127.0.0.1:(base + m), PX4 SITL's offboard p
 (commanding.py) and an `OffboardEntry` (offboard.py), and runs three paced loops (pacing.py):
 GCS HEARTBEAT, telemetry (with link supervision) and the setpoint stream. It flies the mission
 phases: `prepare` (the OFFBOARD entry), waypoints, `hold`, `land`, and the re-entry into
-OFFBOARD after a link loss.
+OFFBOARD after a link loss. It never takes a vehicle back from an operator or from the vehicle's
+own failsafe (override.py, `override`), and carries out the operator's fleet commands
+(`on_fleet`: hold, resume, land, release).
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from isac_mission.service.bridge.commanding import VehicleCommander
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.legs import as_xy
 from isac_mission.service.bridge.offboard import OffboardEntry
+from isac_mission.service.bridge.operator import OverrideKeeper
 from isac_mission.service.bridge.pacing import run_paced
 from isac_mission.service.bridge.setpoints import SetpointStream
 from isac_mission.service.bridge.settings import BridgeSettings
@@ -100,6 +103,16 @@ class VehicleBridge:
         self._tasks: list[asyncio.Task[None]] = []
         self._reentry: asyncio.Task[None] | None = None
         self._waypoints_set = 0  # set_waypoint calls, to notice plans arriving during prepare
+        self._keeper = OverrideKeeper(
+            settings.index,
+            time,
+            self._stream,
+            self._offboard,
+            self._watch,
+            self.counters,
+            self._start_reentry,
+        )
+        self.link.on("STATUSTEXT", self._keeper.on_statustext)
 
     # -- lifecycle ---------------------------------------------------------------------------
 
@@ -218,13 +231,19 @@ class VehicleBridge:
         from_clock = self.time.current_slot() if isinstance(self.time, ClockSimTime) else -1
         return max(-1, from_clock, self.plan_slot - 1)
 
+    @property
+    def override(self) -> str:
+        """Why the service does not fly the vehicle (operator.py, override.py); "" while it
+        does."""
+        return self._keeper.reason
+
     def telemetry(self, status: VehicleStatus | None = None) -> TelemetryMsg | None:
         """The vehicle's telemetry message (None before its first position). t_s is the
         simulation time at which the position arrived."""
         st = self.link.status() if status is None else status
         if st.position_ned_m is None or st.velocity_ned_mps is None:
             return None
-        return telemetry_message(st, self._origin, self.index, self.slot)
+        return telemetry_message(st, self._origin, self.index, self.slot, self.override)
 
     # -- mission -----------------------------------------------------------------------------
 
@@ -263,7 +282,10 @@ class VehicleBridge:
         self._stream.send(periodic=False)
 
     async def hold(self) -> None:
-        """Switch the vehicle to HOLD (PX4 AUTO.LOITER) and stop streaming setpoints."""
+        """Switch the vehicle to HOLD (PX4 AUTO.LOITER) and stop streaming setpoints (not a
+        vehicle an operator or its failsafe took: `override`)."""
+        if self._keeper.not_ours("hold"):
+            return
         self._offboard.want = False
         await self._vehicle.command(hold_mode_command(self.link.target))
         self._stream.stop()
@@ -274,6 +296,8 @@ class VehicleBridge:
         if the vehicle has not after `disarm_wait_s`). Returns at once if landed and disarmed;
         LinkError when the link is lost (the vehicle then follows its own loss action)."""
         s, vehicle = self.settings, self._vehicle
+        if self._keeper.not_ours("land"):
+            return
         self._offboard.want = False
         st = self.link.status()
         if st.lost:
@@ -325,9 +349,41 @@ class VehicleBridge:
 
     def _supervise(self, st: VehicleStatus) -> None:
         """Follow link-state transitions (supervision.py); after a loss or an interruption that
-        left the vehicle out of OFFBOARD, take it back to OFFBOARD."""
+        left the vehicle in the offboard-loss HOLD or LAND, take it back to OFFBOARD; any other
+        exit from OFFBOARD is an override (operator.py, override.py)."""
+        now = self.time.now_s()
+        if st.mode == "offboard":
+            self._offboard.awaiting = False
         idle = self._reentry is None or self._reentry.done()
-        if self._watch.observe(st, self.time.now_s(), self._offboard.want, idle):
-            self._reentry = asyncio.create_task(
-                self._offboard.reenter(), name=f"bridge-{self.index}-reentry"
-            )
+        if self._watch.observe(st, now, self._offboard.want, idle):
+            if self._keeper.after_gap(st, now):
+                self._start_reentry()
+            return
+        self._keeper.check(st, now, self.phase == "ready", idle)
+
+    def _start_reentry(self) -> None:
+        self._reentry = asyncio.create_task(
+            self._offboard.reenter(), name=f"bridge-{self.index}-reentry"
+        )
+
+    async def on_fleet(self, command: str, request_id: str) -> None:
+        """An operator's fleet command (`isac/<mission>/fleet`, request `request_id`): hold,
+        resume, land or release this vehicle; a failure is logged and counted, not raised."""
+        st = self.link.status()
+        log.warning("vehicle %d: operator %s (request %s)", self.index, command, request_id)
+        keeper = self._keeper
+        try:
+            if command == "hold" and self.phase == "ready" and not keeper.not_ours("hold"):
+                keeper.take("control: hold")
+                await self._vehicle.command(hold_mode_command(self.link.target))
+            elif (command == "resume" and keeper.reason == "control: hold") or (
+                command == "release" and keeper.reason and st.airborne
+            ):
+                keeper.hand_back(st, command=True)
+            elif command == "land":
+                keeper.reason = "control: land"
+                self._stream.follow_vehicle = False
+                await self.land()
+        except LinkError as err:
+            self.counters.last_error = str(err)
+            log.warning("vehicle %d: operator %s failed: %s", self.index, command, err)

@@ -2,8 +2,12 @@
 
 A vehicle whose bridge reports its link lost, or whose telemetry position is older than both
 `vehicle_lost_after_s` (simulation) and `vehicle_lost_wall_s` (wall), is excluded: the slot is
-planned for the others (fleet_plan.py) and the vehicle holds where it was last seen. It is
-re-admitted once its link is back, its telemetry fresh and it is in OFFBOARD again.
+planned for the others (fleet_plan.py) and the vehicle holds where it was last seen. So is a
+vehicle its bridge reports as not flown by the service (telemetry `override`: an operator's mode
+change, the vehicle's own failsafe, landed, killed; docs/service.md, "Operator override"), and one
+an operator's `hold` or `land` on `control` took out (`held`, control.py). It is re-admitted once
+its link is back, its telemetry fresh, no override or operator hold remains and it is in OFFBOARD
+again.
 """
 
 from __future__ import annotations
@@ -31,6 +35,8 @@ class VehicleWatch:
         self.telemetry: dict[int, TelemetryMsg] = {}
         self.excluded: dict[int, str] = {}
         """Vehicles planned around, with the reason."""
+        self.held: dict[int, str] = {}
+        """Vehicles an operator's `hold` or `land` took out of planning, with the reason."""
         self.telemetry_fresh_wall: dict[int, float] = {}
         """Vehicle -> wall time (time.monotonic) its telemetry position last advanced."""
 
@@ -52,19 +58,47 @@ class VehicleWatch:
                 age_s > self.settings.vehicle_lost_after_s
                 and now - self.telemetry_fresh_wall.get(m, now) > self.settings.vehicle_lost_wall_s
             )
-            if m not in self.excluded and (tel.link == "lost" or stale):
-                why = "link lost" if tel.link == "lost" else f"telemetry {age_s:.1f} s old"
+            why = self._why_out(m, tel, stale, age_s)
+            if why and m not in self.excluded:
                 self.excluded[m] = why
                 self.report.counters["vehicle exclusions"] += 1
                 self.report.last_error = f"vehicle {m}: {why}; planning around it"
                 log.warning("vehicle %d: %s; planning the others around it", m, why)
                 changed = True
-            elif m in self.excluded and tel.link == "ok" and not stale and tel.mode == "offboard":
+            elif why and self.excluded[m] != why and not why.startswith("telemetry"):
+                self.excluded[m] = why  # a new reason (an operator took a lost vehicle, ...)
+                log.warning("vehicle %d: still planned around: %s", m, why)
+                changed = True
+            elif not why and m in self.excluded and tel.mode == "offboard":
                 del self.excluded[m]
                 self.report.counters["vehicle readmissions"] += 1
                 log.warning("vehicle %d: link back and in OFFBOARD; planning it again", m)
                 changed = True
+        for m, why in self.held.items():  # held before any telemetry
+            if m not in self.telemetry and self.excluded.get(m) != why:
+                self.excluded[m] = why
+                changed = True
         return changed
+
+    def _why_out(self, m: int, tel: TelemetryMsg, stale: bool, age_s: float) -> str:
+        """Why vehicle m cannot be planned now ("" when it can)."""
+        if tel.link == "lost":
+            return "link lost"
+        if stale:
+            return f"telemetry {age_s:.1f} s old"
+        if m in self.held:
+            return self.held[m]
+        return tel.override
+
+    def override(self, m: int) -> str:
+        """Vehicle m's override as its bridge last reported it ("" when flown by the service)."""
+        tel = self.telemetry.get(m)
+        return "" if tel is None else tel.override
+
+    def airborne(self, m: int) -> bool | None:
+        """Vehicle m armed and not landed, as last reported (None: no telemetry yet)."""
+        tel = self.telemetry.get(m)
+        return None if tel is None else tel.armed and not tel.landed
 
     def positions(self, t_s: float, det_xy: FloatArray | None = None) -> FloatArray:
         """[M, 2] positions (m): fresh telemetry, else det_xy (a slot's detection positions),

@@ -23,6 +23,7 @@ from isac_mission.errors import MessageError
 from isac_mission.planning.slot import SolverKit
 from isac_mission.records import SlotRecord, TraceWriter
 from isac_mission.service.ground.assembler import DetectionAssembler
+from isac_mission.service.ground.control import ControlDesk
 from isac_mission.service.ground.exclusion import VehicleWatch
 from isac_mission.service.ground.fleet_plan import PlanningJob
 from isac_mission.service.ground.mission import MissionState
@@ -39,7 +40,6 @@ from isac_mission.wire import (
     TrackMsg,
     collect_detections,
     decode_clock,
-    decode_control,
     decode_detection,
     decode_telemetry,
     decode_truth,
@@ -63,7 +63,6 @@ class GroundLoop:
         kit: SolverKit | None = None,
         on_slot: Callable[[SlotEvent], None] | None = None,
     ) -> None:
-        self.s = scenario
         self.bus = bus
         self.keys = Keys(scenario.mission_id)
         self.settings = settings
@@ -78,11 +77,19 @@ class GroundLoop:
         self.mission_t0_s: float | None = None
         self.detections = DetectionAssembler(scenario.M, scenario.N, settings, self.report.counters)
         self.vehicles = VehicleWatch(scenario.M, settings, self.report)
+        self.control = ControlDesk(
+            self.keys, bus, self.vehicles, self.report, lambda: self.state, lambda: self.t_s
+        )
         self.truth: dict[int, FloatArray] = {}
         self.done = asyncio.Event()
         self.planning: asyncio.Task[None] | None = None
         self.resumed_xy: FloatArray | None = None
         """UAV positions of the last traced slot, after a resume (until telemetry is fresh)."""
+
+    @property
+    def s(self) -> Scenario:
+        """The scenario planned with (an operator's `set` changes it: control.py)."""
+        return self.state.scenario
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -123,6 +130,7 @@ class GroundLoop:
 
     async def _pump(self, sub: Subscription) -> None:
         prefix = self.keys.prefix + "/"
+        reply_key = self.keys.control_reply
         handlers: dict[str, Callable[[bytes], None]] = {
             "clock": self._on_clock,
             "truth": self._on_truth,
@@ -131,6 +139,8 @@ class GroundLoop:
             "control": self._on_control,
         }
         async for key, payload in sub:
+            if key == reply_key:  # our own replies (control/... is not a control request)
+                continue
             kind = key.removeprefix(prefix).split("/", 1)[0]
             handler = handlers.get(kind)
             if handler is None:  # plan, track, health: ours or another ground's
@@ -179,15 +189,9 @@ class GroundLoop:
         self._update_vehicle_states()
 
     def _on_control(self, payload: bytes) -> None:
-        msg = decode_control(payload)
-        r_th_mbps = msg.params["rate_min_mbps"]
-        new = self.state.scenario.with_changes(
-            r_th=r_th_mbps * 1e6 * self.settings.plan_rate_factor
-        )
-        self.state.set_scenario(new)
-        self.s = new
-        self.report.counters["operator commands"] += 1
-        log.warning("operator: R_th = %.3f Mbit/s from slot %d on", r_th_mbps, self.state.slot + 2)
+        """An operator's request (control.py): executed or refused, always answered."""
+        self.control.on_request(payload)
+        self._update_vehicle_states()
         self._publish_health("running")
 
     def _update_vehicle_states(self) -> None:
