@@ -46,6 +46,7 @@ from isac_mission.wire import Keys
 from sim.autopilot.endpoint import Autopilot
 from sim.clock import SimClock
 from sim.emulator import SensingEmulator
+from sim.impaired_io import ImpairedPublisher
 from sim.lockstep import Lockstep
 from sim.world_assembly import (
     make_target_and_sensor,
@@ -53,6 +54,7 @@ from sim.world_assembly import (
     positions_xy_m,
     ready_for_offboard_start,
 )
+from sim.world_impairment import detection_publisher, impair_vehicles
 from sim.world_options import WorldOptions, WorldStats
 from sim.world_outputs import WorldOutputs
 
@@ -87,6 +89,12 @@ class World:
             self.clock, options.lockstep_timeout_s, self.stats, self._republish_clock
         )
         self._opened_vehicles: list[Autopilot] = []
+        self.impairment = options.impairment or scenario.impairment
+        """Lossy, late links (the options', else the scenario's; sim.world_impairment)."""
+        self.impairment_seed = next(
+            s for s in (self.impairment.seed, options.seed, scenario.seed) if s is not None
+        )
+        self.detection_links: ImpairedPublisher | None = None
 
     # -- lifecycle ---------------------------------------------------------------------------
 
@@ -100,13 +108,26 @@ class World:
             speed=self.options.speed,
             clock_rate_hz=self.options.clock_rate_hz,
         )
+        self.detection_links = detection_publisher(
+            self.bus,
+            self.keys,
+            self.scenario.M,
+            self.impairment,
+            self.impairment_seed,
+            self.options.speed,
+        )
         self.emulator = SensingEmulator(
-            self.bus, self.keys, self.sensor, self.scenario.M, n_bs=self.scenario.K
+            self.detection_links or self.bus,
+            self.keys,
+            self.sensor,
+            self.scenario.M,
+            n_bs=self.scenario.K,
         )
         self.emulator.add_plan_listener(self._on_plan)
         for v in self.vehicles:
             await v.open()
             self._opened_vehicles.append(v)
+        impair_vehicles(self.vehicles, self.impairment, self.impairment_seed, self.options.speed)
 
     async def run(self, stop: asyncio.Event) -> None:
         """Run until `stop` is set. Needs `open()` first."""
@@ -139,6 +160,8 @@ class World:
                 await v.close()
             except Exception as err:  # keep closing the rest
                 log.warning("vehicle %d close: %s", v.system_id, err)
+        if self.detection_links is not None:
+            self.detection_links.close()
         if self.bus is not None:
             self.bus.close()
 

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from isac_mission.bus import BusSettings
+from isac_mission.config import ImpairmentConfig
 from isac_mission.frames import PX4_SITL_ORIGIN, GeoPoint
 from isac_mission.mavwire.ports import (
     GCS_LOCAL_BASE_PORT,
@@ -79,6 +80,8 @@ class WorldOptions:
     (mean x0, covariance P0) is honest; False starts it exactly at x0.
     geo_origin: geodetic position of the scenario origin (GPS of the simulated vehicles).
     link_outages: scheduled MAVLink radio failures (fault injection, docs/reliability.md).
+    impairment: lossy, late links (fault injection, `sim.world_impairment`); None: the
+    scenario's `impairment` section.
     """
 
     speed: float = 1.0
@@ -100,6 +103,7 @@ class WorldOptions:
     initial_error: bool = True
     geo_origin: GeoPoint = PX4_SITL_ORIGIN
     link_outages: tuple[LinkOutage, ...] = ()
+    impairment: ImpairmentConfig | None = None
 
     def __post_init__(self) -> None:
         if math.isnan(self.speed) or self.speed <= 0:

@@ -41,6 +41,17 @@ InjectLinkLossOpt = Annotated[
     ),
 ]
 
+ImpairLinkOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        help="Fault injection: lossy, late links of the simulated world, as "
+        "[TARGET[:up|down]:]KEY=VALUE,... with TARGET all (default), a vehicle index or "
+        "detections and KEY loss, latency_ms, jitter_ms, duplicate, reorder, reorder_delay_ms, "
+        "e.g. loss=0.2,latency_ms=100,jitter_ms=50 (repeatable; over the scenario's "
+        "`impairment` section; docs/reliability.md)."
+    ),
+]
+
 
 def load_or_exit(path: Path) -> Scenario:
     """Load a scenario or print its problems (one per line) and exit with status 2."""

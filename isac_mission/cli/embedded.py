@@ -17,13 +17,21 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from isac_mission.cli.app import ConfigArg, InjectLinkLossOpt, app, err_console, load_or_exit
+from isac_mission.cli.app import (
+    ConfigArg,
+    ImpairLinkOpt,
+    InjectLinkLossOpt,
+    app,
+    err_console,
+    load_or_exit,
+)
 from isac_mission.cli.ports import (
     GcsLocalBasePortOpt,
     GcsPortOpt,
     MavlinkBasePortOpt,
     MavlinkLocalBasePortOpt,
 )
+from isac_mission.config import ImpairmentConfig, apply_impairment_flags
 from isac_mission.errors import ConfigError
 from isac_mission.mavwire.ports import (
     GCS_LOCAL_BASE_PORT,
@@ -71,6 +79,7 @@ def sim(
         typer.Option(help="Slot 0 begins: immediate, or offboard (all vehicles up in OFFBOARD)."),
     ] = "immediate",
     inject_link_loss: InjectLinkLossOpt = None,
+    impair_link: ImpairLinkOpt = None,
 ) -> None:
     """The world alone (vehicles, target, sensing, clock) until SIGINT or SIGTERM."""
     import logging
@@ -109,6 +118,7 @@ def sim(
             gcs_local_base_port=gcs_local_base_port,
             start=start,  # type: ignore[arg-type]
             link_outages=parse_outages(inject_link_loss or [], s.M),
+            impairment=world_impairment(s, impair_link or []),
         )
     except (ConfigError, ValueError) as err:
         err_console.print(f"[bold red]invalid option[/] {err}", highlight=False)
@@ -135,6 +145,18 @@ def sim(
     except ConfigError as err:
         err_console.print(f"[bold red]cannot start the world[/] {err}", highlight=False)
         raise typer.Exit(1) from None
+
+
+def world_impairment(s: Scenario, specs: Sequence[str]) -> ImpairmentConfig | None:
+    """The scenario's impairment with the `--impair-link` specs applied (None: no specs, the
+    scenario's own); ConfigError naming the spec and the field, or a vehicle the fleet lacks."""
+    if not specs:
+        return None
+    out = apply_impairment_flags(s.impairment, list(specs))
+    bad = sorted(m for m in out.vehicles if m >= s.M)
+    if bad:
+        raise ConfigError(f"--impair-link: no vehicle {bad[0]} (M = {s.M})")
+    return out
 
 
 def check_link_outages(specs: Sequence[str], n_uavs: int) -> None:
@@ -176,6 +198,7 @@ async def run_embedded(
         gcs_local_base_port=opts.gcs_local_base_port,
         start="offboard",
         link_outages=parse_outages(opts.link_outages, s.M),
+        impairment=world_impairment(s, opts.link_impairment),
     )
     with ZenohBus.open(hub) as bus:
         world = asyncio.create_task(run_world(s, world_opts, world_stop))

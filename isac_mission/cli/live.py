@@ -11,6 +11,7 @@ from rich.table import Table
 
 from isac_mission.cli.app import (
     ConfigArg,
+    ImpairLinkOpt,
     InjectLinkLossOpt,
     PlanBudgetOpt,
     app,
@@ -51,6 +52,7 @@ def _live(
     resume: bool,
     plan_budget: float,
     link_outages: list[str],
+    link_impairment: list[str] | None = None,
 ) -> None:
     """Shared body of `run` and `serve`: live progress, summary, plots; exit 0 on SIGINT/SIGTERM."""
     import asyncio
@@ -83,6 +85,15 @@ def _live(
         except ValueError as err:
             err_console.print(f"--inject-link-loss: {err}", highlight=False)
             raise typer.Exit(2) from None
+    if link_impairment:
+        from isac_mission.cli.embedded import world_impairment
+        from isac_mission.errors import ConfigError
+
+        try:
+            world_impairment(s, link_impairment)
+        except ConfigError as err:
+            err_console.print(f"[bold red]invalid option[/] {err}", highlight=False)
+            raise typer.Exit(2) from None
     opts = LiveOptions(
         speed=speed,
         lockstep=lockstep,
@@ -98,6 +109,7 @@ def _live(
         resume=resume,
         plan_budget_s=plan_budget if plan_budget > 0 else None,
         link_outages=tuple(link_outages),
+        link_impairment=tuple(link_impairment or ()),
     )
     status = {"phase": "starting", "line": ""}
 
@@ -220,6 +232,7 @@ def run(
     gcs_local_base_port: GcsLocalBasePortOpt = GCS_LOCAL_BASE_PORT,
     plan_budget: PlanBudgetOpt = 1.0,
     inject_link_loss: InjectLinkLossOpt = None,
+    impair_link: ImpairLinkOpt = None,
 ) -> None:
     """The live system in one process: simulated vehicles (MAVLink), target and sensing, MAVLink
     bridges and the ground loop, over real loopback UDP and Zenoh."""
@@ -240,6 +253,7 @@ def run(
         resume=False,
         plan_budget=plan_budget,
         link_outages=inject_link_loss or [],
+        link_impairment=impair_link or [],
     )
 
 

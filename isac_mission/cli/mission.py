@@ -76,6 +76,9 @@ class LiveOptions:
     link_outages: tuple[str, ...] = ()
     """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S`
     (sim.world_options)."""
+    link_impairment: tuple[str, ...] = ()
+    """Embedded world only: `--impair-link` specs over the scenario's `impairment` section
+    (isac_mission.config.impairment)."""
     plan_budget_s: float | None = 1.0
     """Wall seconds a slot's planning may take (GroundSettings.plan_budget_s)."""
 

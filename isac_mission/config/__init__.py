@@ -10,6 +10,12 @@ key), `security` (Zenoh users, roles, TLS), `scenario` (`ScenarioFile`, `Scenari
 (derived constants and cross-field checks), `loading` (files, mappings, names).
 """
 
+from isac_mission.config.impairment import (
+    ChannelImpairmentConfig,
+    ImpairmentConfig,
+    LinkImpairmentConfig,
+    apply_impairment_flags,
+)
 from isac_mission.config.loading import (
     SCENARIOS_DIR,
     load_scenario,
@@ -56,6 +62,9 @@ __all__ = [
     "SPEED_OF_LIGHT_MPS",
     "AreaConfig",
     "BaseStationConfig",
+    "ChannelImpairmentConfig",
+    "ImpairmentConfig",
+    "LinkImpairmentConfig",
     "MavlinkSigningConfig",
     "MavlinkSigningKey",
     "PlannerConfig",
@@ -72,6 +81,7 @@ __all__ = [
     "ZenohSecurityConfig",
     "ZenohTlsConfig",
     "ZenohTopic",
+    "apply_impairment_flags",
     "db_to_linear",
     "dbm_to_w",
     "load_scenario",

@@ -110,6 +110,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
         planner=spec.planner,
         security=spec.security,
         mavlink_signing_key=mavlink_signing_key(spec.security.mavlink_signing),
+        impairment=spec.impairment,
     )
     problems = _cross_field_problems(scenario, n_slots)
     if problems:
@@ -149,6 +150,9 @@ def _cross_field_problems(s: Scenario, n_slots: float) -> list[str]:
                     f"uavs.start_xy_m[{i}], [{j}]: {gap:.1f} m apart, closer than "
                     f"safe_distance_m = {s.d_safe} m"
                 )
+    for m in sorted(s.impairment.vehicles):
+        if m >= s.M:
+            out.append(f"impairment.vehicles.{m}: no vehicle {m} (M = {s.M})")
     p = s.x0[:2]
     if not (0 <= p[0] <= s.area[0] and 0 <= p[1] <= s.area[1]):
         out.append(f"target.initial_state: position {p.tolist()} is outside the area")

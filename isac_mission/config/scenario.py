@@ -9,6 +9,7 @@ from typing import Any
 
 from pydantic import Field
 
+from isac_mission.config.impairment import ImpairmentConfig
 from isac_mission.config.sections import (
     AreaConfig,
     BaseStationConfig,
@@ -41,6 +42,7 @@ class ScenarioFile(Section):
     tracker: TrackerConfig = TrackerConfig()
     planner: PlannerConfig = PlannerConfig()
     security: SecurityConfig = SecurityConfig()
+    impairment: ImpairmentConfig = ImpairmentConfig()
 
 
 @dataclass(frozen=True)
@@ -92,6 +94,8 @@ class Scenario:
     security: SecurityConfig = field(default_factory=SecurityConfig)
     mavlink_signing_key: MavlinkSigningKey | None = None
     """Resolved from security.mavlink_signing; None when signing is off. Never traced."""
+    impairment: ImpairmentConfig = field(default_factory=ImpairmentConfig)
+    """Fault injection on the simulated world's links (read by `sim` only; not traced)."""
 
     @property
     def radar_gain(self) -> float:

@@ -24,8 +24,10 @@ Vehicle state (`VehicleStatus` of `isac_mission.mavwire.status`, a snapshot take
 name decoded from HEARTBEAT.custom_mode (`px4_mode_name`), armed (HEARTBEAT base_mode), landed
 state (EXTENDED_SYS_STATE), and the time of the last HEARTBEAT. Times come from the `clock`
 callable given to the link (the bridge passes its simulation time, so "lost" is judged in
-simulation seconds, like every other timeout of the service). The link is *lost* when no
-HEARTBEAT has been heard for `lost_after_s` (or never).
+simulation seconds, like every other timeout of the service). The link is *lost* when nothing
+from the vehicle's autopilot was heard for `lost_after_s` (or no HEARTBEAT ever): any message
+counts, as a lossy radio drops 1 Hz heartbeats in a row far more often than a 20 Hz stream, but
+only a HEARTBEAT (a fresh mode) ends a loss (docs/reliability.md, "Lossy, late radio links").
 
 Outgoing messages come from the pure builder functions of `isac_mission.mavwire.builders`
 (`gcs_heartbeat`, `arm_command`, `takeoff_command`, `land_command`, `set_mode_command`,
@@ -141,6 +143,7 @@ class MavlinkLink(asyncio.DatagramProtocol):
         """Handlers by message type; `on()` adds one."""
         self._noted: set[str] = set()
 
+        self._heard_s = self._heard_wall_s = -math.inf  # last message of the vehicle's autopilot
         self._vehicle = VehicleTelemetry(clock, self.name, self._count_error)
         self._commands = CommandProtocol(self.name, self.send, self.ignored)
         self._changed = asyncio.Event()
@@ -239,6 +242,8 @@ class MavlinkLink(asyncio.DatagramProtocol):
             self._count_error("foreign_address", f"{mtype} as system {src} from {addr}")
             return
         self.received[mtype] += 1
+        if int(msg.get_srcComponent()) == self._vehicle_component and not self.lost:
+            self._heard_s, self._heard_wall_s = self._clock(), time.monotonic()
         handlers = self.handlers.get(mtype)
         if not handlers:
             self.ignored[f"unhandled:{mtype}"] += 1
@@ -340,15 +345,14 @@ class MavlinkLink(asyncio.DatagramProtocol):
 
     @property
     def lost(self) -> bool:
-        """No HEARTBEAT for `lost_after_s` clock seconds and for `lost_min_wall_s` wall seconds
-        (or never heard one). The wall-clock floor keeps a simulation run many times faster
-        than real time from declaring a link lost over a few hundred milliseconds of CPU load."""
+        """Nothing from the vehicle for `lost_after_s` clock and `lost_min_wall_s` wall seconds
+        (or no HEARTBEAT yet); the wall floor keeps CPU stalls of a fast simulation from it."""
         hb = self._vehicle.heartbeat_s
         if hb is None:
             return True
-        return (
-            self._clock() - hb > self.lost_after_s
-            and time.monotonic() - self._vehicle.heartbeat_wall_s > self.lost_min_wall_s
+        wall_s = max(self._vehicle.heartbeat_wall_s, self._heard_wall_s)
+        return self._clock() - max(hb, self._heard_s) > self.lost_after_s and (
+            time.monotonic() - wall_s > self.lost_min_wall_s
         )
 
     @property

@@ -63,6 +63,7 @@ from sim.autopilot.link import VehicleLink
 from sim.autopilot.params import ParamProtocol, make_params
 from sim.autopilot.settings import AutopilotSettings
 from sim.autopilot.telemetry import Telemetry, default_intervals
+from sim.impaired_io import DelayLine
 
 logger = logging.getLogger(__name__)
 
@@ -211,6 +212,14 @@ class Autopilot:
                 name=f"autopilot-{self._sysid}-keepalive",
             )
 
+    def impair_links(self, make_line: Callable[[VehicleLink, str], DelayLine | None]) -> None:
+        """Fault injection: each open link's uplink and downlink from `make_line(link,
+        "uplink" | "downlink")` (None: that direction untouched); `close` drops what is in
+        flight (sim/impaired_io.py, docs/reliability.md)."""
+        for link in self._links:
+            link.uplink = make_line(link, "uplink")
+            link.downlink = make_line(link, "downlink")
+
     async def close(self) -> None:
         """Stop the keep-alive and close both sockets."""
         if self._keepalive is not None:
@@ -219,6 +228,9 @@ class Autopilot:
                 await self._keepalive
             self._keepalive = None
         for link in self._links:
+            for line in (link.uplink, link.downlink):
+                if line is not None:
+                    line.close()
             if link.transport is not None:
                 link.transport.close()
         self._links = []

@@ -4,7 +4,9 @@ The link binds 127.0.0.1 and sends to its default peer (the offboard client's or
 station's port); whoever speaks to it joins its peers (at most 8, the oldest dropped first) and
 gets what it sends. What it receives goes to the vehicle (`on_datagram`); the vehicle parses it
 with `isac_mission.mavwire.parsing`. Everything it sends is packed (and signed, with a key) by its
-own encoder, whose signing state its parsers share.
+own encoder, whose signing state its parsers share. Fault injection: `uplink` / `downlink`, when
+set (`Autopilot.impair_links`), carry what the link receives / sends through a lossy, late
+channel (`sim.impaired_io.DelayLine`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.parsing import DatagramParser
 from isac_mission.mavwire.ports import AUTOPILOT_COMPONENT_ID, Address
 from isac_mission.mavwire.signing import enable_signing, new_encoder, pack
+from sim.impaired_io import DelayLine
 
 logger = logging.getLogger(__name__)
 
@@ -65,12 +68,23 @@ class VehicleLink(asyncio.DatagramProtocol):
         self.next_due_s: dict[int, float] = {}
         """Streamed message id -> simulation time it is next due, s."""
         self.last_heartbeat_wall_s = -math.inf
+        self.uplink: DelayLine | None = None
+        """Impairs what the link receives (delivers to `on_datagram`); None: untouched."""
+        self.downlink: DelayLine | None = None
+        """Impairs what the link sends (delivers to `sendto`); None: untouched."""
 
     # asyncio.DatagramProtocol
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = cast(asyncio.DatagramTransport, transport)
 
     def datagram_received(self, data: bytes, addr: Address) -> None:
+        if self.uplink is not None:
+            self.uplink.push(data, addr)
+        else:
+            self.receive(data, addr)
+
+    def receive(self, data: bytes, addr: Address) -> None:
+        """Hand one datagram (as it arrives after the uplink) to the vehicle."""
         self._on_datagram(self, data, addr)
 
     def error_received(self, exc: Exception) -> None:
@@ -86,9 +100,17 @@ class VehicleLink(asyncio.DatagramProtocol):
             return
         buf = pack(msg, self.encoder)
         for addr in [to] if to is not None else list(self.peers):
-            self.transport.sendto(buf, addr)
+            if self.downlink is not None:
+                self.downlink.push(buf, addr)
+            else:
+                self.sendto(buf, addr)
         if msg.get_msgId() == mavlink2.MAVLINK_MSG_ID_HEARTBEAT:
             self.last_heartbeat_wall_s = asyncio.get_running_loop().time()
+
+    def sendto(self, buf: bytes, addr: Address) -> None:
+        """Put one datagram on the socket (as it leaves the downlink); dropped once closed."""
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.sendto(buf, addr)
 
     def add_peer(self, addr: Address) -> None:
         """`addr` spoke to the link: it gets what the link sends from now on."""

@@ -34,6 +34,7 @@ PURE = (
     "sim/vehicle.py",
     "sim/target.py",
     "sim/sensing.py",
+    "sim/impairment.py",
 )
 """Pure modules and packages: numbers in, numbers out (numpy, scipy, cvxpy, filterpy ...)."""
 

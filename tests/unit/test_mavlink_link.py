@@ -133,6 +133,28 @@ def test_link_tracks_vehicle_state_from_its_messages() -> None:
     assert link.status().lost
 
 
+def test_link_is_lost_only_when_the_vehicle_is_silent_and_regained_by_a_heartbeat() -> None:
+    # A lossy radio drops 1 Hz heartbeats in a row while the 20 Hz stream gets through: any
+    # message of the vehicle keeps the link; only a HEARTBEAT (a fresh mode) ends a loss.
+    clock = FakeClock()
+    link, _ = make_link(clock)
+    position = vehicle_bytes(mavlink2.MAVLink_local_position_ned_message(5, 1, 2, -30, 0, 0, 0))
+    link.datagram_received(position, VEHICLE_ADDR)
+    assert link.status().lost  # no HEARTBEAT yet
+    link.datagram_received(vehicle_bytes(px4_heartbeat(0x00060000, armed=True)), VEHICLE_ADDR)
+    for _ in range(10):  # 10 s without a heartbeat, a position every second
+        clock.t += 1.0
+        link.datagram_received(position, VEHICLE_ADDR)
+        assert not link.status().lost
+    clock.t += 3.5  # silence
+    assert link.status().lost
+    link.datagram_received(position, VEHICLE_ADDR)  # a position does not end the loss ...
+    assert link.status().lost
+    link.datagram_received(vehicle_bytes(px4_heartbeat(0x03040000, armed=True)), VEHICLE_ADDR)
+    st = link.status()  # ... a heartbeat does, with the mode it carries
+    assert not st.lost and st.mode == "hold"
+
+
 def test_garbage_bad_crc_and_truncation_are_counted_and_parsing_goes_on() -> None:
     link, _ = make_link()
     good = vehicle_bytes(px4_heartbeat(0x03040000, armed=False))
