@@ -1,8 +1,9 @@
 """Link supervision of one vehicle: losses, regains, interruptions, and when to re-enter OFFBOARD.
 
 A vehicle silent for `link_lost_after_s` (simulation seconds: nothing heard from it, its
-heartbeat or anything else; `MavlinkLink.lost`) is reported with link "lost"; the setpoint stream keeps running meanwhile (the uplink may still work). When
-heartbeats return while the bridge is flying the mission, the bridge re-enters OFFBOARD if the
+heartbeat or anything else; `MavlinkLink.lost`) is reported with link "lost"; the setpoint
+stream keeps running meanwhile (the uplink may still work). When heartbeats return while the
+bridge is flying the mission, the bridge re-enters OFFBOARD if the
 vehicle took its loss action. A radio gap shorter than link loss but longer than PX4's
 offboard-loss timeout (`interruption_after_s`) also leaves the vehicle in hold: after such a gap
 in its position stream, the bridge re-enters OFFBOARD once the vehicle reports the hold. A mode
