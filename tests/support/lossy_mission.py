@@ -32,7 +32,7 @@ from isac_mission.config import ImpairmentConfig, Scenario
 from isac_mission.records import read_trace
 from sim.world import World
 from sim.world_options import WorldOptions
-from tests.support.ports import free_port_block
+from tests.support.ports import free_port_block, sitl_ports
 
 HEARTBEAT_ID = 0
 LINK_LOST_AFTER_S = 3.0
@@ -136,15 +136,14 @@ async def fly_lossy(
 ) -> LossyRun:
     """Fly `s` live once with `impairment` on the world's links (None: clean) and measure it."""
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
-    mav, gcs = free_port_block(s.M), free_port_block(s.M)
+    ports = sitl_ports(s.M)
     opts = LiveOptions(
         speed=speed,
         lockstep=lockstep,
         seed=seed,
         out_dir=out_dir,
         zenoh_endpoint=endpoint,
-        mavlink_base_port=mav,
-        gcs_base_port=gcs,
+        **ports.world_kwargs(),
     )
     world = World(
         s,
@@ -154,8 +153,7 @@ async def fly_lossy(
             lockstep_timeout_s=60.0,
             seed=seed,
             bus=BusSettings(connect=(endpoint,)),
-            mavlink_base_port=mav,
-            gcs_base_port=gcs,
+            **ports.world_kwargs(),
             start="offboard",
             impairment=impairment or ImpairmentConfig(),
         ),
