@@ -16,6 +16,7 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.mavwire.modes import FlightMode
 from isac_mission.types import FloatArray
+from sim.autopilot.battery import BatterySettings
 from sim.autopilot.endpoint import Autopilot
 from sim.autopilot.settings import AutopilotSettings
 from sim.sensing import SensingModel, Sensor
@@ -53,8 +54,9 @@ def make_target(scenario: Scenario, options: WorldOptions, rng: np.random.Genera
 
 
 def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> AutopilotSettings:
-    """Vehicle m's settings: start point, flight altitude H, V_max, geofence = the area, and
-    the scenario's MAVLink signing key (None: signing off)."""
+    """Vehicle m's settings: start point, flight altitude H, V_max (also the cruise speed of
+    RTL, missions and DO_REPOSITION), geofence = the area, the energy model, and the scenario's
+    MAVLink signing key (None: signing off)."""
     start = scenario.uav_start_xy[m]
     return AutopilotSettings(
         index=m,
@@ -73,6 +75,21 @@ def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> Aut
         area_max_xy_m=(float(scenario.area[0]), float(scenario.area[1])),
         max_altitude_m=max(500.0, 2.0 * scenario.H),
         signing=scenario.mavlink_signing_key,
+        cruise_speed_mps=scenario.v_max,
+        battery=battery_settings(scenario, m),
+    )
+
+
+def battery_settings(scenario: Scenario, m: int) -> BatterySettings:
+    """Vehicle m's energy model from the scenario's uavs.battery (its capacity override, if
+    any)."""
+    b = scenario.battery
+    return BatterySettings(
+        capacity_wh=b.capacity_wh_by_uav.get(m, b.capacity_wh),
+        start_remaining=b.start_remaining,
+        hover_power_w=b.hover_power_w,
+        speed_power_w_per_mps=b.speed_power_w_per_mps,
+        climb_power_w_per_mps=b.climb_power_w_per_mps,
     )
 
 

@@ -108,6 +108,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
         bound_prior=spec.tracker.bound_prior,
         ekf_iterations=spec.tracker.update_iterations,
         planner=spec.planner,
+        battery=uav.battery,
         security=spec.security,
         mavlink_signing_key=mavlink_signing_key(spec.security.mavlink_signing),
         impairment=spec.impairment,
@@ -153,6 +154,9 @@ def _cross_field_problems(s: Scenario, n_slots: float) -> list[str]:
     for m in sorted(s.impairment.vehicles):
         if m >= s.M:
             out.append(f"impairment.vehicles.{m}: no vehicle {m} (M = {s.M})")
+    for m in s.battery.capacity_wh_by_uav:
+        if m >= s.M:
+            out.append(f"uavs.battery.capacity_wh_by_uav: no UAV {m} (M = {s.M})")
     p = s.x0[:2]
     if not (0 <= p[0] <= s.area[0] and 0 <= p[1] <= s.area[1]):
         out.append(f"target.initial_state: position {p.tolist()} is outside the area")

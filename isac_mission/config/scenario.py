@@ -13,6 +13,7 @@ from isac_mission.config.impairment import ImpairmentConfig
 from isac_mission.config.sections import (
     AreaConfig,
     BaseStationConfig,
+    BatteryConfig,
     PlannerConfig,
     RadioConfig,
     Section,
@@ -91,6 +92,8 @@ class Scenario:
     bound_prior: str
     ekf_iterations: int
     planner: PlannerConfig = field(default_factory=PlannerConfig)
+    battery: BatteryConfig = field(default_factory=BatteryConfig)
+    """The simulated vehicles' energy model (uavs.battery)."""
     security: SecurityConfig = field(default_factory=SecurityConfig)
     mavlink_signing_key: MavlinkSigningKey | None = None
     """Resolved from security.mavlink_signing; None when signing is off. Never traced."""

@@ -69,6 +69,36 @@ class BaseStationConfig(Section):
         return self
 
 
+class BatteryConfig(Section):
+    """The simulated vehicles' energy model (docs/service.md, "Battery and the low-battery
+    failsafe"): P = hover + per-speed * |v_h| + per-climb * climb rate while armed."""
+
+    capacity_wh: float = Field(80.0, gt=0, description="Usable energy of a full pack, Wh.")
+    capacity_wh_by_uav: dict[int, float] = Field(
+        default_factory=dict,
+        description="Per-UAV capacity overrides, Wh, by UAV index (e.g. {1: 2.0} for a test "
+        "whose vehicle 1 runs low).",
+    )
+    start_remaining: float = Field(1.0, gt=0, le=1, description="Charge at start, (0, 1].")
+    hover_power_w: float = Field(250.0, gt=0, description="Power drawn armed at rest, W.")
+    speed_power_w_per_mps: float = Field(
+        4.0, ge=0, description="Extra power per m/s of horizontal speed, W/(m/s)."
+    )
+    climb_power_w_per_mps: float = Field(
+        30.0, ge=0, description="Extra power per m/s of climb rate, W/(m/s)."
+    )
+
+    @model_validator(mode="after")
+    def _overrides_positive(self) -> BatteryConfig:
+        for m, wh in self.capacity_wh_by_uav.items():
+            if m < 0 or not wh > 0:
+                raise ValueError(
+                    f"capacity_wh_by_uav: UAV {m}: needs an index >= 0 and a capacity > 0 "
+                    f"(got {wh})"
+                )
+        return self
+
+
 class UavConfig(Section):
     altitude_m: float = Field(100.0, gt=0, description="H, flight altitude of UAVs and target.")
     start_xy_m: list[tuple[float, float]] = Field(
@@ -84,6 +114,7 @@ class UavConfig(Section):
         description="Horizontal acceleration limit of the simulated vehicles (not in the paper's "
         "model, which has none; docs/model.md, 'Live service').",
     )
+    battery: BatteryConfig = BatteryConfig()
 
 
 class TargetConfig(Section):

@@ -4,7 +4,8 @@ PX4 reports its mode in HEARTBEAT.custom_mode (with MAV_MODE_FLAG_CUSTOM_MODE_EN
 base_mode) as `(sub_mode << 24) | (main_mode << 16)`; DO_SET_MODE and SET_MODE ask for one by the
 same (main, sub) pair. Main modes: MANUAL 1, ALTCTL 2, POSCTL 3, AUTO 4, ACRO 5, OFFBOARD 6,
 STABILIZED 7, RATTITUDE 8; AUTO sub-modes: READY 1, TAKEOFF 2, LOITER (hold) 3, MISSION 4, RTL 5,
-LAND 6, ... So OFFBOARD = 0x00060000, TAKEOFF = 0x02040000, HOLD = 0x03040000, LAND = 0x06040000.
+LAND 6, ... So OFFBOARD = 0x00060000, TAKEOFF = 0x02040000, HOLD = 0x03040000, MISSION = 0x04040000,
+RTL = 0x05040000, LAND = 0x06040000.
 
 `px4_mode_name` decodes any custom mode to a lower-case name (the service's view of a real or
 simulated vehicle); `FlightMode` is the subset of modes the simulated vehicle flies, with
@@ -45,6 +46,8 @@ PX4_MAIN_AUTO: Final = 4
 PX4_MAIN_OFFBOARD: Final = 6
 PX4_SUB_TAKEOFF: Final = 2
 PX4_SUB_HOLD: Final = 3
+PX4_SUB_MISSION: Final = 4
+PX4_SUB_RTL: Final = 5
 PX4_SUB_LAND: Final = 6
 
 
@@ -87,10 +90,13 @@ class FlightMode(Enum):
     TAKEOFF = "TAKEOFF"
     LAND = "LAND"
     OFFBOARD = "OFFBOARD"
+    RTL = "RTL"
+    MISSION = "MISSION"
 
     @property
     def px4_name(self) -> str:
-        """The `px4_mode_name` of this mode ("hold", "takeoff", "land", "offboard")."""
+        """The `px4_mode_name` of this mode ("hold", "takeoff", "land", "offboard", "rtl",
+        "mission")."""
         return self.value.lower()
 
     @property
@@ -104,6 +110,8 @@ _PX4_MAIN_SUB: Final[dict[FlightMode, tuple[int, int]]] = {
     FlightMode.TAKEOFF: (PX4_MAIN_AUTO, PX4_SUB_TAKEOFF),
     FlightMode.HOLD: (PX4_MAIN_AUTO, PX4_SUB_HOLD),
     FlightMode.LAND: (PX4_MAIN_AUTO, PX4_SUB_LAND),
+    FlightMode.RTL: (PX4_MAIN_AUTO, PX4_SUB_RTL),
+    FlightMode.MISSION: (PX4_MAIN_AUTO, PX4_SUB_MISSION),
 }
 _BY_PX4_NAME: Final[dict[str, FlightMode]] = {mode.px4_name: mode for mode in FlightMode}
 
@@ -112,7 +120,7 @@ def mode_from_px4(main_mode: int, sub_mode: int) -> FlightMode | None:
     """The simulated mode for a PX4 (main, sub) mode pair, or None if not simulated.
 
     OFFBOARD takes any sub-mode, as PX4 does; an AUTO sub-mode is decoded by `px4_mode_name`'s
-    table (TAKEOFF, HOLD, LAND are simulated)."""
+    table (TAKEOFF, HOLD, LAND, RTL and MISSION are simulated)."""
     if main_mode == PX4_MAIN_OFFBOARD:
         return FlightMode.OFFBOARD
     if main_mode == PX4_MAIN_AUTO and sub_mode in PX4_AUTO_SUB_MODES:

@@ -1,7 +1,9 @@
 """What the simulated vehicle obeys: commands, mode changes, setpoints and pings.
 
-COMMAND_LONG and COMMAND_INT (arm/disarm, takeoff, land, DO_SET_MODE, SET_MESSAGE_INTERVAL,
-REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION; anything else UNSUPPORTED),
+COMMAND_LONG and COMMAND_INT (arm/disarm, with param2 = 21196 a force disarm in the air;
+takeoff, land, NAV_RETURN_TO_LAUNCH, DO_REPOSITION, MISSION_START, DO_SET_MISSION_CURRENT,
+DO_SET_MODE, SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES,
+GET_HOME_POSITION; anything else UNSUPPORTED),
 SET_MODE, SET_POSITION_TARGET_LOCAL_NED (MAV_FRAME_LOCAL_NED only; position and/or velocity, yaw
 and yaw rate by type_mask) and PING. Every command is answered with a COMMAND_ACK. Bad input is
 counted (`reject`): a NaN, infinite or absurd integer parameter (DENIED, as PX4 does), an
@@ -32,10 +34,18 @@ logger = logging.getLogger(__name__)
 
 INTEGER_PARAMS: dict[int, int] = {
     mavlink2.MAV_CMD_DO_SET_MODE: 3,
+    mavlink2.MAV_CMD_MISSION_START: 2,
+    mavlink2.MAV_CMD_DO_SET_MISSION_CURRENT: 1,
     mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL: 1,
     mavlink2.MAV_CMD_REQUEST_MESSAGE: 1,
 }
 """Commands whose first n parameters are integers carried in floats (a mode, a message id)."""
+FORCE_DISARM_MAGIC = 21196
+"""MAV_CMD_COMPONENT_ARM_DISARM param2 that disarms in the air (PX4's kill)."""
+RELATIVE_ALT_FRAMES = (
+    mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+)
 
 
 class CommandHandler:
@@ -77,16 +87,24 @@ class CommandHandler:
             msg.param6,
             msg.param7,
         )
-        self._on_command(link, msg, addr, int(msg.command), tuple(float(p) for p in params))
+        self._on_command(link, msg, addr, int(msg.command), tuple(float(p) for p in params), None)
 
     def on_command_int(self, link: VehicleLink, msg: Any, addr: Address) -> None:
         """COMMAND_INT: param1 .. param4, x, y, z."""
         params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.x, msg.y, msg.z)
-        self._on_command(link, msg, addr, int(msg.command), tuple(float(p) for p in params))
+        p = tuple(float(x) for x in params)
+        self._on_command(link, msg, addr, int(msg.command), p, int(msg.frame))
 
     def _on_command(
-        self, link: VehicleLink, msg: Any, addr: Address, command: int, p: tuple[float, ...]
+        self,
+        link: VehicleLink,
+        msg: Any,
+        addr: Address,
+        command: int,
+        p: tuple[float, ...],
+        frame: int | None,
     ) -> None:
+        """One command; `frame` is COMMAND_INT's (x, y in degE7), None for COMMAND_LONG."""
         flight = self._flight
         builders = self._telemetry.builders
         followup: Any = None
@@ -96,8 +114,27 @@ class CommandHandler:
             self._reject("bad_command_param", f"command {command} {p[:n_ints]} from {addr}")
             self._ack(link, msg, addr, command, RESULT_DENIED)
             return
+        mission = flight.mission
         if command == mavlink2.MAV_CMD_COMPONENT_ARM_DISARM:
-            result = flight.arm() if p[0] >= 0.5 else flight.disarm("commanded")
+            force = p[1] == FORCE_DISARM_MAGIC
+            if p[0] >= 0.5:
+                result = flight.arm()
+            else:
+                result = flight.disarm("forced" if force else "commanded", force=force)
+        elif command == mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            result = flight.request_mode(FlightMode.RTL)
+        elif command == mavlink2.MAV_CMD_DO_REPOSITION:
+            result = self._reposition(p, frame)
+        elif command == mavlink2.MAV_CMD_MISSION_START:
+            first = int(p[0])
+            if mission.items and 0 < first < len(mission.items):
+                mission.set_current(first)
+            result = flight.request_mode(FlightMode.MISSION)
+        elif command == mavlink2.MAV_CMD_DO_SET_MISSION_CURRENT:
+            ok = 0 <= int(p[0]) < len(mission.items)
+            if ok:
+                mission.set_current(int(p[0]))
+            result = RESULT_ACCEPTED if ok else RESULT_DENIED
         elif command == mavlink2.MAV_CMD_NAV_TAKEOFF:
             result = flight.takeoff(p[6])
         elif command == mavlink2.MAV_CMD_NAV_LAND:
@@ -123,6 +160,28 @@ class CommandHandler:
         self._ack(link, msg, addr, command, result)
         if followup is not None:
             link.send(followup, addr)
+
+    def _reposition(self, p: tuple[float, ...], frame: int | None) -> int:
+        """DO_REPOSITION: param1 speed (m/s, -1 default), param4 yaw (rad, NaN keep), lat, lon
+        (degrees; degE7 in COMMAND_INT; NaN here) and altitude (AMSL, above home in the
+        relative frames; NaN: the present one)."""
+        flight = self._flight
+        here = flight.vehicle.position_ned_m
+        scale = 1e-7 if frame is not None else 1.0
+        lat, lon, alt = p[4] * scale, p[5] * scale, p[6]
+        if frame in RELATIVE_ALT_FRAMES:
+            alt += flight.home_amsl_m()
+        if not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0.0 and lon == 0.0):
+            target = here.copy()
+        else:
+            if not (abs(lat) <= 90.0 and abs(lon) <= 180.0):
+                return RESULT_DENIED
+            target = flight.geodetic_to_ned(lat, lon, flight.home_amsl_m())
+        target[2] = flight.geodetic_to_ned(0.0, 0.0, alt)[2] if math.isfinite(alt) else here[2]
+        pos = target.copy()
+        self._clamp_position_setpoint(pos, ("reposition", 0))
+        speed = p[0] if math.isfinite(p[0]) else -1.0
+        return flight.reposition(pos, speed, p[3])
 
     def _command_set_mode(self, base_mode: int, main_mode: int, sub_mode: int) -> int:
         if not base_mode & mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:

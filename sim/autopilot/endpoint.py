@@ -11,7 +11,7 @@ One `Autopilot` is one vehicle: the flight logic (`flight`) around the kinematic
   on 14550 sees the whole fleet, told apart by system id.
 
 Both links stream telemetry (`telemetry`), accept every command (`commands`, `params`,
-`mission`), and also answer whoever speaks to them (the sender's address joins the link's
+`mission_protocol`), and also answer whoever speaks to them (the sender's address joins the link's
 peers). Vehicle index m is MAVLink system m + 1, component 1.
 
 Time: everything runs on simulation time. The world's clock calls `step(now_s, dt_s)` at the
@@ -56,12 +56,13 @@ from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.modes import FlightMode
 from isac_mission.mavwire.parsing import Rejection
 from isac_mission.mavwire.ports import AUTOPILOT_COMPONENT_ID, LOOPBACK, Address
-from sim.autopilot import mission
 from sim.autopilot.commands import CommandHandler
-from sim.autopilot.flight import AutopilotState, FlightLogic
+from sim.autopilot.flight import FlightLogic
 from sim.autopilot.link import VehicleLink
+from sim.autopilot.mission_protocol import MissionProtocol
 from sim.autopilot.params import ParamProtocol, make_params
 from sim.autopilot.settings import AutopilotSettings
+from sim.autopilot.state import AutopilotState
 from sim.autopilot.telemetry import Telemetry, default_intervals
 from sim.impaired_io import DelayLine
 
@@ -94,11 +95,13 @@ class Autopilot:
         self._links: list[VehicleLink] = []
         self._keepalive: asyncio.Task[None] | None = None
         self._warned_types: set[str] = set()
+        self._statustext_id = 0
         self._params = make_params(settings)
         self._flight = FlightLogic(settings, self._params, self._statustext)
         self._telemetry = Telemetry(self._flight)
         commands = CommandHandler(self._flight, self._telemetry, self._reject)
         params = ParamProtocol(self._params, self._reject, self._flight.apply_param, self._sysid)
+        mission = MissionProtocol(self._flight, self._reject)
         self._handlers: dict[str, Handler] = {
             "HEARTBEAT": self._on_heartbeat,
             "COMMAND_LONG": commands.on_command_long,
@@ -108,11 +111,15 @@ class Autopilot:
             "PARAM_REQUEST_LIST": params.on_request_list,
             "PARAM_REQUEST_READ": params.on_request_read,
             "PARAM_SET": params.on_set,
-            "MISSION_REQUEST_LIST": mission.on_mission_request_list,
-            "MISSION_COUNT": mission.on_mission_count,
-            "MISSION_CLEAR_ALL": mission.on_mission_clear_all,
-            "MISSION_REQUEST_INT": mission.on_mission_request_item,
-            "MISSION_REQUEST": mission.on_mission_request_item,
+            "MISSION_REQUEST_LIST": mission.on_request_list,
+            "MISSION_COUNT": mission.on_count,
+            "MISSION_ITEM_INT": mission.on_item,
+            "MISSION_ITEM": mission.on_item,
+            "MISSION_CLEAR_ALL": mission.on_clear_all,
+            "MISSION_REQUEST_INT": mission.on_request_item,
+            "MISSION_REQUEST": mission.on_request_item,
+            "MISSION_SET_CURRENT": mission.on_set_current,
+            "MISSION_ACK": mission.on_ack,
             "PING": commands.on_ping,
         }
 
@@ -251,6 +258,21 @@ class Autopilot:
         built: dict[int, Any] = {}
         for link in self._links:
             link.send_due(now_s, self._telemetry.builders, built)
+        self._send_mission_events()
+
+    def _send_mission_events(self) -> None:
+        """MISSION_CURRENT and MISSION_ITEM_REACHED for what the mission did since last time."""
+        events = self._flight.mission.events
+        if not events:
+            return
+        for kind, seq in events:
+            if kind == "reached":
+                msg = mavlink2.MAVLink_mission_item_reached_message(seq)
+            else:
+                msg = self._telemetry.mission_current()
+            for link in self._links:
+                link.send(msg)
+        events.clear()
 
     # -- radio -------------------------------------------------------------------------------
 
@@ -333,9 +355,22 @@ class Autopilot:
                     link.send(self._telemetry.heartbeat())
 
     def _statustext(self, severity: int, text: str) -> None:
-        msg = mavlink2.MAVLink_statustext_message(severity, text.encode("ascii")[:50], 0, 0)
-        for link in self._links:
-            link.send(msg)
+        """STATUSTEXT to every peer; a text over 50 characters goes in chunks of 50 with one
+        nonzero id and chunk_seq 0, 1, ... (MAVLink 2, as PX4 sends them), the last chunk
+        shorter than 50 (NUL-terminated on the wire; empty when the text fills the chunks)."""
+        data = text.encode("ascii", "replace")
+        if len(data) <= 50:
+            chunks, text_id = [data], 0
+        else:
+            chunks = [data[i : i + 50] for i in range(0, len(data), 50)]
+            if len(chunks[-1]) == 50:
+                chunks.append(b"")
+            self._statustext_id = self._statustext_id % 65535 + 1
+            text_id = self._statustext_id
+        for seq, chunk in enumerate(chunks):
+            msg = mavlink2.MAVLink_statustext_message(severity, chunk, text_id, seq)
+            for link in self._links:
+                link.send(msg)
 
     def _local_address(self, i: int) -> Address:
         if len(self._links) <= i or self._links[i].transport is None:

@@ -1,16 +1,11 @@
 """The flight logic of a PX4-like multirotor around the kinematic core (pure: no I/O).
 
-Modes HOLD (AUTO.LOITER), TAKEOFF (AUTO.TAKEOFF), LAND (AUTO.LAND) and OFFBOARD; `armed` and
-`landed` complete the state (landed/disarmed, armed on the ground, in the air). The PX4 rules a
-ground service must respect are kept:
-
-- OFFBOARD is DENIED unless setpoints are streaming (the last one younger than
-  1 / `offboard_min_rate_hz`, 0.5 s); when they stop for COM_OF_LOSS_T the vehicle takes the
-  offboard-loss action (HOLD or LAND) and says so (`say`, a STATUSTEXT);
-- after a client HEARTBEAT has been heard, silence for COM_DL_LOSS_T makes an airborne vehicle take
-  the datalink-loss action (NAV_DLL_ACT: none, HOLD or LAND);
-- the vehicle disarms COM_DISARM_LAND after touching down and COM_DISARM_PRFLT after arming
-  without taking off.
+Modes HOLD (AUTO.LOITER; DO_REPOSITION flies it to a point), TAKEOFF (AUTO.TAKEOFF), LAND
+(AUTO.LAND), RTL (AUTO.RTL, `rtl`), MISSION (AUTO.MISSION, `mission_flight`) and OFFBOARD;
+`armed` and `landed` complete the state (landed/disarmed, armed on the ground, in the air). A
+vehicle disarmed in the air (force disarm) falls under gravity to the ground. The failsafes
+(`failsafes`: offboard loss, datalink loss, low battery, auto-disarm) run before each step, the
+battery (`battery`) draws energy at each step.
 
 Everything runs on simulation time: `step(now_s, dt_s)` integrates the vehicle (`sim.vehicle`),
 checks the timeouts against `now_s` and runs the land detector. Frames: local NED (north, east,
@@ -22,16 +17,22 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
-from isac_mission.frames import ned_to_scenario_xy, scenario_to_ned
+from isac_mission.frames import GeoPoint, geodetic_to_scenario, ned_to_scenario_xy, scenario_to_ned
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.modes import FlightMode
 from isac_mission.types import FloatArray
+from sim.autopilot import failsafes
+from sim.autopilot.battery import Battery
+from sim.autopilot.guidance import Guidance, fall_step, goto, land_below
+from sim.autopilot.mission_flight import MissionRunner
 from sim.autopilot.params import LIMIT_FIELDS, Param
+from sim.autopilot.rtl import Rtl, RtlPhase
 from sim.autopilot.settings import AutopilotSettings
+from sim.autopilot.state import AutopilotState
 from sim.vehicle import Setpoint, VehicleState, stopping_point, wrap_pi
 from sim.vehicle import step as vehicle_step
 
@@ -49,35 +50,6 @@ Say = Callable[[int, str], None]
 """Tells the ground a STATUSTEXT: (MAV_SEVERITY_*, text)."""
 
 
-@dataclass(frozen=True)
-class AutopilotState:
-    """A snapshot of the vehicle, as the world and tests see it.
-
-    Attributes:
-        time_s: Simulation time of the snapshot, s.
-        position_ned_m: (3,) local NED position, m.
-        velocity_ned_mps: (3,) local NED velocity, m/s.
-        yaw_rad: Heading, rad.
-        position_xy_m: (2,) scenario-plane position (x east, y north), m.
-        altitude_m: Height above the ground, m.
-        mode: Current flight mode.
-        armed: Motors armed.
-        landed: On the ground (land detector).
-        gcs_lost: No client heartbeat for COM_DL_LOSS_T (after one was heard).
-    """
-
-    time_s: float
-    position_ned_m: FloatArray
-    velocity_ned_mps: FloatArray
-    yaw_rad: float
-    position_xy_m: FloatArray
-    altitude_m: float
-    mode: FlightMode
-    armed: bool
-    landed: bool
-    gcs_lost: bool
-
-
 class FlightLogic:
     """One vehicle's modes, failsafes, land detector and kinematics (see the module docstring).
 
@@ -90,7 +62,7 @@ class FlightLogic:
     def __init__(self, settings: AutopilotSettings, params: dict[str, Param], say: Say) -> None:
         self.settings = settings
         self.params = params
-        self._say = say
+        self.say = say
         self.system_id = settings.system_id
         self.origin_xy_m = np.array(settings.local_origin_xy_m, dtype=np.float64)
         """Scenario-plane origin (2,) of the local NED frame, m."""
@@ -109,16 +81,25 @@ class FlightLogic:
         self.mode = FlightMode.HOLD
         self.armed = False
         self.landed = True
-        self._armed_at_s = 0.0
-        self._landed_at_s: float | None = None
+        self.armed_at_s = 0.0
+        self.landed_at_s: float | None = None
         self._hold_ned = self.vehicle.position_ned_m.copy()
+        self._hold_speed_mps: float | None = None
+        self._hold_yaw_rad = math.nan
         self._land_xy_ned = self.vehicle.position_ned_m[:2].copy()
         self._takeoff_ned = self.vehicle.position_ned_m.copy()
+        self.rtl: Rtl | None = None
+        """The return in progress (mode RTL)."""
         self.home_ned = self.vehicle.position_ned_m.copy()
         """Where the vehicle armed last (local NED (3,), m)."""
-        self.offboard_sp: Setpoint | None = None
+        self.battery = Battery(settings.battery)
+        self.battery_action_due: tuple[FlightMode, float] | None = None
+        """A low-battery action and the simulation time it is due (COM_BAT_ACT_T)."""
+        self.mission = MissionRunner()
+        """The uploaded plan and its progress (flown in MISSION)."""
+        self.offboard_sp: Guidance | None = None
         self.last_setpoint_s = -math.inf
-        self._last_client_heartbeat_s: float | None = None
+        self.last_client_heartbeat_s: float | None = None
         self.gcs_lost = False
         self.accel_ned_mps2 = np.zeros(3)
         """Acceleration over the last step, NED (3,), m/s^2."""
@@ -136,17 +117,33 @@ class FlightLogic:
             self.limits = replace(self.limits, **{LIMIT_FIELDS[name]: self.params[name].value})
 
     def step(self, now_s: float, dt_s: float) -> None:
-        """Advance to simulation time `now_s` (s) by `dt_s` (s): failsafes, physics, land
-        detector, then a new snapshot."""
+        """Advance to simulation time `now_s` (s) by `dt_s` (s): failsafes, physics, battery,
+        land detector, then a new snapshot."""
         self.now_s = now_s
-        self._check_failsafes()
+        failsafes.check_failsafes(self)
         v0 = self.vehicle
-        sp = self._control_setpoint()
-        if sp is not None:
-            self.vehicle = vehicle_step(v0, sp, self.limits, dt_s)
+        if not self.armed:
+            if self.height_m() > 0.0:
+                self.vehicle = fall_step(v0, self.limits.ground_down_m, dt_s)
+        else:
+            guidance = self._guidance()
+            if guidance is not None:
+                self.vehicle = vehicle_step(
+                    v0, guidance.setpoint, guidance.limits(self.limits), dt_s
+                )
         v1 = self.vehicle
         self.accel_ned_mps2 = (v1.velocity_ned_mps - v0.velocity_ned_mps) / dt_s
         self.yaw_rate_rps = wrap_pi(v1.yaw_rad - v0.yaw_rad) / dt_s
+        speed_h = float(np.hypot(v1.velocity_ned_mps[0], v1.velocity_ned_mps[1]))
+        level = self.battery.step(
+            dt_s,
+            self.armed,
+            speed_h,
+            -float(v1.velocity_ned_mps[2]),
+            failsafes.battery_thresholds(self),
+        )
+        if level is not None:
+            failsafes.on_battery_warning(self, level)
         self._update_land_detector()
         self.state = self.snapshot()
 
@@ -154,35 +151,57 @@ class FlightLogic:
         """Height above the ground, m."""
         return float(self.limits.ground_down_m - self.vehicle.position_ned_m[2])
 
-    def _control_setpoint(self) -> Setpoint | None:
-        """What the vehicle tracks this step; None = motors off (stay put)."""
-        if not self.armed:
-            return None
+    def cruise_mps(self) -> float:
+        """MPC_XY_CRUISE, the horizontal speed of the autonomous modes, m/s."""
+        return self.param("MPC_XY_CRUISE")
+
+    def land_here(self, xy_ned_m: FloatArray) -> Guidance:
+        """Land over `xy_ned_m` (2,) (LAND's descent profile)."""
+        return land_below(
+            xy_ned_m,
+            self.height_m(),
+            self.limits,
+            self.settings.land_slow_below_m,
+            self.param("MPC_LAND_SPEED"),
+        )
+
+    def _guidance(self) -> Guidance | None:
+        """What the armed vehicle tracks this step; None = motors idle (stay put)."""
         mode = self.mode
-        if self.landed and mode in (FlightMode.HOLD, FlightMode.LAND):
+        if mode is FlightMode.MISSION:
+            return self.mission.guidance(self)
+        if self.landed and mode in (FlightMode.HOLD, FlightMode.LAND, FlightMode.RTL):
             return None
         if mode is FlightMode.TAKEOFF:
-            return Setpoint.hold_at(self._takeoff_ned)
+            return goto(self._takeoff_ned, None)
         if mode is FlightMode.HOLD:
-            return Setpoint.hold_at(self._hold_ned)
+            return goto(self._hold_ned, self._hold_speed_mps, self._hold_yaw_rad)
         if mode is FlightMode.LAND:
-            rate = (
-                self.limits.max_descent_rate_mps
-                if self.height_m() > self.settings.land_slow_below_m
-                else self.param("MPC_LAND_SPEED")
-            )
-            return Setpoint(
-                position_ned_m=np.array([self._land_xy_ned[0], self._land_xy_ned[1], math.nan]),
-                velocity_ned_mps=np.array([0.0, 0.0, rate]),
-            )
+            return self.land_here(self._land_xy_ned)
+        if mode is FlightMode.RTL and self.rtl is not None:
+            guidance = self.rtl.guidance(self.vehicle, self.now_s)
+            return guidance if guidance is not None else self.land_here(self.rtl.home_ned_m[:2])
         return self.offboard_sp
 
     def set_mode(self, mode: FlightMode, reason: str) -> None:
-        """Switch to `mode` (HOLD holds at the stopping point, LAND lands below it)."""
+        """Switch to `mode` (HOLD holds at the stopping point, LAND lands below it, RTL returns
+        from it, MISSION resumes the plan at its current item)."""
+        stop = stopping_point(self.vehicle, self.limits)
         if mode is FlightMode.HOLD:
-            self._hold_ned = stopping_point(self.vehicle, self.limits)
+            self._hold_ned, self._hold_speed_mps, self._hold_yaw_rad = stop, None, math.nan
         elif mode is FlightMode.LAND:
-            self._land_xy_ned = stopping_point(self.vehicle, self.limits)[:2]
+            self._land_xy_ned = stop[:2]
+        elif mode is FlightMode.RTL:
+            self.rtl = Rtl.start(
+                stop,
+                self.home_ned,
+                self.param("RTL_RETURN_ALT"),
+                self.param("RTL_DESCEND_ALT"),
+                self.param("RTL_LAND_DELAY"),
+                self.cruise_mps(),
+            )
+        elif mode is FlightMode.MISSION:
+            self.mission.resume(self, stop)
         if mode is not self.mode:
             logger.info(
                 "vehicle %d: mode %s -> %s (%s)",
@@ -193,6 +212,16 @@ class FlightLogic:
             )
         self.mode = mode
         self.state = self.snapshot()
+
+    def landing(self) -> bool:
+        """True while the vehicle descends to land (LAND, RTL's last leg, a mission's LAND)."""
+        if self.landed:
+            return False
+        if self.mode is FlightMode.LAND:
+            return True
+        if self.mode is FlightMode.RTL:
+            return self.rtl is not None and self.rtl.phase is RtlPhase.LAND
+        return self.mode is FlightMode.MISSION and self.mission.landing
 
     def setpoint_stream_ok(self) -> bool:
         """True when the last setpoint is younger than 1 / offboard_min_rate_hz (sim time).
@@ -207,7 +236,7 @@ class FlightLogic:
 
     def set_offboard_setpoint(self, setpoint: Setpoint) -> None:
         """A new offboard setpoint, received now."""
-        self.offboard_sp = setpoint
+        self.offboard_sp = Guidance(setpoint)
         self.last_setpoint_s = self.now_s
 
     def client_heartbeat(self, link_name: str) -> None:
@@ -218,70 +247,21 @@ class FlightLogic:
             )
             self.gcs_lost = False
             self.state = self.snapshot()
-        self._last_client_heartbeat_s = self.now_s
-
-    def _check_failsafes(self) -> None:
-        self._check_offboard_loss()
-        self._check_datalink_loss()
-        self._check_auto_disarm()
-
-    def _check_offboard_loss(self) -> None:
-        if self.mode is not FlightMode.OFFBOARD:
-            return
-        if self.now_s - self.last_setpoint_s <= self.param("COM_OF_LOSS_T"):
-            return
-        lands = self.param("COM_OBL_RC_ACT") == 4
-        action = FlightMode.LAND if lands else FlightMode.HOLD
-        logger.warning("vehicle %d: offboard setpoints lost, %s", self.system_id, action.value)
-        self.set_mode(action, "offboard loss")
-        self._say(mavlink2.MAV_SEVERITY_WARNING, f"Offboard lost: {action.value}")
-
-    def _check_datalink_loss(self) -> None:
-        last = self._last_client_heartbeat_s
-        if last is None or self.gcs_lost:
-            return
-        silent_s = self.now_s - last
-        if silent_s <= self.param("COM_DL_LOSS_T"):
-            return
-        self.gcs_lost = True
-        act = int(self.param("NAV_DLL_ACT"))
-        action = {1: FlightMode.HOLD, 3: FlightMode.LAND}.get(act)
-        logger.warning(
-            "vehicle %d: no client heartbeat for %.1f s, action %s",
-            self.system_id,
-            silent_s,
-            action.value if action else "none",
-        )
-        airborne = self.armed and not self.landed
-        if action is not None and airborne and self.mode not in (FlightMode.LAND, action):
-            self.set_mode(action, "datalink loss")
-        self._say(mavlink2.MAV_SEVERITY_CRITICAL, "Connection to ground station lost")
-        self.state = self.snapshot()
-
-    def _check_auto_disarm(self) -> None:
-        if not (self.armed and self.landed):
-            return
-        now = self.now_s
-        if self._landed_at_s is not None:
-            delay = self.param("COM_DISARM_LAND")
-            if delay > 0 and now - self._landed_at_s >= delay:
-                self.disarm("landed")
-        else:
-            delay = self.param("COM_DISARM_PRFLT")
-            if delay > 0 and now - self._armed_at_s >= delay:
-                self.disarm("no takeoff after arming")
+        self.last_client_heartbeat_s = self.now_s
 
     def _update_land_detector(self) -> None:
         height = self.height_m()
         v_down = float(self.vehicle.velocity_ned_mps[2])
         if self.landed and self.armed and height > _AIRBORNE_ALT_M:
             self.landed = False
-            self._landed_at_s = None
+            self.landed_at_s = None
             logger.info("vehicle %d: airborne", self.system_id)
         elif not self.landed and height < _LANDED_ALT_M and v_down >= -0.05:
             self.landed = True
-            self._landed_at_s = self.now_s
+            self.landed_at_s = self.now_s
             logger.info("vehicle %d: landed", self.system_id)
+            if self.mode is FlightMode.MISSION:
+                self.mission.touched_down(self)
         to_go_m = abs(float(self._takeoff_ned[2] - self.vehicle.position_ned_m[2]))
         if self.mode is FlightMode.TAKEOFF and not self.landed and to_go_m < _TAKEOFF_DONE_M:
             self.set_mode(FlightMode.HOLD, "takeoff complete")
@@ -293,24 +273,34 @@ class FlightLogic:
         if not self.landed:
             return RESULT_DENIED
         self.armed = True
-        self._armed_at_s = self.now_s
-        self._landed_at_s = None
+        self.armed_at_s = self.now_s
+        self.landed_at_s = None
         self.home_ned = self.vehicle.position_ned_m.copy()
-        if self.mode in (FlightMode.LAND, FlightMode.TAKEOFF):
+        if self.mode in (FlightMode.LAND, FlightMode.TAKEOFF, FlightMode.RTL):
             self.set_mode(FlightMode.HOLD, "armed")
         logger.info("vehicle %d: armed", self.system_id)
         self.state = self.snapshot()
         return RESULT_ACCEPTED
 
-    def disarm(self, reason: str) -> int:
-        """Disarm (on the ground only); a MAV_RESULT."""
+    def disarm(self, reason: str, force: bool = False) -> int:
+        """Disarm; a MAV_RESULT. In the air only with `force` (PX4's 21196): the motors stop
+        and the vehicle falls."""
         if not self.armed:
             return RESULT_ACCEPTED
-        if not self.landed:
+        if not self.landed and not force:
             return RESULT_DENIED
         self.armed = False
-        self.vehicle = replace(self.vehicle, velocity_ned_mps=np.zeros(3))
-        logger.info("vehicle %d: disarmed (%s)", self.system_id, reason)
+        self.battery_action_due = None
+        if self.landed:
+            self.vehicle = replace(self.vehicle, velocity_ned_mps=np.zeros(3))
+            logger.info("vehicle %d: disarmed (%s)", self.system_id, reason)
+        else:
+            logger.warning(
+                "vehicle %d: disarmed in the air at %.1f m (%s): falling",
+                self.system_id,
+                self.height_m(),
+                reason,
+            )
         self.state = self.snapshot()
         return RESULT_ACCEPTED
 
@@ -319,11 +309,10 @@ class FlightLogic:
         band; a MAV_RESULT."""
         if not self.armed:
             return RESULT_DENIED
-        home_amsl = self.settings.geo_origin.alt_amsl_m + float(
-            self.limits.ground_down_m - self.home_ned[2]
-        )
         height = (
-            alt_amsl_m - home_amsl if math.isfinite(alt_amsl_m) else self.param("MIS_TAKEOFF_ALT")
+            alt_amsl_m - self.home_amsl_m()
+            if math.isfinite(alt_amsl_m)
+            else self.param("MIS_TAKEOFF_ALT")
         )
         height = min(max(height, self.settings.min_altitude_m), self.settings.max_altitude_m)
         xy = stopping_point(self.vehicle, self.limits)[:2]
@@ -331,18 +320,46 @@ class FlightLogic:
         self.set_mode(FlightMode.TAKEOFF, f"takeoff to {height:.1f} m")
         return RESULT_ACCEPTED
 
+    def reposition(self, target_ned_m: FloatArray, speed_mps: float, yaw_rad: float) -> int:
+        """MAV_CMD_DO_REPOSITION: HOLD, flying to `target_ned_m` (3,) at `speed_mps` (<= 0:
+        MPC_XY_CRUISE) and holding there with heading `yaw_rad` (NaN: keep); a MAV_RESULT."""
+        if not self.armed or self.landed:
+            return RESULT_DENIED
+        self.set_mode(FlightMode.HOLD, "reposition")
+        self._hold_ned = np.array(target_ned_m, dtype=float)
+        self._hold_speed_mps = speed_mps if speed_mps > 0 else self.cruise_mps()
+        self._hold_yaw_rad = yaw_rad
+        return RESULT_ACCEPTED
+
     def request_mode(self, mode: FlightMode) -> int:
-        """A mode asked for by a client (OFFBOARD needs a setpoint stream); a MAV_RESULT."""
+        """A mode asked for by a client (OFFBOARD needs a setpoint stream, RTL a vehicle in
+        the air, MISSION a plan); a MAV_RESULT."""
         if mode is FlightMode.OFFBOARD:
             if not self.setpoint_stream_ok():
                 logger.warning("vehicle %d: OFFBOARD denied, no setpoint stream", self.system_id)
                 return RESULT_DENIED
-            self.set_mode(FlightMode.OFFBOARD, "requested")
-            return RESULT_ACCEPTED
-        if mode is FlightMode.TAKEOFF:
+        elif mode is FlightMode.TAKEOFF:
             return self.takeoff(math.nan)
+        elif mode is FlightMode.RTL and (not self.armed or self.landed):
+            return RESULT_DENIED
+        elif mode is FlightMode.MISSION and not self.mission.items:
+            logger.warning("vehicle %d: MISSION denied, no mission", self.system_id)
+            return RESULT_DENIED
         self.set_mode(mode, "requested")
         return RESULT_ACCEPTED
+
+    def home_amsl_m(self) -> float:
+        """Altitude of home above mean sea level, m."""
+        return self.settings.geo_origin.alt_amsl_m + float(
+            self.limits.ground_down_m - self.home_ned[2]
+        )
+
+    def geodetic_to_ned(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> FloatArray:
+        """The local NED position (3,), m, of a geodetic point (altitude AMSL)."""
+        xy, alt_m = geodetic_to_scenario(
+            GeoPoint(lat_deg, lon_deg, alt_amsl_m), self.settings.geo_origin
+        )
+        return scenario_to_ned(xy, alt_m - self.limits.ground_down_m, self.origin_xy_m)
 
     def snapshot(self) -> AutopilotState:
         """The vehicle now, as an `AutopilotState`."""
@@ -359,4 +376,5 @@ class FlightLogic:
             armed=self.armed,
             landed=self.landed,
             gcs_lost=self.gcs_lost,
+            battery_remaining=self.battery.remaining,
         )

@@ -1,7 +1,8 @@
 """The simulated vehicle's parameter table and the MAVLink parameter protocol.
 
 A small PX4-like table (MIS_TAKEOFF_ALT, COM_OF_LOSS_T, COM_OBL_RC_ACT, COM_DL_LOSS_T, NAV_DLL_ACT,
-COM_DISARM_LAND, COM_DISARM_PRFLT, MPC_* limits, ...); PARAM_REQUEST_LIST, PARAM_REQUEST_READ and
+COM_DISARM_LAND, COM_DISARM_PRFLT, MPC_* limits and MPC_XY_CRUISE, RTL_*, NAV_ACC_RAD,
+NAV_MC_ALT_RAD, BAT_*_THR, COM_LOW_BAT_ACT, COM_BAT_ACT_T, BAT1_* (read only), ...); PARAM_REQUEST_LIST, PARAM_REQUEST_READ and
 PARAM_SET are answered with PARAM_VALUE. Integer parameters travel bytewise in the float field,
 as PX4 encodes them. A bad value is refused (counted `bad_param_value`) and answered with the
 value in force, as PX4 does; an unknown name or index is counted `unknown_param`.
@@ -54,6 +55,14 @@ def _finite(v: float) -> bool:
     return math.isfinite(v)
 
 
+def _non_negative(v: float) -> bool:
+    return math.isfinite(v) and v >= 0.0
+
+
+def _fraction(v: float) -> bool:
+    return 0.0 <= v < 1.0
+
+
 def make_params(s: AutopilotSettings) -> dict[str, Param]:
     """The parameter table of a vehicle with settings `s`, in PARAM_VALUE index order."""
     lim = s.limits
@@ -61,6 +70,9 @@ def make_params(s: AutopilotSettings) -> dict[str, Param]:
     real, int32 = mavlink2.MAV_PARAM_TYPE_REAL32, mavlink2.MAV_PARAM_TYPE_INT32
     obl = {"hold": 5.0, "land": 4.0}[s.offboard_loss_action]
     dll = {"none": 0.0, "hold": 1.0, "land": 3.0}[s.gcs_loss_action]
+    low_bat = {"warn": 0.0, "return": 1.0, "land": 2.0, "return_then_land": 3.0}[
+        s.low_battery_action
+    ]
     return {
         "MAV_SYS_ID": Param(float(sysid), int32, lambda v: v == sysid),
         "MIS_TAKEOFF_ALT": Param(s.takeoff_alt_m, real, _positive),
@@ -75,6 +87,20 @@ def make_params(s: AutopilotSettings) -> dict[str, Param]:
         "MPC_Z_VEL_MAX_UP": Param(lim.max_climb_rate_mps, real, _positive),
         "MPC_Z_VEL_MAX_DN": Param(lim.max_descent_rate_mps, real, _positive),
         "MPC_LAND_SPEED": Param(s.land_speed_mps, real, _positive),
+        "MPC_XY_CRUISE": Param(s.cruise_speed_mps, real, _positive),
+        "RTL_RETURN_ALT": Param(s.rtl_return_alt_m, real, _positive),
+        "RTL_DESCEND_ALT": Param(s.rtl_descend_alt_m, real, _positive),
+        "RTL_LAND_DELAY": Param(s.rtl_land_delay_s, real, _finite),
+        "NAV_ACC_RAD": Param(s.acceptance_radius_m, real, _positive),
+        "NAV_MC_ALT_RAD": Param(s.altitude_acceptance_m, real, _positive),
+        "BAT_LOW_THR": Param(s.battery_low_thr, real, _fraction),
+        "BAT_CRIT_THR": Param(s.battery_crit_thr, real, _fraction),
+        "BAT_EMERGEN_THR": Param(s.battery_emergen_thr, real, _fraction),
+        "COM_LOW_BAT_ACT": Param(low_bat, int32, lambda v: v in (0.0, 1.0, 2.0, 3.0)),
+        "COM_BAT_ACT_T": Param(s.battery_action_delay_s, real, _non_negative),
+        "BAT1_N_CELLS": Param(float(s.battery.cells), int32, lambda v: v == s.battery.cells),
+        "BAT1_V_CHARGED": Param(s.battery.cell_full_v, real, lambda v: v == s.battery.cell_full_v),
+        "BAT1_V_EMPTY": Param(s.battery.cell_empty_v, real, lambda v: v == s.battery.cell_empty_v),
     }
 
 

@@ -20,10 +20,14 @@ from isac_mission.mavwire.ports import (
     OFFBOARD_BASE_PORT,
     OFFBOARD_LOCAL_BASE_PORT,
 )
+from sim.autopilot.battery import BatterySettings
 from sim.vehicle import VehicleLimits
 
 LossAction = Literal["none", "hold", "land"]
 """What the vehicle does when the ground station's heartbeats stop (PX4 NAV_DLL_ACT)."""
+LowBatteryAction = Literal["warn", "return", "land", "return_then_land"]
+"""PX4 COM_LOW_BAT_ACT: 0 warn only, 1 Return, 2 Land, 3 Return at critical and Land at
+emergency."""
 
 _POSITIVE = (
     "takeoff_alt_m",
@@ -35,6 +39,12 @@ _POSITIVE = (
     "status_rate_hz",
     "home_rate_hz",
     "max_altitude_m",
+    "cruise_speed_mps",
+    "rtl_return_alt_m",
+    "rtl_descend_alt_m",
+    "acceptance_radius_m",
+    "altitude_acceptance_m",
+    "vfr_hud_rate_hz",
 )
 
 
@@ -76,6 +86,19 @@ class AutopilotSettings(Settings):
         min_altitude_m: Lowest altitude a position setpoint may ask for (higher ones clamped up).
         max_altitude_m: Highest altitude a position setpoint may ask for.
         signing: MAVLink 2 signing key of both links; None = no signing (accept unsigned).
+        cruise_speed_mps: MPC_XY_CRUISE, horizontal speed of RTL, missions and DO_REPOSITION.
+        rtl_return_alt_m: RTL_RETURN_ALT, return altitude above home.
+        rtl_descend_alt_m: RTL_DESCEND_ALT, altitude over home before landing.
+        rtl_land_delay_s: RTL_LAND_DELAY, hover over home before landing (< 0: for ever).
+        acceptance_radius_m: NAV_ACC_RAD, a mission waypoint's default acceptance radius.
+        altitude_acceptance_m: NAV_MC_ALT_RAD, a mission item's altitude acceptance.
+        battery: The energy model (`battery.BatterySettings`).
+        battery_low_thr: BAT_LOW_THR, remaining fraction of the low-battery warning.
+        battery_crit_thr: BAT_CRIT_THR, remaining fraction of the critical level.
+        battery_emergen_thr: BAT_EMERGEN_THR, remaining fraction of the emergency level.
+        low_battery_action: COM_LOW_BAT_ACT (`LowBatteryAction`).
+        battery_action_delay_s: COM_BAT_ACT_T, delay between a battery level and its action.
+        vfr_hud_rate_hz: Rate of VFR_HUD (BATTERY_STATUS streams at `status_rate_hz`).
     """
 
     settings_name: ClassVar[str] = "AutopilotSettings"
@@ -109,6 +132,19 @@ class AutopilotSettings(Settings):
     min_altitude_m: float = 2.0
     max_altitude_m: float = 500.0
     signing: InstanceOf[MavlinkSigningKey] | None = None
+    cruise_speed_mps: float = 5.0
+    rtl_return_alt_m: float = 60.0
+    rtl_descend_alt_m: float = 30.0
+    rtl_land_delay_s: float = 0.0
+    acceptance_radius_m: float = 2.0
+    altitude_acceptance_m: float = 0.8
+    battery: BatterySettings = Field(default_factory=BatterySettings)
+    battery_low_thr: float = 0.15
+    battery_crit_thr: float = 0.07
+    battery_emergen_thr: float = 0.05
+    low_battery_action: LowBatteryAction = "return_then_land"
+    battery_action_delay_s: float = 5.0
+    vfr_hud_rate_hz: float = 4.0
 
     @model_validator(mode="after")
     def _check_values(self) -> AutopilotSettings:
@@ -131,6 +167,16 @@ class AutopilotSettings(Settings):
         if any(lo >= hi for lo, hi in zip(self.area_min_xy_m, self.area_max_xy_m, strict=True)):
             problems.append(
                 f"area_min_xy_m {self.area_min_xy_m} must be below area_max_xy_m {self.area_max_xy_m}"
+            )
+        thresholds = (self.battery_emergen_thr, self.battery_crit_thr, self.battery_low_thr)
+        if not 0.0 <= thresholds[0] <= thresholds[1] <= thresholds[2] < 1.0:
+            problems.append(
+                "battery thresholds must satisfy 0 <= battery_emergen_thr <= battery_crit_thr"
+                f" <= battery_low_thr < 1 (got {thresholds[0]}, {thresholds[1]}, {thresholds[2]})"
+            )
+        if not (math.isfinite(self.battery_action_delay_s) and self.battery_action_delay_s >= 0):
+            problems.append(
+                f"battery_action_delay_s must be finite and >= 0 (got {self.battery_action_delay_s})"
             )
         if self.heartbeat_keepalive_wall_s is not None and not self.heartbeat_keepalive_wall_s > 0:
             problems.append("heartbeat_keepalive_wall_s must be > 0 or None")

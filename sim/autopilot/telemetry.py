@@ -2,9 +2,13 @@
 flight logic (pure builders: no socket).
 
 HEARTBEAT (PX4, custom mode of `FlightMode`), SYS_STATUS (every sensor present, enabled and
-healthy, pre-arm checks passed), EXTENDED_SYS_STATE (landed state), ATTITUDE (roll and pitch
-from the horizontal acceleration), LOCAL_POSITION_NED, GLOBAL_POSITION_INT, GPS_RAW_INT,
-GPS_GLOBAL_ORIGIN, HOME_POSITION and AUTOPILOT_VERSION. Geodetic positions come from
+healthy but the battery from its critical level on, pre-arm checks passed; the battery's
+voltage, current and remaining %, as BATTERY_STATUS has them), EXTENDED_SYS_STATE (landed
+state), ATTITUDE (roll and pitch from the horizontal acceleration), LOCAL_POSITION_NED,
+GLOBAL_POSITION_INT, GPS_RAW_INT, GPS_GLOBAL_ORIGIN, HOME_POSITION, BATTERY_STATUS, VFR_HUD,
+MISSION_CURRENT and AUTOPILOT_VERSION (which advertises what the vehicle does: MISSION_INT and
+MISSION_FLOAT, COMMAND_INT, PARAM_FLOAT with bytewise encoding, SET_POSITION_TARGET_LOCAL_NED,
+MAVLink 2). Geodetic positions come from
 `isac_mission.frames` (flat earth around the scenario origin `geo_origin`). Units on the wire as
 MAVLink has them (degE7, mm, cm/s, cdeg, us, ms).
 """
@@ -21,10 +25,16 @@ from isac_mission.frames import GeoPoint, ned_to_geodetic
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.modes import FlightMode
 from isac_mission.types import FloatArray
+from sim.autopilot.battery import BatteryWarning
 from sim.autopilot.flight import FlightLogic
 from sim.autopilot.settings import AutopilotSettings
 
 GRAVITY_MPS2 = 9.80665
+
+
+def battery_percent(remaining: float) -> int:
+    """Remaining charge as MAVLink's integer percent (rounded up, as PX4 does)."""
+    return min(100, max(0, math.ceil(remaining * 100.0 - 1e-9)))
 
 
 def default_intervals(s: AutopilotSettings) -> dict[int, float]:
@@ -39,6 +49,9 @@ def default_intervals(s: AutopilotSettings) -> dict[int, float]:
         mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED: fast,
         mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: fast,
         mavlink2.MAVLINK_MSG_ID_HOME_POSITION: 1.0 / s.home_rate_hz,
+        mavlink2.MAVLINK_MSG_ID_BATTERY_STATUS: status,
+        mavlink2.MAVLINK_MSG_ID_VFR_HUD: 1.0 / s.vfr_hud_rate_hz,
+        mavlink2.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
     }
 
 
@@ -58,6 +71,9 @@ class Telemetry:
             mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
             mavlink2.MAVLINK_MSG_ID_HOME_POSITION: self.home_position,
             mavlink2.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self.extended_sys_state,
+            mavlink2.MAVLINK_MSG_ID_BATTERY_STATUS: self.battery_status,
+            mavlink2.MAVLINK_MSG_ID_VFR_HUD: self.vfr_hud,
+            mavlink2.MAVLINK_MSG_ID_MISSION_CURRENT: self.mission_current,
         }
         """Message id -> builder, for the streams and MAV_CMD_REQUEST_MESSAGE."""
 
@@ -104,16 +120,86 @@ class Telemetry:
             | mavlink2.MAV_SYS_STATUS_SENSOR_BATTERY
             | mavlink2.MAV_SYS_STATUS_PREARM_CHECK
         )
+        b = self._flight.battery
+        health = sensors
+        if b.warning >= BatteryWarning.CRITICAL:
+            health &= ~mavlink2.MAV_SYS_STATUS_SENSOR_BATTERY
         return mavlink2.MAVLink_sys_status_message(
-            sensors, sensors, sensors, 150, 16200, -1, 100, 0, 0, 0, 0, 0, 0, 0, 0, 0
+            sensors,
+            sensors,
+            health,
+            150,
+            round(b.voltage_v * 1000.0),
+            round(b.current_a * 100.0),
+            battery_percent(b.remaining),
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
         )
+
+    def battery_status(self) -> Any:
+        """BATTERY_STATUS of battery 0: cell voltages, current, charge and energy drawn,
+        remaining %, time to empty and the charge state of PX4's warning level."""
+        b = self._flight.battery
+        cells = b.settings.cells
+        cell_mv = min(65534, round(1000.0 * b.voltage_v / cells))
+        voltages = [cell_mv] * min(cells, 10) + [65535] * (10 - min(cells, 10))
+        ext = [cell_mv if i + 10 < cells else 0 for i in range(4)]
+        return mavlink2.MAVLink_battery_status_message(
+            0,
+            mavlink2.MAV_BATTERY_FUNCTION_ALL,
+            mavlink2.MAV_BATTERY_TYPE_LIPO,
+            32767,
+            voltages,
+            round(b.current_a * 100.0),
+            round(b.charge_drawn_mah),
+            round(b.energy_drawn_wh * 36.0),
+            battery_percent(b.remaining),
+            min(2**31 - 1, round(b.time_remaining_s)),
+            int(b.warning) + 1,
+            ext,
+        )
+
+    def vfr_hud(self) -> Any:
+        """VFR_HUD: air speed = ground speed (no wind), heading, throttle (motor power over
+        twice the hover power, %), altitude AMSL and climb rate."""
+        f = self._flight
+        v = f.vehicle.velocity_ned_mps
+        speed = float(np.hypot(v[0], v[1]))
+        heading = round(math.degrees(f.vehicle.yaw_rad)) % 360
+        b = f.battery
+        motor_w = b.power_w - b.settings.idle_power_w if f.armed else 0.0
+        throttle = min(100, max(0, round(50.0 * motor_w / b.settings.hover_power_w)))
+        alt = self._geodetic(f.vehicle.position_ned_m).alt_amsl_m
+        return mavlink2.MAVLink_vfr_hud_message(speed, speed, heading, throttle, alt, -float(v[2]))
+
+    def mission_current(self) -> Any:
+        """MISSION_CURRENT: the current item, the plan's size and the mission state."""
+        f = self._flight
+        m = f.mission
+        if not m.items:
+            state = mavlink2.MISSION_STATE_NO_MISSION
+        elif m.finished:
+            state = mavlink2.MISSION_STATE_COMPLETE
+        elif f.mode is FlightMode.MISSION:
+            state = mavlink2.MISSION_STATE_ACTIVE
+        else:
+            state = mavlink2.MISSION_STATE_NOT_STARTED
+        in_mission = 1 if f.mode is FlightMode.MISSION else 2
+        return mavlink2.MAVLink_mission_current_message(m.current, len(m.items), state, in_mission)
 
     def extended_sys_state(self) -> Any:
         if self._flight.landed:
             landed = mavlink2.MAV_LANDED_STATE_ON_GROUND
         elif self._flight.mode is FlightMode.TAKEOFF:
             landed = mavlink2.MAV_LANDED_STATE_TAKEOFF
-        elif self._flight.mode is FlightMode.LAND:
+        elif self._flight.landing():
             landed = mavlink2.MAV_LANDED_STATE_LANDING
         else:
             landed = mavlink2.MAV_LANDED_STATE_IN_AIR

@@ -21,6 +21,8 @@ DOCUMENTED = {
     FlightMode.TAKEOFF: 0x02040000,
     FlightMode.HOLD: 0x03040000,
     FlightMode.LAND: 0x06040000,
+    FlightMode.RTL: 0x05040000,
+    FlightMode.MISSION: 0x04040000,
 }
 
 
@@ -44,7 +46,7 @@ def test_main_and_sub_mode_round_trip_through_the_custom_mode() -> None:
 def test_offboard_takes_any_sub_mode_and_other_modes_are_not_simulated() -> None:
     for sub in (-1, 0, 7, 255, 300):
         assert mode_from_px4(6, sub) is FlightMode.OFFBOARD
-    assert mode_from_px4(4, 4) is None  # AUTO.MISSION
+    assert mode_from_px4(4, 1) is None  # AUTO.READY
     assert mode_from_px4(4, 300) is None
     assert mode_from_px4(3, 0) is None  # POSCTL
     assert mode_from_px4(262, 0) is None  # not a byte: not OFFBOARD
