@@ -143,6 +143,7 @@ async def fly_mission(
             resume=opts.resume,
             plan_rate_factor=opts.plan_rate_factor,
             plan_budget_s=opts.plan_budget_s,
+            wait_for_telemetry=True,  # the bridges publish it (ground/startup.py)
             # The trace states the vehicles' real limit; the planner's budget goes beside it.
             trace_config={
                 "v_max": s.v_max,
@@ -189,6 +190,7 @@ async def fly_mission(
             result.fleet_counters = {
                 "plans applied": c.plans_applied,
                 "plans invalid": c.plans_invalid,
+                "plans late": c.plans_late,
                 "vehicles landed": sum(b.phase == "landed" for b in fleet.bridges),
                 "link losses": sum(b.counters.link_losses for b in fleet.bridges),
                 "link interruptions": sum(b.counters.link_interruptions for b in fleet.bridges),

@@ -38,6 +38,7 @@ from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from sim.world import run_world
 from sim.world_options import WorldOptions
+from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import bound_update, compare_pcrb, cv_model, jacobian
 from tests.support.live_cli import serve_argv, sim_argv, start
 from tests.support.ports import free_port_block, sitl_ports
@@ -329,7 +330,9 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(tmp_path: P
                 p.wait(timeout=30)
     trace = read_trace(path)
     received = {r.slot: r.extra.get("received") for r in trace.slots}
+    statuses = {r.slot: r.status for r in trace.slots}
     print(f"killed after slot {last.slot}; detections received per slot: {received}")
+    print(f"statuses: {statuses}")
     _assert_every_slot_once(trace, n_slots)
     # The file still starts with the first run's config line, then every slot once.
     lines = _strict_json_lines(path)
@@ -339,6 +342,19 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(tmp_path: P
     s_dt, s_kappa = float(trace.config["dt"]), float(trace.config["kappa"])
     _assert_continues_from(trace, last, s_dt, s_kappa)
     assert compare_pcrb(trace) == []
+    # A true record (docs/trace.md, "Statuses"): slot 1 planned; the slots the world ran while
+    # no ground loop was up are `unobserved` (nothing arrived: positions null) or `held` (the
+    # detections' positions), never the last plan's positions; then planned again. The whole
+    # trace passes 14a-14j on those positions at 1 m.
+    assert trace.slots[0].status == "ok"
+    for r in trace.slots[last.slot :]:
+        if r.status == "unobserved":
+            assert r.extra.get("received") == 0 and np.isnan(np.asarray(r.uav_xy)).all()
+    skipped = [n for n, st in statuses.items() if st in ("unobserved", "held")]
+    if skipped:  # none when the new `serve` was up before the world's lockstep timeout
+        assert skipped == list(range(last.slot + 1, skipped[-1] + 1)), statuses
+    assert all(st == "ok" for n, st in statuses.items() if n > max(skipped, default=0)), statuses
+    assert [str(v) for v in check_constraints(trace, tol_m=1.0)] == []
     assert re.search(r"vehicles landed\s*│\s*3\s*│", out_text), out_text[-2000:]
     # Back to measuring: the last slots got every detection.
     assert all(r.extra.get("received") == 3 for r in trace.slots[-3:])

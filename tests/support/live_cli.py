@@ -5,8 +5,12 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
+import yaml
+
+from isac_mission.records import Trace, read_trace
 from tests.support.ports import SitlPorts
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -59,3 +63,30 @@ def sim_argv(config: Path, endpoint: str, ports: SitlPorts, *extra: str) -> list
         *ports.cli_args(),
         *extra,
     )
+
+
+def wait_for_slots(path: Path, n: int, proc: subprocess.Popen[str], timeout_s: float) -> Trace:
+    """Poll the trace file (a generous wall bound, not a timing assertion) until it holds n
+    complete slots; AssertionError with the process's stderr if it exits first."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            err = proc.stderr.read() if proc.stderr else ""
+            raise AssertionError(f"process exited with {proc.returncode}: {err[-3000:]}")
+        if path.exists():
+            trace = read_trace(path)
+            if len(trace.slots) >= n:
+                return trace
+        time.sleep(0.2)
+    raise AssertionError(f"fewer than {n} slots in {path} after {timeout_s} s")
+
+
+def short_mission(tmp_path: Path, n_slots: int, altitude_m: float = 40.0) -> Path:
+    """config/paper.yaml with N = n_slots slots and H = altitude_m (take-off and landing in
+    seconds), written under tmp_path; returns its path."""
+    cfg = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
+    cfg["timing"]["duration_s"] = n_slots
+    cfg["uavs"]["altitude_m"] = altitude_m
+    config = tmp_path / "mission.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    return config

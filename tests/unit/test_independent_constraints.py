@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import ast
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from isac_mission.records import TraceWriter
+from isac_mission.records import Trace, TraceWriter
 from tests.support.checker_cases import (
     base_config,
     flagged,
@@ -137,6 +138,26 @@ def test_distance_tolerance_is_tol_m_and_status_is_reported() -> None:
 def test_non_finite_position_is_a_violation() -> None:
     trace = mutate(valid_trace(), 1, uav_xy=np.array([[np.nan, 300.0], [450.0, 300.0]]))
     assert {"14a", "14b", "14h", "14i", "14j"} <= {v.constraint for v in check_constraints(trace)}
+
+
+@pytest.mark.parametrize("status", ["unobserved", "held"])
+def test_an_unobserved_position_is_skipped_and_14h_spans_the_gap(status: str) -> None:
+    """A null position in a slot the ground did not plan is not a violation; the next known
+    position is held to V_max dt per slot since the last known one (2 slots: 50 m)."""
+    trace = valid_trace()
+    gap = replace(trace.slots[1], slot=2, status=status, uav_xy=np.full((2, 2), np.nan))
+    # 40 m in the two slots since slot 1: within 2 x 25 m, beyond 25 m
+    third = replace(trace.slots[1], slot=3, uav_xy=np.array([[440.0, 300.0], [500.0, 300.0]]))
+    assert check_constraints(Trace(trace.config, [trace.slots[0], gap, third])) == []
+    # 60 m (UAV 0) in those two slots: over 50 m, flagged at slot 3 against slot 1
+    far = replace(third, uav_xy=np.array([[460.0, 300.0], [500.0, 300.0]]))
+    got = flagged(Trace(trace.config, [trace.slots[0], gap, far]))
+    assert got == {("14h", 3, (0,))}
+
+
+def test_a_null_position_in_a_planned_slot_is_still_a_violation() -> None:
+    trace = mutate(valid_trace(), 1, uav_xy=np.array([[np.nan, np.nan], [450.0, 300.0]]))
+    assert {"14b", "14h", "14j"} <= {v.constraint for v in check_constraints(trace)}
 
 
 def test_missing_config_key_is_named() -> None:

@@ -27,6 +27,8 @@ class FleetCounters:
 
     plans_applied: int = 0
     plans_stale: int = 0
+    plans_late: int = 0
+    """Plans that arrived more than LATE_PLAN_SLOTS after their slot ended (fleet.py)."""
     plans_invalid: int = 0
     fleet_invalid: int = 0
     """Refused `fleet` commands."""

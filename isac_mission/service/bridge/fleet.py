@@ -3,7 +3,8 @@
 `start()`, `prepare_all()`, `on_plan(plan)` (or `follow_plans()`, which subscribes to
 `isac/<mission>/plan`), `land_all()`, `stop()`. Plan n's waypoints are to be reached by the end
 of slot n (t0 + n dt from the clock's slot timeline); plans not newer than the last one are
-dropped and counted.
+dropped and counted, and so are plans that come more than `LATE_PLAN_SLOTS` after their slot
+ended (a ground station that stalled: its plan is for a past the vehicles have left).
 """
 
 from __future__ import annotations
@@ -33,6 +34,15 @@ from isac_mission.types import FloatArray
 from isac_mission.wire import Keys, PlanMsg, decode_fleet, decode_plan
 
 log = logging.getLogger(__name__)
+
+LATE_PLAN_SLOTS = 1.0
+"""A plan whose slot ended more than this many slots ago is dropped as late, not flown."""
+
+
+def plan_is_late(slot_end_s: float | None, now_s: float, slot_s: float) -> bool:
+    """Whether a plan whose slot ends at `slot_end_s` (None: the mission start is unknown) is
+    late at simulation time `now_s` (slot length `slot_s`; all in s)."""
+    return slot_end_s is not None and now_s > slot_end_s + LATE_PLAN_SLOTS * slot_s
 
 
 @dataclass
@@ -234,6 +244,12 @@ class BridgeFleet:
             return False
         if plan.slot <= st.last_slot:
             st.counters.plans_stale += 1
+            return False
+        end = self.time.slot_end_s(plan.slot) if isinstance(self.time, ClockSimTime) else None
+        if arrive_by_s is None and plan_is_late(end, self.time.now_s(), self.slot_s):
+            st.counters.plans_late += 1
+            st.counters.last_error = f"plan {plan.slot}: its slot ended at {end:.1f} s; dropped"
+            log.warning("%s", st.counters.last_error)
             return False
         st.last_slot = plan.slot
         deadline = self.deadline_s(plan.slot) if arrive_by_s is None else arrive_by_s

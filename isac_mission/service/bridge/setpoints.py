@@ -119,10 +119,14 @@ class SetpointStream:
         self.goal = Goal(xy_m.copy(), arrive_by_s, max_speed_mps)
 
     def reanchor(self, status: VehicleStatus) -> None:
-        """Restart the carrot at the vehicle, toward the current goal."""
+        """Restart the carrot at the vehicle, toward the current goal; hover there instead when
+        the goal's deadline has passed (a plan of before a loss or a stall is not flown after)."""
         here = vehicle_xy(status, self._origin)
         goal = self.goal
         if here is None or goal is None:
+            return
+        if goal.arrive_by_s is not None and goal.arrive_by_s < self.time.now_s():
+            self.hover(here)
             return
         self.leg = plan_leg(
             here, goal.xy_m, self.carrot_time_s(), goal.arrive_by_s, goal.max_speed_mps

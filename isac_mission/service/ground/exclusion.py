@@ -39,6 +39,11 @@ class VehicleWatch:
         """Vehicles an operator's `hold` or `land` took out of planning, with the reason."""
         self.telemetry_fresh_wall: dict[int, float] = {}
         """Vehicle -> wall time (time.monotonic) its telemetry position last advanced."""
+        self.received_wall: dict[int, float] = {}
+        """Vehicle -> wall time its last telemetry message arrived."""
+        self.seen_ok: set[int] = set()
+        """Vehicles reported with a live link at least once: before that, "lost" is no loss (a
+        bridge that has not yet heard its vehicle), and the start gate waits (startup.py)."""
 
     def on_telemetry(self, msg: TelemetryMsg) -> None:
         """Keep a vehicle's newest telemetry (and when its position last advanced)."""
@@ -46,6 +51,7 @@ class VehicleWatch:
         if last is None or msg.t_s > last.t_s:
             self.telemetry_fresh_wall[msg.uav] = time.monotonic()
         self.telemetry[msg.uav] = msg
+        self.received_wall[msg.uav] = time.monotonic()
 
     def update(self, t_s: float) -> bool:
         """Exclude and re-admit vehicles at simulation time t_s (see the module doc); True when
@@ -53,6 +59,10 @@ class VehicleWatch:
         now = time.monotonic()
         changed = False
         for m, tel in self.telemetry.items():
+            if m not in self.seen_ok and m not in self.excluded:
+                if tel.link != "ok":
+                    continue
+                self.seen_ok.add(m)
             age_s = t_s - tel.t_s
             stale = (
                 age_s > self.settings.vehicle_lost_after_s
@@ -99,6 +109,27 @@ class VehicleWatch:
         """Vehicle m armed and not landed, as last reported (None: no telemetry yet)."""
         tel = self.telemetry.get(m)
         return None if tel is None else tel.armed and not tel.landed
+
+    def ready(self, m: int, t_s: float, since_wall_s: float) -> bool:
+        """Vehicle m can be planned from its telemetry: received after `since_wall_s` (wall),
+        over a live link, at most telemetry_max_age_s old at simulation time t_s, not excluded."""
+        tel = self.telemetry.get(m)
+        return (
+            tel is not None
+            and m not in self.excluded
+            and tel.link == "ok"
+            and t_s - tel.t_s <= self.settings.telemetry_max_age_s
+            and self.received_wall.get(m, -np.inf) >= since_wall_s
+        )
+
+    def exclude(self, m: int, why: str) -> None:
+        """Plan around vehicle m (counted, logged) until the re-admission rule takes it back."""
+        if m in self.excluded:
+            return
+        self.excluded[m] = why
+        self.report.counters["vehicle exclusions"] += 1
+        self.report.last_error = f"vehicle {m}: {why}; planning around it"
+        log.warning("vehicle %d: %s; planning the others around it", m, why)
 
     def positions(self, t_s: float, det_xy: FloatArray | None = None) -> FloatArray:
         """[M, 2] positions (m): fresh telemetry, else det_xy (a slot's detection positions),

@@ -30,6 +30,7 @@ from isac_mission.service.ground.mission import MissionState
 from isac_mission.service.ground.planner_thread import consume_result, in_daemon_thread
 from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.service.ground.startup import PlanningGate, skip_slot
 from isac_mission.service.ground.tracefile import open_trace
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
 from isac_mission.wire import (
@@ -83,8 +84,8 @@ class GroundLoop:
         self.truth: dict[int, FloatArray] = {}
         self.done = asyncio.Event()
         self.planning: asyncio.Task[None] | None = None
-        self.resumed_xy: FloatArray | None = None
-        """UAV positions of the last traced slot, after a resume (until telemetry is fresh)."""
+        self.gate = PlanningGate(scenario.M, settings)
+        """Plans wait for fresh telemetry at the start, on a resume and after a stall."""
 
     @property
     def s(self) -> Scenario:
@@ -99,7 +100,7 @@ class GroundLoop:
         last = opened.last
         if last is not None:
             self.state = MissionState.resumed(self.s, self.kit, self.settings.method, last)
-            self.resumed_xy = np.asarray(last.uav_xy, dtype=float)
+            self.gate.close("resume")
             log.info("resuming after slot %d from %s", self.state.slot, self.settings.trace_path)
 
     async def run(self, stop: asyncio.Event) -> GroundReport:
@@ -155,6 +156,7 @@ class GroundLoop:
         """Wakes the loop so that a wall-clock deadline can pass without traffic."""
         while True:
             await asyncio.sleep(0.05)
+            self.gate.tick()
             self._update_vehicle_states()
             self._advance_guarded()
 
@@ -214,8 +216,6 @@ class GroundLoop:
                 fallback = last
             elif self.report.records:
                 fallback = np.asarray(self.report.records[-1].uav_xy)
-            elif self.resumed_xy is not None:
-                fallback = self.resumed_xy
             else:
                 fallback = self.s.uav_start_xy
             xy = np.where(np.isfinite(xy), xy, fallback)
@@ -225,6 +225,8 @@ class GroundLoop:
         """Process every slot that is ready; plan slot 1 once the mission has started. Nothing
         moves while a plan is being made (slot n+1 needs plan n+1's prediction)."""
         if self.done.is_set() or self.planning is not None:
+            return
+        if self.gate.closed and not self._open_gate():
             return
         if self.state.pending is None and not self.state.done and self.mission_t0_s is not None:
             # Slot 1 at mission start, or the slot after the last traced one on a resume.
@@ -238,6 +240,17 @@ class GroundLoop:
         if self.state.done and self.planning is None:
             self.done.set()
 
+    def _open_gate(self) -> bool:
+        """Open the gate once the vehicles reported; trace the slots missed (startup.py)."""
+        t0 = self.mission_t0_s
+        if t0 is None or not self.gate.try_open(self.vehicles, self.t_s):
+            return False
+        for n in self.gate.slots_to_skip(self.state, self.t_s, t0):
+            msgs = self.detections.take(n)
+            record = skip_slot(self.state, n, msgs, self._uav_positions(), self.gate.reason)
+            self._complete_record(*self._track_and_truth(n, record), 0.0)
+        return True
+
     def _slot_ready(self, n: int) -> bool:
         return self.detections.ready(n, self.t_s, self.mission_t0_s, self.s.dt)
 
@@ -250,31 +263,25 @@ class GroundLoop:
         for m, msg in msgs.items():
             eta[m] = msg.bandwidth_share
         record = self.state.process(det, eta, self._uav_positions())
-        truth = self.truth.pop(n, None)
-        if truth is not None:
-            record = SlotRecord.from_dict(record.to_dict() | {"target_true": truth.tolist()})
+        record, truth = self._track_and_truth(n, record)
         latency_from = self.detections.last_detection_wall if msgs else None
         if latency_from is not None:
             self.report.last_detection_wall_s[n] = latency_from
             self.report.last_detection_wall_s.pop(n - SLOTS_KEPT, None)
-        self._publish(
-            self.keys.track,
-            lambda: encode_track(
-                TrackMsg(
-                    n,
-                    self.t_s,
-                    self.state.belief.x,
-                    self.state.belief.P,
-                    self.state.bound.J,
-                    self.state.bound.trace,
-                    published_wall_s=time.time(),
-                )
-            ),
-        )
         if self.state.done:
             self._complete_record(record, truth, 0.0)
         else:
             self._start_planning(self._uav_positions(det.uav_xy_m), latency_from, (record, truth))
+
+    def _track_and_truth(self, n: int, record: SlotRecord) -> tuple[SlotRecord, FloatArray | None]:
+        """Publish slot n's track; the record with the world's truth for slot n (if it came)."""
+        b, j = self.state.belief, self.state.bound
+        track = TrackMsg(n, self.t_s, b.x, b.P, j.J, j.trace, time.time())
+        self._publish(self.keys.track, lambda: encode_track(track))
+        truth = self.truth.pop(n, None)
+        if truth is not None:
+            record = SlotRecord.from_dict(record.to_dict() | {"target_true": truth.tolist()})
+        return record, truth
 
     def _complete_record(
         self, record: SlotRecord, truth: FloatArray | None, latency: float
@@ -351,13 +358,16 @@ class GroundLoop:
         latency_from: float | None,
         record: tuple[SlotRecord, FloatArray | None] | None,
     ) -> None:
-        pending = self.state.commit(job, plan)
-        self._publish(
-            self.keys.plan, lambda: encode_plan(PlanMsg(pending.slot, self.t_s, pending.plan))
-        )
-        if plan.report.status != "ok":
-            self.report.last_error = f"slot {pending.slot}: {plan.report.reason}"
-            log.warning("slot %d: %s", pending.slot, plan.report.reason)
+        if self.gate.tick() is not None or self.gate.closed:
+            # Made before a stall: never published (startup.py); replanned once it opens.
+            self.report.counters["plans dropped after a stall"] += 1
+        else:
+            pending = self.state.commit(job, plan)
+            msg = PlanMsg(pending.slot, self.t_s, pending.plan)
+            self._publish(self.keys.plan, lambda: encode_plan(msg))
+            if plan.report.status != "ok":
+                self.report.last_error = f"slot {pending.slot}: {plan.report.reason}"
+                log.warning("slot %d: %s", pending.slot, plan.report.reason)
         latency = 0.0
         if latency_from is not None:
             latency = time.monotonic() - latency_from
@@ -379,19 +389,11 @@ class GroundLoop:
         self.bus.publish(key, payload)
 
     def _publish_health(self, status: str) -> None:
+        rep, slot = self.report, max(self.state.slot, 0)
+        msg = HealthMsg(
+            slot, self.t_s, status, dict(rep.counters), rep.last_error, self.vehicles.status()
+        )
         try:
-            self.bus.publish(
-                self.keys.health,
-                encode_health(
-                    HealthMsg(
-                        max(self.state.slot, 0),
-                        self.t_s,
-                        status,
-                        dict(self.report.counters),
-                        self.report.last_error,
-                        self.vehicles.status(),
-                    )
-                ),
-            )
+            self.bus.publish(self.keys.health, encode_health(msg))
         except Exception as err:  # the bus may already be closing at shutdown
             log.debug("health not published: %s", err)

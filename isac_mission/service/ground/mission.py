@@ -19,7 +19,14 @@ from isac_mission.records import SlotRecord
 from isac_mission.service.ground.fleet_plan import KitCache, PlanningJob
 from isac_mission.tracking.cycle import CycleModel, SlotPrediction, TrackState, predict, update
 from isac_mission.tracking.pcrb import Bound
-from isac_mission.types import Detections, FloatArray, Gaussian, IntArray, SlotPlan
+from isac_mission.types import (
+    Detections,
+    FloatArray,
+    Gaussian,
+    IntArray,
+    SlotPlan,
+    SolveReport,
+)
 
 
 @dataclass(frozen=True)
@@ -116,6 +123,30 @@ class MissionState:
         self.scenario = s
         self.model = CycleModel.from_scenario(s)
         self.renew_kits()
+
+    def skip(
+        self,
+        det: Detections,
+        eta_used: FloatArray,
+        compute_xy: FloatArray,
+        status: str,
+        reason: str,
+    ) -> SlotRecord:
+        """Slot n = slot + 1 ran without a plan of this loop (startup.py): drop the pending plan,
+        predict, fold in what arrived (det, NaN = missing) as `process` does, and record status
+        and reason. A UAV without a detection gets a null position in the record: compute_xy
+        [M, 2] (finite) is used for the computation only, where it contributes nothing."""
+        n = self.slot + 1
+        if det.slot != n:
+            raise ValueError(f"slot {det.slot} is not the next slot {n}")
+        predicted = predict(self.model, TrackState(self.belief, self.bound))
+        known = np.isfinite(det.uav_xy_m)
+        xy = np.where(known, det.uav_xy_m, np.nan)
+        assoc = self.assoc if self.assoc is not None else np.full(self.scenario.M, -1)
+        plan = SlotPlan(xy, assoc, eta_used, float("nan"), SolveReport(status, reason))
+        self.pending = PendingSlot(n, predicted, plan)
+        record = self.process(det, eta_used, np.asarray(compute_xy, dtype=float))
+        return SlotRecord.from_dict(record.to_dict() | {"uav_xy": xy.tolist(), "plan_xy": None})
 
     def process(self, det: Detections, eta_used: FloatArray, fallback_xy: FloatArray) -> SlotRecord:
         """Fold in slot n's detections (NaN = missing: a partial update) and advance the bound.

@@ -26,6 +26,13 @@ class GroundSettings(Settings):
     normally. vehicle_lost_after_s (simulation) and vehicle_lost_wall_s (wall): a vehicle whose
     telemetry position is older than both, or whose bridge reports its link lost, is planned
     around (fleet_plan.py) until its link is back and it is in OFFBOARD again.
+    wait_for_telemetry: plan only from fresh telemetry at a start, a resume and after a stall
+    (startup.py; the live service sets it: its bridges publish telemetry). False (a loop fed by
+    a world without telemetry): plan from the detections' positions and the start points.
+    startup_wait_s (wall): at a start or resume, slot 1 (or L+1) is planned once every vehicle
+    has reported fresh telemetry, or after this long for the vehicles that have (startup.py).
+    stall_gap_s (wall): a pause of the loop longer than this (SIGSTOP, an overloaded host) is a
+    stall: planning waits for telemetry that arrived stall_settle_s after it woke.
     plan_rate_factor: the planner's R_th margin, applied to an operator's new R_th too.
     planner: the per-slot planning function (plan_slot; replaceable to inject faults).
 
@@ -45,4 +52,8 @@ class GroundSettings(Settings):
     vehicle_lost_after_s: float = Field(1.5, gt=0.0)
     vehicle_lost_wall_s: float = Field(1.0, gt=0.0)
     plan_rate_factor: float = Field(1.0, gt=0.0)
+    wait_for_telemetry: bool = False
+    startup_wait_s: float = Field(10.0, gt=0.0)
+    stall_gap_s: float = Field(1.0, gt=0.0)
+    stall_settle_s: float = Field(0.3, ge=0.0)
     planner: Planner = plan_slot

@@ -45,6 +45,12 @@ class Violation:
         )
 
 
+UNKNOWN_POSITION_STATUSES = ("held", "unobserved")
+"""Statuses of slots the ground loop did not plan (docs/trace.md): a UAV position there may be
+null (not observed); such a UAV is skipped in that slot, and 14h compares its next known position
+with its last known one over the slots in between."""
+
+
 def control_range_m(config: Mapping[str, Any]) -> float:
     """d_th = sqrt(P_bs beta0 / (noise_w gamma_th) - (H - H_bs)^2) (14b), m; 0 if it never closes."""
     p_bs, beta0 = float(config_value(config, "P_bs")), float(config_value(config, "beta0"))
@@ -104,7 +110,7 @@ def _check_slot(
     cfg: Mapping[str, Any],
     lim: _Limits,
     prev_xy: Array,
-    elapsed: int,
+    elapsed: Array,
     tol_m: float,
     rate_rtol: float,
     share_tol: float,
@@ -115,6 +121,11 @@ def _check_slot(
     assoc = list(np.asarray(rec.assoc).reshape(-1))
     n_uav, n_bs = q.shape[0], lim.bs_xy.shape[0]
     out: list[Violation] = []
+    # A null position is allowed only where the slot says it was not observed.
+    if status in UNKNOWN_POSITION_STATUSES:
+        seen = [bool(np.all(np.isfinite(q[m]))) for m in range(n_uav)]
+    else:
+        seen = [True] * n_uav
 
     def flag(c: str, uavs: tuple[int, ...], value: float, limit: float, detail: str) -> None:
         out.append(Violation(n, c, uavs, float(value), float(limit), status, detail))
@@ -144,35 +155,37 @@ def _check_slot(
     # 14a: rate to the associated BS (only where the share and the BS index are valid)
     for m in range(n_uav):
         k_m = bs_of[m]
-        if k_m is None or not share_ok[m]:
+        if k_m is None or not share_ok[m] or not seen[m]:
             continue
         # The position tolerance applies here too: the rate tol_m metres closer to the BS.
         rate = uplink_rate_bps(float(eta[m]), max(_dist(q[m], lim.bs_xy[k_m]) - tol_m, 0.0), cfg)
         if not rate >= lim.r_th * (1.0 - rate_rtol):
             flag("14a", (m,), rate, lim.r_th, f"rate to BS {k_m} below R_th (bit/s)")
     # 14b: control range of the nearest BS
-    for m in range(n_uav):
+    for m in (m for m in range(n_uav) if seen[m]):
         nearest = min(_dist(q[m], w) for w in lim.bs_xy)
         if not nearest <= lim.d_th + tol_m:
             flag("14b", (m,), nearest, lim.d_th, "nearest BS beyond control range d_th (m)")
     # 14h: speed limit since the previous record (or the start positions)
     if prev_xy.shape == q.shape:
-        allowed = lim.step_m * elapsed
-        for m in range(n_uav):
+        for m in (m for m in range(n_uav) if seen[m]):
+            allowed = lim.step_m * float(elapsed[m])
             moved = _dist(q[m], prev_xy[m])
             if not moved <= allowed + tol_m:
-                flag("14h", (m,), moved, allowed, f"moved too far in {elapsed} slot(s) (m)")
+                flag("14h", (m,), moved, allowed, f"moved too far in {elapsed[m]:g} slot(s) (m)")
     else:
         flag("14h", tuple(range(n_uav)), n_uav, prev_xy.shape[0], "number of UAVs changed")
     # 14i: UAV-UAV separation
     for i in range(n_uav):
         for j in range(i + 1, n_uav):
+            if not (seen[i] and seen[j]):
+                continue
             gap = _dist(q[i], q[j])
             if not gap >= lim.d_safe - tol_m:
                 flag("14i", (i, j), gap, lim.d_safe, "UAVs closer than D_s (m)")
     # 14j: UAV-predicted target separation
     target = np.asarray(rec.target_pred, dtype=float).reshape(-1)[:2]
-    for m in range(n_uav):
+    for m in (m for m in range(n_uav) if seen[m]):
         gap = _dist(q[m], target)
         if not gap >= lim.d_safe - tol_m:
             flag("14j", (m,), gap, lim.d_safe, "UAV closer than D_s to the predicted target (m)")
@@ -196,24 +209,42 @@ def check_constraints(
     - 14b  min_k ||q_m - w_k|| <= d_th + tol_m, d_th recomputed from P_bs, beta0, ... .
     - 14c  |sum_m eta_m - 1| <= share_tol;  14d  -share_tol <= eta_m <= 1 + share_tol.
     - 14e  at most n_a UAVs per BS;  14f/g  each assoc entry is an integer in [0, K).
-    - 14h  ||q_n - q_prev|| <= v_max dt s + tol_m, s = slots elapsed since the previous record;
-           the first record is compared with uav_start_xy (the positions at slot 0) with
+    - 14h  ||q_n - q_prev|| <= v_max dt s + tol_m, s = slots elapsed since the UAV's previous
+           known position (the previous record, or an earlier one when it was not observed in
+           between); the first is compared with uav_start_xy (the positions at slot 0) with
            s = max(1, its slot number).
     - 14i  ||q_i - q_j|| >= d_safe - tol_m;  14j  ||q_m - target_pred[:2]|| >= d_safe - tol_m.
     A UAV with BS -1 and share 0 is outside the plan (link lost): 14a and 14f/g skip it.
-    Non-finite values count as violations. Every slot is checked whatever its status; each
+    In a slot the ground did not plan (UNKNOWN_POSITION_STATUSES: `held`, `unobserved`) a UAV
+    with a null position was not observed: 14a, 14b and 14h-14j skip it there.
+    Otherwise non-finite values count as violations. Every slot is checked whatever its status; each
     Violation carries the status so the caller decides what a non-"ok" slot may break.
     """
     tr = as_trace(trace)
     lim = _Limits.from_config(tr.config)
     out: list[Violation] = []
-    prev_xy, prev_slot = lim.start_xy, None
+    prev_xy = lim.start_xy.copy()
+    prev_slot = np.zeros(prev_xy.shape[0])
+    first = True
     for rec in tr.slots:
         n = int(rec.slot)
-        elapsed = max(1, n) if prev_slot is None else n - prev_slot
+        q = np.asarray(rec.uav_xy, dtype=float).reshape(-1, 2)
+        elapsed = np.maximum(1.0, n - prev_slot) if first else n - prev_slot
         out += _check_slot(rec, tr.config, lim, prev_xy, elapsed, tol_m, rate_rtol, share_tol)
-        prev_xy, prev_slot = np.asarray(rec.uav_xy, dtype=float).reshape(-1, 2), n
+        if q.shape != prev_xy.shape:  # reported as 14h by _check_slot; start afresh
+            prev_xy, prev_slot = q.copy(), np.full(q.shape[0], float(n))
+        else:
+            keep = np.isfinite(q).all(axis=1) | (str(rec.status) not in UNKNOWN_POSITION_STATUSES)
+            prev_xy[keep], prev_slot[keep] = q[keep], n
+        first = False
     return out
 
 
-__all__ = ["CONSTRAINTS", "Violation", "check_constraints", "control_range_m", "uplink_rate_bps"]
+__all__ = [
+    "CONSTRAINTS",
+    "UNKNOWN_POSITION_STATUSES",
+    "Violation",
+    "check_constraints",
+    "control_range_m",
+    "uplink_rate_bps",
+]
