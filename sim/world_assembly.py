@@ -58,6 +58,7 @@ def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> Aut
     RTL, missions and DO_REPOSITION), geofence = the area, the energy model, and the scenario's
     MAVLink signing key (None: signing off)."""
     start = scenario.uav_start_xy[m]
+    serial = next((link for link in options.serial_links if link.vehicle == m), None)
     return AutopilotSettings(
         index=m,
         offboard_port=options.mavlink_base_port + m,
@@ -75,6 +76,8 @@ def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> Aut
         area_max_xy_m=(float(scenario.area[0]), float(scenario.area[1])),
         max_altitude_m=max(500.0, 2.0 * scenario.H),
         signing=scenario.mavlink_signing_key,
+        serial_device=None if serial is None else serial.device,
+        serial_baud=57600 if serial is None else serial.baud,
         cruise_speed_mps=scenario.v_max,
         battery=battery_settings(scenario, m),
     )

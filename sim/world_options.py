@@ -58,6 +58,39 @@ def parse_outages(texts: Sequence[str], n_vehicles: int) -> tuple[LinkOutage, ..
 
 
 @dataclass(frozen=True)
+class SerialLink:
+    """Vehicle `vehicle` also speaks MAVLink on the serial device `device` at `baud`."""
+
+    vehicle: int
+    device: str
+    baud: int = 57600
+
+    @classmethod
+    def parse(cls, text: str) -> SerialLink:
+        """`M=DEVICE[:BAUD]`, e.g. `1=/dev/pts/5:57600` (vehicle 1 on /dev/pts/5)."""
+        m_text, _, rest = text.partition("=")
+        device, _, baud_text = rest.rpartition(":")
+        if not baud_text.isdigit():
+            device, baud_text = rest, "57600"
+        if not m_text.isdigit() or not device.startswith("/") or int(baud_text) <= 0:
+            raise ValueError(
+                f"serial link {text!r}: expected VEHICLE=DEVICE[:BAUD], e.g. 1=/dev/ttyUSB0"
+            )
+        return cls(int(m_text), device, int(baud_text))
+
+
+def parse_serial_links(texts: Sequence[str], n_vehicles: int) -> tuple[SerialLink, ...]:
+    """SerialLink.parse of each text, checked against the fleet size (one device per vehicle)."""
+    links = tuple(SerialLink.parse(text) for text in texts)
+    seen: set[int] = set()
+    for text, link in zip(texts, links, strict=True):
+        if link.vehicle >= n_vehicles or link.vehicle in seen:
+            raise ValueError(f"serial link {text!r}: no vehicle {link.vehicle}, or given twice")
+        seen.add(link.vehicle)
+    return links
+
+
+@dataclass(frozen=True)
 class WorldOptions:
     """How to run the world. Times are simulation seconds unless marked wall.
 
@@ -82,6 +115,7 @@ class WorldOptions:
     link_outages: scheduled MAVLink radio failures (fault injection, docs/reliability.md).
     impairment: lossy, late links (fault injection, `sim.world_impairment`); None: the
     scenario's `impairment` section.
+    serial_links: vehicles that also speak MAVLink on a serial device (SerialLink).
     """
 
     speed: float = 1.0
@@ -104,6 +138,7 @@ class WorldOptions:
     geo_origin: GeoPoint = PX4_SITL_ORIGIN
     link_outages: tuple[LinkOutage, ...] = ()
     impairment: ImpairmentConfig | None = None
+    serial_links: tuple[SerialLink, ...] = ()
 
     def __post_init__(self) -> None:
         if math.isnan(self.speed) or self.speed <= 0:

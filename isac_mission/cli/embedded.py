@@ -80,6 +80,13 @@ def sim(
     ] = "immediate",
     inject_link_loss: InjectLinkLossOpt = None,
     impair_link: ImpairLinkOpt = None,
+    serial_link: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="Vehicle M also speaks MAVLink on a serial device, as M=DEVICE[:BAUD] "
+            "(e.g. 0=/dev/ttyUSB0:57600; repeatable; docs/service.md, 'Serial links')."
+        ),
+    ] = None,
 ) -> None:
     """The world alone (vehicles, target, sensing, clock) until SIGINT or SIGTERM."""
     import logging
@@ -87,7 +94,7 @@ def sim(
 
     from isac_mission.bus.security import default_endpoint, secured_settings
     from sim.world import run_world
-    from sim.world_options import WorldOptions, parse_outages
+    from sim.world_options import WorldOptions, parse_outages, parse_serial_links
 
     s = load_or_exit(config)
     if not logging.getLogger().handlers:
@@ -119,6 +126,7 @@ def sim(
             start=start,  # type: ignore[arg-type]
             link_outages=parse_outages(inject_link_loss or [], s.M),
             impairment=world_impairment(s, impair_link or []),
+            serial_links=parse_serial_links(serial_link or [], s.M),
         )
     except (ConfigError, ValueError) as err:
         err_console.print(f"[bold red]invalid option[/] {err}", highlight=False)
@@ -142,7 +150,7 @@ def sim(
 
     try:
         asyncio.run(_main())
-    except ConfigError as err:
+    except (ConfigError, OSError) as err:  # OSError: a port taken, a serial device missing
         err_console.print(f"[bold red]cannot start the world[/] {err}", highlight=False)
         raise typer.Exit(1) from None
 

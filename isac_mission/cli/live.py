@@ -53,6 +53,7 @@ def _live(
     plan_budget: float,
     link_outages: list[str],
     link_impairment: list[str] | None = None,
+    vehicle_links: list[str] | None = None,
 ) -> None:
     """Shared body of `run` and `serve`: live progress, summary, plots; exit 0 on SIGINT/SIGTERM."""
     import asyncio
@@ -94,6 +95,14 @@ def _live(
         except ConfigError as err:
             err_console.print(f"[bold red]invalid option[/] {err}", highlight=False)
             raise typer.Exit(2) from None
+    if vehicle_links:
+        from isac_mission.mavwire.serial_link import parse_vehicle_links
+
+        try:
+            parse_vehicle_links(vehicle_links, s.M)
+        except ValueError as err:
+            err_console.print(f"--vehicle-link: {err}", highlight=False)
+            raise typer.Exit(2) from None
     opts = LiveOptions(
         speed=speed,
         lockstep=lockstep,
@@ -106,6 +115,7 @@ def _live(
         mavlink_local_base_port=mavlink_local_base_port,
         gcs_port=gcs_port,
         gcs_local_base_port=gcs_local_base_port,
+        vehicle_links=tuple(vehicle_links or ()),
         resume=resume,
         plan_budget_s=plan_budget if plan_budget > 0 else None,
         link_outages=tuple(link_outages),
@@ -283,6 +293,13 @@ def serve(
         bool, typer.Option(help="Continue the trace in --out after its last slot.")
     ] = False,
     plan_budget: PlanBudgetOpt = 1.0,
+    vehicle_link: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="Vehicle M's link instead of UDP, as M=URL: M=serial:DEVICE[:BAUD] or "
+            "M=udpin:127.0.0.1:PORT (repeatable; docs/service.md, 'Links')."
+        ),
+    ] = None,
 ) -> None:
     """The ground loop and the MAVLink bridges, for vehicles and sensing that run elsewhere
     (`isac-mission sim`, or real UAVs). The clock comes from the world over Zenoh."""
@@ -303,4 +320,5 @@ def serve(
         resume=resume,
         plan_budget=plan_budget,
         link_outages=[],
+        vehicle_links=vehicle_link,
     )

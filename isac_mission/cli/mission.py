@@ -30,6 +30,7 @@ from isac_mission.mavwire.ports import (
     OFFBOARD_BASE_PORT,
     OFFBOARD_LOCAL_BASE_PORT,
 )
+from isac_mission.mavwire.serial_link import parse_vehicle_links
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
@@ -49,6 +50,8 @@ class LiveOptions:
     mavlink_base_port, mavlink_local_base_port, gcs_port, gcs_local_base_port: PX4 SITL's port
     layout (vehicle m: offboard link from 14580 + m to 14540 + m, where the bridges listen;
     ground-station link from 18570 + m to 14550; local ports of the embedded world only);
+    vehicle_links: `M=URL` per vehicle (serve): vehicle M's link URL instead of UDP
+    base + M (`isac_mission.mavwire.serial_link`, e.g. `1=serial:/dev/ttyUSB0:57600`);
     resume: continue an existing trace (serve); plan_speed_fraction: the planner's speed budget
     as a fraction of V_max, the headroom a vehicle with finite acceleration needs to be at each
     waypoint by the slot's end; plan_rate_factor, plan_safety_margin_m: the planner asks for
@@ -68,6 +71,7 @@ class LiveOptions:
     mavlink_local_base_port: int = OFFBOARD_LOCAL_BASE_PORT
     gcs_port: int = GCS_PORT
     gcs_local_base_port: int = GCS_LOCAL_BASE_PORT
+    vehicle_links: tuple[str, ...] = ()
     resume: bool = False
     plan_speed_fraction: float = 0.9
     plan_rate_factor: float = 1.05
@@ -133,7 +137,13 @@ async def fly_mission(
     kit = SolverKit(planning)
     kit.warm_up()
     time_source = ClockSimTime()
-    fleet = BridgeFleet.from_scenario(s, time_source, bus, base_port=opts.mavlink_base_port)
+    fleet = BridgeFleet.from_scenario(
+        s,
+        time_source,
+        bus,
+        base_port=opts.mavlink_base_port,
+        links=parse_vehicle_links(opts.vehicle_links, s.M),
+    )
     ground = GroundLoop(
         planning,
         bus,

@@ -8,7 +8,9 @@ One `Autopilot` is one vehicle: the flight logic (`flight`) around the kinematic
   MAVSDK, the service's bridge);
 - the GCS link binds `gcs_bind_port` (default 18570 + index) and sends to `gcs_port` (default
   14550, the same for every vehicle) for the ground stations: one QGroundControl or MAVProxy
-  on 14550 sees the whole fleet, told apart by system id.
+  on 14550 sees the whole fleet, told apart by system id;
+- with `serial_device`, a third link on that serial device (a telemetry radio's, or one end of a
+  pseudo-terminal pair), framed by `isac_mission.mavwire.serial_link.SerialTransport`.
 
 Both links stream telemetry (`telemetry`), accept every command (`commands`, `params`,
 `mission_protocol`), and also answer whoever speaks to them (the sender's address joins the link's
@@ -56,6 +58,7 @@ from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.modes import FlightMode
 from isac_mission.mavwire.parsing import Rejection
 from isac_mission.mavwire.ports import AUTOPILOT_COMPONENT_ID, LOOPBACK, Address
+from isac_mission.mavwire.serial_link import SerialTransport
 from sim.autopilot.commands import CommandHandler
 from sim.autopilot.flight import FlightLogic
 from sim.autopilot.link import VehicleLink
@@ -175,22 +178,23 @@ class Autopilot:
             return
         loop = asyncio.get_running_loop()
         s = self.settings
+        serial = () if s.serial_device is None else (("serial", 0, 0),)
         for name, bind, dest in (
             ("offboard", s.offboard_local_port, s.offboard_dest_port),
             ("gcs", s.gcs_local_port, s.gcs_dest_port),
+            *serial,
         ):
+            peer = (LOOPBACK, dest) if name != "serial" else (str(s.serial_device), s.serial_baud)
             link = VehicleLink(
-                self._sysid,
-                name,
-                (LOOPBACK, dest),
-                s.signing,
-                self._on_datagram,
-                lambda: self.radio_silent,
+                self._sysid, name, peer, s.signing, self._on_datagram, lambda: self.radio_silent
             )
             try:
-                await loop.create_datagram_endpoint(
-                    functools.partial(_same, link), local_addr=(LOOPBACK, bind)
-                )
+                if name == "serial":  # a telemetry radio's device (mavwire/serial_link.py)
+                    SerialTransport(link, *peer)
+                else:
+                    await loop.create_datagram_endpoint(
+                        functools.partial(_same, link), local_addr=(LOOPBACK, bind)
+                    )
             except OSError:
                 await self.close()  # do not leave the first link bound
                 raise

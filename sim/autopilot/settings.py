@@ -85,7 +85,7 @@ class AutopilotSettings(Settings):
         area_max_xy_m: Scenario-plane upper corner of the allowed area.
         min_altitude_m: Lowest altitude a position setpoint may ask for (higher ones clamped up).
         max_altitude_m: Highest altitude a position setpoint may ask for.
-        signing: MAVLink 2 signing key of both links; None = no signing (accept unsigned).
+        signing: MAVLink 2 signing key of every link; None = no signing (accept unsigned).
         cruise_speed_mps: MPC_XY_CRUISE, horizontal speed of RTL, missions and DO_REPOSITION.
         rtl_return_alt_m: RTL_RETURN_ALT, return altitude above home.
         rtl_descend_alt_m: RTL_DESCEND_ALT, altitude over home before landing.
@@ -99,6 +99,9 @@ class AutopilotSettings(Settings):
         low_battery_action: COM_LOW_BAT_ACT (`LowBatteryAction`).
         battery_action_delay_s: COM_BAT_ACT_T, delay between a battery level and its action.
         vfr_hud_rate_hz: Rate of VFR_HUD (BATTERY_STATUS streams at `status_rate_hz`).
+        serial_device: A serial device (e.g. one end of a pseudo-terminal pair) the vehicle also
+            speaks MAVLink on, as PX4 on a TELEM port; None = UDP links only.
+        serial_baud: Its rate (raw 8N1).
     """
 
     settings_name: ClassVar[str] = "AutopilotSettings"
@@ -145,6 +148,8 @@ class AutopilotSettings(Settings):
     low_battery_action: LowBatteryAction = "return_then_land"
     battery_action_delay_s: float = 5.0
     vfr_hud_rate_hz: float = 4.0
+    serial_device: str | None = None
+    serial_baud: int = 57600
 
     @model_validator(mode="after")
     def _check_values(self) -> AutopilotSettings:
@@ -178,6 +183,10 @@ class AutopilotSettings(Settings):
             problems.append(
                 f"battery_action_delay_s must be finite and >= 0 (got {self.battery_action_delay_s})"
             )
+        if self.serial_device is not None and not self.serial_device.startswith("/"):
+            problems.append(f"serial_device must be a device path (got {self.serial_device!r})")
+        if self.serial_baud <= 0:
+            problems.append(f"serial_baud must be > 0 (got {self.serial_baud})")
         if self.heartbeat_keepalive_wall_s is not None and not self.heartbeat_keepalive_wall_s > 0:
             problems.append("heartbeat_keepalive_wall_s must be > 0 or None")
         if problems:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Awaitable, Callable, Coroutine, Sequence
+from collections.abc import Awaitable, Callable, Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -105,12 +105,14 @@ class BridgeFleet:
         base_port: int = OFFBOARD_BASE_PORT,
         origins_xy_m: Sequence[tuple[float, float]] | None = None,
         bus_settings: BusSettings | None = None,
+        links: Mapping[int, str] | None = None,
         **overrides: Any,
     ) -> BridgeFleet:
         """M bridges for `scenario`: V_max, vehicle m on base_port + m with system id m + 1,
         local origins `origins_xy_m` (default: the scenario origin for all), start points and
-        altitude H for `prepare_all`, the scenario's MAVLink signing key; `overrides` go to
-        every BridgeSettings."""
+        altitude H for `prepare_all`, the scenario's MAVLink signing key, vehicle m's link URL
+        `links[m]` if given (a serial device, `isac_mission.mavwire.serial_link`); `overrides`
+        go to every BridgeSettings."""
         if origins_xy_m is not None and len(origins_xy_m) != scenario.M:
             raise IsacError(f"origins_xy_m: {len(origins_xy_m)} origins for M = {scenario.M}")
         settings = [
@@ -119,6 +121,7 @@ class BridgeFleet:
                 base_port=base_port,
                 origin_xy_m=origins_xy_m[m] if origins_xy_m is not None else (0.0, 0.0),
                 v_max_mps=scenario.v_max,
+                link=(links or {}).get(m),
                 **{"signing": scenario.mavlink_signing_key, **overrides},
             )
             for m in range(scenario.M)

@@ -10,7 +10,8 @@ from pydantic import InstanceOf, model_validator
 from isac_mission.config import MavlinkSigningKey
 from isac_mission.config.validation import Settings
 from isac_mission.errors import ConfigError
-from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
+from isac_mission.mavwire.ports import LOOPBACK, OFFBOARD_BASE_PORT
+from isac_mission.mavwire.serial_link import parse_link_url
 
 _POSITIVE = (
     "v_max_mps",
@@ -40,6 +41,9 @@ class BridgeSettings(Settings):
     Attributes:
         index: 0-based vehicle index m (telemetry key `telemetry/<m>`).
         port: UDP port to bind on 127.0.0.1; None = base_port + index.
+        link: The vehicle's link URL (`isac_mission.mavwire.serial_link`):
+            `udpin:127.0.0.1:PORT` or `serial:DEVICE[:BAUD]`; None = `udpin:127.0.0.1:` +
+            the port above.
         base_port: PX4's offboard base port (14540).
         system_id: The vehicle's MAVLink system id; None = index + 1.
         origin_xy_m: Scenario-plane position of the vehicle's local NED origin (on the ground).
@@ -77,6 +81,7 @@ class BridgeSettings(Settings):
 
     index: int = 0
     port: int | None = None
+    link: str | None = None
     base_port: int = OFFBOARD_BASE_PORT
     system_id: int | None = None
     origin_xy_m: tuple[float, float] = (0.0, 0.0)
@@ -109,6 +114,11 @@ class BridgeSettings(Settings):
             problems.append(f"index must be in [0, 253] (got {self.index})")
         if not 0 <= self.listen_port <= 65535:
             problems.append(f"port must be a UDP port (got {self.listen_port})")
+        if self.link is not None:
+            try:
+                parse_link_url(self.link)
+            except ValueError as err:
+                problems.append(f"link: {err}")
         for name in _POSITIVE:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -131,6 +141,11 @@ class BridgeSettings(Settings):
     def listen_port(self) -> int:
         """The bound port: `port`, or base_port + index."""
         return self.base_port + self.index if self.port is None else self.port
+
+    @property
+    def link_url(self) -> str:
+        """The vehicle's link URL: `link`, or `udpin:127.0.0.1:<listen_port>`."""
+        return self.link if self.link is not None else f"udpin:{LOOPBACK}:{self.listen_port}"
 
     @property
     def vehicle_system_id(self) -> int:

@@ -1,6 +1,7 @@
 """`VehicleBridge`: one vehicle between its MAVLink link and Zenoh (see the package docstring).
 
-The bridge owns a `MavlinkLink` (UDP 127.0.0.1:(base + m), PX4 SITL's offboard port), a
+The bridge owns a `MavlinkLink` (UDP 127.0.0.1:(base + m), PX4 SITL's offboard port, or the
+`settings.link` URL: a serial device), a
 `SetpointStream` (setpoints.py), a `LinkWatch` (supervision.py), a `VehicleCommander`
 (commanding.py) and an `OffboardEntry` (offboard.py), and runs three paced loops (pacing.py):
 GCS HEARTBEAT, telemetry (with link supervision) and the setpoint stream. It flies the mission
@@ -31,7 +32,7 @@ from isac_mission.mavwire.builders import (
     hold_mode_command,
     land_command,
 )
-from isac_mission.mavwire.link import MavlinkLink
+from isac_mission.mavwire.serial_link import open_link
 from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bridge.clock_time import (
     ClockSimTime,
@@ -84,8 +85,8 @@ class VehicleBridge:
         self._own_bus = bus is None
         self._bus_settings = bus_settings
         self._started_clock = False
-        self.link = MavlinkLink(
-            settings.listen_port,
+        self.link = open_link(
+            settings.link_url,
             system_id=settings.vehicle_system_id,
             clock=time.now_s,
             lost_after_s=settings.link_lost_after_s,

@@ -1,0 +1,61 @@
+"""MAVLink over a real serial device: a simulated vehicle on one end of a pseudo-terminal pair and
+the service's link (`SerialMavlinkLink`) on the other; every byte crosses two real tty devices
+(tests/support/pty_pair.py). Waits are bounded by generous wall-clock deadlines."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+
+import pytest
+
+from isac_mission.errors import LinkError
+from isac_mission.mavwire.builders import Target, arm_command, gcs_heartbeat
+from isac_mission.mavwire.serial_link import SerialMavlinkLink, open_link
+from sim.autopilot.settings import AutopilotSettings
+from tests.support.ports import free_udp_ports
+from tests.support.pty_pair import PtyCable
+from tests.support.sim_harness import SimRunner, async_wait_until
+
+pytestmark = pytest.mark.timeout(120)
+TIMEOUT_S = 30.0
+
+
+async def test_service_link_hears_and_commands_a_vehicle_over_a_pty_pair(
+    sim_runner: Callable[..., SimRunner],
+) -> None:
+    offboard, gcs = free_udp_ports(2)  # nobody listens there: only the serial link can carry it
+    with PtyCable() as cable:
+        settings = AutopilotSettings(
+            index=1,
+            offboard_port=offboard,
+            gcs_port=gcs,
+            bind_port=0,
+            gcs_bind_port=0,
+            serial_device=cable.a,
+            serial_baud=57600,
+        )
+        runner = sim_runner([settings])
+        vehicle = runner.autopilots[0]
+        link = open_link(f"serial:{cable.b}:57600", system_id=2, name="serial vehicle 1")
+        assert isinstance(link, SerialMavlinkLink)
+        async with link:
+            status = await link.wait_for(lambda st: not st.lost, TIMEOUT_S, "a heartbeat")
+            assert status.system_id == 2
+            assert link.local_address == (cable.b, 57600)
+            link.send(gcs_heartbeat())
+            await link.command(arm_command(Target(2, 1)), timeout_s=5.0)
+            await async_wait_until(lambda: vehicle.armed, TIMEOUT_S, "the vehicle armed")
+            await link.wait_for(lambda st: st.armed, TIMEOUT_S, "armed in its heartbeat")
+            assert link.received["LOCAL_POSITION_NED"] > 0
+            assert not link.errors, link.errors
+        assert cable.bytes_relayed > 1000
+        assert not vehicle.rejected, vehicle.rejected
+
+
+async def test_a_missing_serial_device_is_a_link_error_naming_it() -> None:
+    link = open_link("serial:/dev/nonexistent-tty:57600", name="vehicle 0")
+    with pytest.raises(LinkError, match="vehicle 0: cannot open /dev/nonexistent-tty"):
+        await link.open()
+    assert not link.is_open
+    await asyncio.sleep(0)
