@@ -62,6 +62,7 @@ from isac_mission.mavwire.serial_link import SerialTransport
 from sim.autopilot.commands import CommandHandler
 from sim.autopilot.flight import FlightLogic
 from sim.autopilot.link import VehicleLink
+from sim.autopilot.mission_plan import MissionItem
 from sim.autopilot.mission_protocol import MissionProtocol
 from sim.autopilot.params import ParamProtocol, make_params
 from sim.autopilot.settings import AutopilotSettings
@@ -152,6 +153,11 @@ class Autopilot:
     def landed(self) -> bool:
         """True when the land detector says the vehicle is on the ground."""
         return self._flight.landed
+
+    @property
+    def mission_items(self) -> tuple[MissionItem, ...]:
+        """The uploaded mission plan (empty without one)."""
+        return tuple(self._flight.mission.items)
 
     @property
     def signatures_ok(self) -> int:
