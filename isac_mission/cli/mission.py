@@ -31,6 +31,7 @@ from isac_mission.mavwire.ports import (
     OFFBOARD_LOCAL_BASE_PORT,
 )
 from isac_mission.mavwire.serial_link import parse_vehicle_links
+from isac_mission.mavwire.signing import SIGNATURE_REJECTIONS
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
@@ -172,6 +173,7 @@ async def fly_mission(
         # The ground loop and the plan follower listen from the start: the world announces slot 0
         # as soon as every vehicle is in place, and in lockstep it then waits for plan 1.
         follower = asyncio.create_task(fleet.follow_plans())
+        mirror = asyncio.create_task(mirror_signing_counters(fleet, ground.report))
         ground_task = asyncio.create_task(ground.run(stop))
         try:
             say("waiting for the clock and the vehicles")
@@ -182,7 +184,7 @@ async def fly_mission(
             result.report = await ground_task
         finally:
             stop.set()
-            for task in (follower, ground_task):
+            for task in (follower, mirror, ground_task):
                 if not task.done():
                     task.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
@@ -207,6 +209,24 @@ async def fly_mission(
                 "offboard re-entries": sum(b.counters.offboard_reentries for b in fleet.bridges),
             }
     return result
+
+
+def signing_counters(fleet: BridgeFleet) -> dict[str, int]:
+    """The bridges' MAVLink signing rejections, summed over the fleet, as health counters:
+    `mavlink unsigned`, `mavlink bad_signature`, `mavlink replayed` (0 with signing off)."""
+    return {
+        f"mavlink {reason}": sum(b.link.errors[reason] for b in fleet.bridges)
+        for reason in SIGNATURE_REJECTIONS
+    }
+
+
+async def mirror_signing_counters(fleet: BridgeFleet, report: GroundReport) -> None:
+    """Keep `signing_counters` in the ground loop's counters (published in every `health`),
+    refreshed every 0.2 wall seconds until cancelled."""
+    while True:
+        for name, n in signing_counters(fleet).items():
+            report.counters[name] = n
+        await asyncio.sleep(0.2)
 
 
 def _timing_figures(result: LiveResult, fleet: BridgeFleet, speed: float) -> None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import time
-from typing import Any, Final, Literal
+from typing import Any, Final, Literal, get_args
 
 from isac_mission.config import MavlinkSigningKey
 from isac_mission.mavwire.dialect import mavlink2
@@ -27,6 +27,8 @@ SIGNING_EPOCH_UNIX_S: Final = 1_420_070_400
 SIGNATURE_LEN: Final = 13
 """link id (1) + timestamp (6) + signature (6) bytes at the end of a signed packet."""
 SignatureRejection = Literal["unsigned", "bad_signature", "replayed"]
+SIGNATURE_REJECTIONS: Final[tuple[SignatureRejection, ...]] = get_args(SignatureRejection)
+"""Every reason a signed link drops a packet for (the links count them under these names)."""
 
 
 def signing_timestamp(unix_s: float | None = None) -> int:

@@ -16,12 +16,15 @@ from typing import Any
 import pytest
 
 from isac_mission.bus import ZenohBus
+from isac_mission.cli.mission import mirror_signing_counters, signing_counters
 from isac_mission.config import DEFAULT_SIGNING_KEY_ENV
 from isac_mission.mavwire.builders import arm_command, takeoff_command
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.modes import FlightMode
 from isac_mission.service.bridge.fleet import BridgeFleet
+from isac_mission.service.ground.report import GroundReport
 from isac_mission.timebase import WallTime
+from isac_mission.wire import HealthMsg, decode_health, encode_health
 from tests.support.ports import free_port_block
 from tests.support.signing_peer import (
     HEX_KEY,
@@ -168,3 +171,17 @@ async def test_bridge_believes_only_correctly_signed_telemetry(
         }
         assert link.signatures_ok == 2
         assert unsigned.drain() == [] and forger.drain() == []
+        # The same counts reach `health` under their names (cli/mission.py mirrors them).
+        report = GroundReport()
+        mirror = asyncio.create_task(mirror_signing_counters(fleet, report))
+        await async_wait_until(
+            lambda: report.counters["mavlink replayed"] == 1, TIMEOUT_S, "mirror"
+        )
+        mirror.cancel()
+        assert signing_counters(fleet) == {
+            "mavlink unsigned": 2,
+            "mavlink bad_signature": 3,
+            "mavlink replayed": 1,
+        }
+        health = HealthMsg(0, 0.0, "running", dict(report.counters), "", {})
+        assert decode_health(encode_health(health)).counters["mavlink bad_signature"] == 3
