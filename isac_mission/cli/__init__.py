@@ -5,6 +5,7 @@
 - `embedded`: `sim` (the world alone), and the world of `run` (`run_embedded`): the only module
   importing `sim`, and so the only one importing both `sim` and the service
 - `live`: `run`, `serve` (the service side of a live mission is in `mission`)
+- `view`: `view` (the console over traces) and the console of `run` / `serve`
 - `security`: `gen-certs`, `gen-users`
 - `schema`: `schema` (the JSON Schema of every bus message)
 
@@ -21,7 +22,7 @@ from isac_mission.cli.app import app
 
 __all__ = ["app", "main"]
 
-COMMAND_GROUPS = ("offline", "sweep", "embedded", "live", "security", "schema")
+COMMAND_GROUPS = ("offline", "sweep", "embedded", "live", "security", "schema", "view")
 """Command modules in `--help` order; importing one registers its commands on `app`."""
 
 for _group in COMMAND_GROUPS:

@@ -51,6 +51,21 @@ ImpairLinkOpt = Annotated[
         "`impairment` section; docs/reliability.md)."
     ),
 ]
+ConsoleOpt = Annotated[
+    str,
+    typer.Option(
+        "--console",
+        help="Serve the operator console on HOST:PORT (loopback unless --console-public).",
+    ),
+]
+NoConsoleOpt = Annotated[bool, typer.Option("--no-console", help="Do not serve the console.")]
+PublicOpt = Annotated[
+    bool,
+    typer.Option(
+        "--console-public",
+        help="Allow a non-loopback --console address (the page can command the fleet).",
+    ),
+]
 
 
 def load_or_exit(path: Path) -> Scenario:

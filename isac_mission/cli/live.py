@@ -4,16 +4,19 @@ ground loop only): live progress, the end-of-run summary table and the plots."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
 from isac_mission.cli.app import (
     ConfigArg,
+    ConsoleOpt,
     ImpairLinkOpt,
     InjectLinkLossOpt,
+    NoConsoleOpt,
     PlanBudgetOpt,
+    PublicOpt,
     app,
     console,
     err_console,
@@ -32,6 +35,10 @@ from isac_mission.mavwire.ports import (
     OFFBOARD_LOCAL_BASE_PORT,
 )
 from isac_mission.quiet import quiet_highs_banner
+
+if TYPE_CHECKING:
+    from isac_mission.cli.mission import LiveOptions
+    from isac_mission.config import Scenario
 
 
 def _live(
@@ -54,18 +61,15 @@ def _live(
     link_outages: list[str],
     link_impairment: list[str] | None = None,
     vehicle_links: list[str] | None = None,
+    console_address: str | None = None,
+    console_public: bool = False,
 ) -> None:
-    """Shared body of `run` and `serve`: live progress, summary, plots; exit 0 on SIGINT/SIGTERM."""
-    import asyncio
+    """Shared body of `run` and `serve`: the console (unless console_address is None), live
+    progress, summary, plots; exit 0 on SIGINT/SIGTERM."""
     import logging
-    import signal
 
-    from rich.live import Live
-
-    from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve, summarize_live
-    from isac_mission.errors import IsacError
+    from isac_mission.cli.mission import LiveOptions
     from isac_mission.planning.slot import METHODS
-    from isac_mission.service.ground.report import SlotEvent
 
     s = load_or_exit(config)
     if method not in METHODS:
@@ -121,6 +125,32 @@ def _live(
         link_outages=tuple(link_outages),
         link_impairment=tuple(link_impairment or ()),
     )
+    console_server = None
+    if console_address is not None:
+        from isac_mission.cli.mission import ground_endpoint
+        from isac_mission.cli.view import start_live_console
+
+        console_server = start_live_console(
+            s, opts.method, ground_endpoint(s, opts), console_address, public=console_public
+        )
+    try:
+        _fly(s, opts, serve_only, out_dir)
+    finally:
+        if console_server is not None:
+            console_server.stop()
+
+
+def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> None:
+    """The mission with its live progress line, then the summary table and the plots."""
+    import asyncio
+    import signal
+
+    from rich.live import Live
+
+    from isac_mission.cli.mission import LiveResult, run_serve, summarize_live
+    from isac_mission.errors import IsacError
+    from isac_mission.service.ground.report import SlotEvent
+
     status = {"phase": "starting", "line": ""}
 
     def render() -> Table:
@@ -243,6 +273,9 @@ def run(
     plan_budget: PlanBudgetOpt = 1.0,
     inject_link_loss: InjectLinkLossOpt = None,
     impair_link: ImpairLinkOpt = None,
+    console_address: ConsoleOpt = "127.0.0.1:8080",
+    no_console: NoConsoleOpt = False,
+    console_public: PublicOpt = False,
 ) -> None:
     """The live system in one process: simulated vehicles (MAVLink), target and sensing, MAVLink
     bridges and the ground loop, over real loopback UDP and Zenoh."""
@@ -264,6 +297,8 @@ def run(
         plan_budget=plan_budget,
         link_outages=inject_link_loss or [],
         link_impairment=impair_link or [],
+        console_address=None if no_console else console_address,
+        console_public=console_public,
     )
 
 
@@ -300,6 +335,9 @@ def serve(
             "M=udpin:127.0.0.1:PORT (repeatable; docs/service.md, 'Links')."
         ),
     ] = None,
+    console_address: ConsoleOpt = "127.0.0.1:8080",
+    no_console: NoConsoleOpt = False,
+    console_public: PublicOpt = False,
 ) -> None:
     """The ground loop and the MAVLink bridges, for vehicles and sensing that run elsewhere
     (`isac-mission sim`, or real UAVs). The clock comes from the world over Zenoh."""
@@ -321,4 +359,6 @@ def serve(
         plan_budget=plan_budget,
         link_outages=[],
         vehicle_links=vehicle_link,
+        console_address=None if no_console else console_address,
+        console_public=console_public,
     )

@@ -17,8 +17,14 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def cli(*args: str) -> list[str]:
-    """`python -m isac_mission.cli ARGS` with this interpreter."""
-    return [sys.executable, "-m", "isac_mission.cli", *args]
+    """`python -m isac_mission.cli ARGS` with this interpreter; `run` and `serve` get
+    `--no-console` unless ARGS choose a console address (parallel tests must not share the
+    console's default port 8080)."""
+    argv = list(args)
+    wants_console = any(a == "--console" or a.startswith("--console=") for a in argv)
+    if argv and argv[0] in ("run", "serve") and not wants_console and "--no-console" not in argv:
+        argv.append("--no-console")
+    return [sys.executable, "-m", "isac_mission.cli", *argv]
 
 
 def start(argv: list[str], stdout: int = subprocess.PIPE) -> subprocess.Popen[str]:

@@ -38,9 +38,15 @@ PURE = (
 )
 """Pure modules and packages: numbers in, numbers out (numpy, scipy, cvxpy, filterpy ...)."""
 
-ADAPTERS = {"zenoh": "isac_mission/bus/session.py", "pymavlink": "isac_mission/mavwire/dialect.py"}
-"""Library -> the one module (in isac_mission and sim alike) that may import it: ZenohBus's
-session, and the dialect module that sets MAVLINK20 and the dialect before pymavlink loads."""
+ADAPTERS = {
+    "zenoh": "isac_mission/bus/session.py",
+    "pymavlink": "isac_mission/mavwire/dialect.py",
+    "starlette": "isac_mission/console",
+    "uvicorn": "isac_mission/console",
+}
+"""Library -> the one module or package (in isac_mission and sim alike) that may import it:
+ZenohBus's session, the dialect module that sets MAVLINK20 and the dialect before pymavlink
+loads, and the operator console for the web server."""
 
 NEUTRAL = (
     "isac_mission/timebase.py",
@@ -53,6 +59,20 @@ NEUTRAL = (
     "isac_mission/tracking",
 )
 """The layer both peers stand on: it imports neither peer, nor the offline experiments."""
+
+CONSOLE = "isac_mission/console"
+"""The operator console: an I/O adapter, a peer of the service on the neutral layer."""
+CONSOLE_MAY_IMPORT = (
+    "isac_mission.wire",
+    "isac_mission.bus",
+    "isac_mission.records",
+    "isac_mission.config",
+    "isac_mission.errors",
+    "isac_mission.types",
+    "isac_mission.console",
+)
+"""What the console may import of the project: the neutral layer (and the error and array
+types), never the service, the planner, `sim`, the experiments or the command line."""
 
 SERVICE = "isac_mission.service"
 CLI = "isac_mission.cli"
@@ -191,6 +211,28 @@ def neutral_violations(root: Path) -> list[str]:
     return out
 
 
+def console_violations(root: Path) -> list[str]:
+    """Console modules importing more of the project than the neutral layer, and service
+    modules importing the console (the two are peers)."""
+    out = []
+    for path in python_files(root, [CONSOLE]):
+        bad = sorted(
+            m
+            for m in imported_modules(path, root)
+            if within(m, "isac_mission")
+            and m != "isac_mission"
+            and not any(within(m, ok) for ok in CONSOLE_MAY_IMPORT)
+        )
+        bad += sorted(m for m in imported_modules(path, root) if within(m, "sim"))
+        if bad:
+            out.append(f"{_rel(path, root)}: imports {', '.join(bad)}")
+    for path in python_files(root, ["isac_mission/service"]):
+        bad = sorted(m for m in imported_modules(path, root) if within(m, "isac_mission.console"))
+        if bad:
+            out.append(f"{_rel(path, root)}: imports {', '.join(bad)}")
+    return out
+
+
 def line_count(path: Path) -> int:
     """Lines in a file (as an editor numbers them)."""
     return len(path.read_text(encoding="utf-8").splitlines())
@@ -222,7 +264,7 @@ def test_the_pure_modules_are_there() -> None:
 
 @pytest.mark.parametrize(("library", "adapter"), sorted(ADAPTERS.items()))
 def test_each_io_library_has_one_adapter(library: str, adapter: str) -> None:
-    assert (ROOT / adapter).is_file()
+    assert (ROOT / adapter).exists()
     assert adapter_violations(ROOT, library, adapter) == []
 
 
@@ -239,6 +281,31 @@ def test_the_neutral_layer_imports_no_peer() -> None:
     missing = [rel for rel in NEUTRAL if not (ROOT / rel).exists()]
     assert missing == []
     assert neutral_violations(ROOT) == []
+
+
+def test_the_console_imports_the_neutral_layer_only() -> None:
+    assert (ROOT / CONSOLE).is_dir()
+    assert console_violations(ROOT) == []
+
+
+def test_the_console_rule_finds_a_violation(tmp_path: Path) -> None:
+    root = _tree(
+        tmp_path,
+        {
+            "isac_mission/console/app.py": "from isac_mission.wire import keys\nimport starlette\n",
+            "isac_mission/console/bad.py": "from isac_mission.service.ground import loop\n",
+            "isac_mission/service/ground/x.py": "def f():\n    import isac_mission.console\n",
+            "isac_mission/cli/live.py": "import uvicorn\n",
+        },
+    )
+    assert [v.split(":")[0] for v in console_violations(root)] == [
+        "isac_mission/console/bad.py",
+        "isac_mission/service/ground/x.py",
+    ]
+    assert adapter_violations(root, "uvicorn", ADAPTERS["uvicorn"]) == [
+        "isac_mission/cli/live.py: imports uvicorn (only isac_mission/console may)"
+    ]
+    assert adapter_violations(root, "starlette", ADAPTERS["starlette"]) == []
 
 
 def test_no_module_is_over_400_lines() -> None:

@@ -1,0 +1,195 @@
+"""What the console knows of a live mission: the latest message of each kind, each vehicle's
+trail, and the time series, built from the bus messages as any observer receives them.
+
+`MissionView.ingest(key, payload)` validates a payload with the bus's own models
+(`wire.models.MODELS`, the receivers' sizes as context), updates the view and returns the
+updates to push to the pages as `(topic, data)` pairs (`console.feed`). A bad payload is counted
+by reason (`wire.rejection_reason`) and changes nothing. `snapshot()` is everything a page that
+has just connected needs. All data are JSON-ready (lists, floats, str), SI units.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter, deque
+from collections.abc import Callable
+from typing import Any, Final
+
+from pydantic import ValidationError
+
+from isac_mission.console.geometry import ellipse_2sigma, pcrb_parts, position_error_m
+from isac_mission.errors import MessageError
+from isac_mission.wire.envelope import loads, rejection_reason
+from isac_mission.wire.models import MODELS
+from isac_mission.wire.refusal import message_error
+
+TRAIL_POINTS: Final = 3000
+"""Trail points kept per vehicle (a point every TRAIL_STEP_M of motion)."""
+TRAIL_STEP_M: Final = 0.5
+SERIES_SLOTS: Final = 20_000
+"""Slots of time series kept."""
+REPLIES_KEPT: Final = 50
+
+Update = tuple[str, Any]
+
+
+class MissionView:
+    """The console's picture of one mission (single-threaded: the console's event loop).
+
+    config: the trace config of the mission (`Scenario.trace_config()`, docs/trace.md): M, K,
+    N, dt, area, bs_xy, d_th, v_max, ...; clock: wall clock (Unix s), replaceable in tests.
+    """
+
+    def __init__(self, config: dict[str, Any], clock: Callable[[], float] = time.time) -> None:
+        self.config = config
+        self.n_uavs = int(config["M"])
+        self.n_bs = int(config["K"])
+        self.clock = clock
+        self.latest: dict[str, Any] = {}
+        self.trails: dict[int, deque[list[float]]] = {
+            m: deque(maxlen=TRAIL_POINTS) for m in range(self.n_uavs)
+        }
+        self.series: dict[int, dict[str, Any]] = {}
+        self.replies: deque[dict[str, Any]] = deque(maxlen=REPLIES_KEPT)
+        self.truth_by_slot: dict[int, list[float]] = {}
+        self.estimate_by_slot: dict[int, list[float]] = {}
+        self.detection_wall_s: dict[int, float] = {}
+        self.received: Counter[str] = Counter()
+        self.rejected: Counter[str] = Counter()
+        self.last_rejection = ""
+
+    # ------------------------------------------------------------------ ingest
+
+    def ingest(self, key: str, payload: bytes) -> list[Update]:
+        """Validate one bus payload received on `key` and fold it in; the page updates."""
+        now = self.clock()
+        try:
+            obj = loads(payload)
+            kind = obj.get("type")
+            model = MODELS.get(kind) if isinstance(kind, str) else None
+            if model is None:
+                raise MessageError(f"type: {kind!r} is not a message type the console knows")
+            context = {"n_uavs": self.n_uavs, "n_bs": self.n_bs}
+            try:
+                msg = model.model_validate(obj, strict=True, context=context)
+            except ValidationError as err:
+                raise message_error(err, str(kind), model) from None
+        except MessageError as err:
+            reason = rejection_reason(err)
+            self.rejected[reason] += 1
+            self.last_rejection = f"{key}: {err}"[:1000]
+            return []
+        self.received[str(kind)] += 1
+        data = msg.model_dump(mode="json", by_alias=True)
+        handler = _HANDLERS.get(str(kind))
+        return handler(self, data, now) if handler is not None else []
+
+    def _telemetry(self, d: dict[str, Any], now: float) -> list[Update]:
+        d["received_wall_s"] = now
+        m = int(d["uav"])
+        trail = self.trails[m]
+        xy = [float(v) for v in d["position_xy_m"]]
+        if not trail or abs(trail[-1][0] - xy[0]) + abs(trail[-1][1] - xy[1]) >= TRAIL_STEP_M:
+            trail.append(xy)
+        return self._state(f"telemetry/{m}", d)
+
+    def _plan(self, d: dict[str, Any], now: float) -> list[Update]:
+        n = int(d["slot"])
+        point: dict[str, Any] = {"slot": n, "solve_ms": float(d["solve_s"]) * 1e3}
+        det = self.detection_wall_s.get(n - 1)
+        if det is not None:
+            point["det_to_plan_ms"] = (now - det) * 1e3
+        d["received_wall_s"] = now
+        return [*self._state("plan", d), *self._point(point)]
+
+    def _track(self, d: dict[str, Any], now: float) -> list[Update]:
+        n = int(d["slot"])
+        d["ellipse"] = ellipse_2sigma(d["P"])
+        parts = pcrb_parts(d["J"])
+        d["pcrb_pos"], d["pcrb_vel"] = parts if parts is not None else (None, None)
+        d["received_wall_s"] = now
+        del d["J"]
+        self.estimate_by_slot[n] = list(d["x"])
+        _trim(self.estimate_by_slot, n)
+        point: dict[str, Any] = {"slot": n, "pcrb_trace": d["pcrb_trace"]}
+        point |= {"pcrb_pos": d["pcrb_pos"], "pcrb_vel": d["pcrb_vel"]}
+        error = position_error_m(d["x"], self.truth_by_slot.get(n))
+        if error is not None:
+            point["error_m"] = error
+        return [*self._state("track", d), *self._point(point)]
+
+    def _truth(self, d: dict[str, Any], now: float) -> list[Update]:
+        n = int(d["slot"])
+        self.truth_by_slot[n] = list(d["target_x"])
+        _trim(self.truth_by_slot, n)
+        out = self._state("truth", d)
+        error = position_error_m(self.estimate_by_slot.get(n, [float("nan")] * 2), d["target_x"])
+        if error is not None:
+            out += self._point({"slot": n, "error_m": error})
+        return out
+
+    def _detection(self, d: dict[str, Any], now: float) -> list[Update]:
+        n = int(d["slot"])
+        self.detection_wall_s[n] = now
+        _trim(self.detection_wall_s, n)
+        return []
+
+    def _reply(self, d: dict[str, Any], now: float) -> list[Update]:
+        d["received_wall_s"] = now
+        self.replies.append(d)
+        return [("reply", d)]
+
+    def _plain(self, d: dict[str, Any], now: float) -> list[Update]:
+        d["received_wall_s"] = now
+        return self._state(str(d["type"]), d)
+
+    def _state(self, topic: str, data: dict[str, Any]) -> list[Update]:
+        self.latest[topic] = data
+        return [(topic, data)]
+
+    def _point(self, point: dict[str, Any]) -> list[Update]:
+        n = int(point["slot"])
+        self.series.setdefault(n, {"slot": n}).update(point)
+        _trim(self.series, n, SERIES_SLOTS)
+        return [("series", point)]
+
+    # ------------------------------------------------------------------ snapshot
+
+    def stats(self) -> dict[str, Any]:
+        """Messages received by type and rejected by reason, and the last rejection."""
+        return {
+            "received": dict(self.received),
+            "rejected": dict(self.rejected),
+            "last_rejection": self.last_rejection,
+        }
+
+    def snapshot(self) -> dict[str, Any]:
+        """Everything a page needs when it connects: config, latest state of each topic,
+        trails [M][k][2], the series (sorted by slot), the recent replies, the stats."""
+        return {
+            "config": self.config,
+            "latest": self.latest,
+            "trails": {str(m): list(t) for m, t in self.trails.items()},
+            "series": [self.series[n] for n in sorted(self.series)],
+            "replies": list(self.replies),
+            "stats": self.stats(),
+        }
+
+
+def _trim(by_slot: dict[int, Any], newest: int, keep: int = 64) -> None:
+    """Forget slots more than `keep` before `newest` (bounded memory over long missions)."""
+    for old in [n for n in by_slot if n < newest - keep]:
+        del by_slot[old]
+
+
+_HANDLERS: Final[dict[str, Callable[[MissionView, dict[str, Any], float], list[Update]]]] = {
+    "telemetry": MissionView._telemetry,
+    "plan": MissionView._plan,
+    "track": MissionView._track,
+    "truth": MissionView._truth,
+    "detection": MissionView._detection,
+    "control_reply": MissionView._reply,
+    "health": MissionView._plain,
+    "clock": MissionView._plain,
+    "control": MissionView._plain,
+}
