@@ -168,6 +168,8 @@ async def test_live_console_draws_the_telemetry_commands_and_survives_connection
                 post, url, "api/control", {"command": "set", "params": {"rate_min_mbps": -1}}
             )
             assert status == 422 and answer["field"] == "control.params.rate_min_mbps"
+            await asyncio.sleep(1.0)
+            assert len(obs.controls) == sent
 
             shot = tmp_path / "console.png"
             await page.screenshot(path=str(shot), full_page=True)

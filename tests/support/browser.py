@@ -91,11 +91,14 @@ def wait_http(url: str, proc: subprocess.Popen[str], timeout_s: float = 120.0) -
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if proc.poll() is not None:
-            raise AssertionError(f"process ended ({proc.returncode}): {proc.stderr.read()[-3000:]}")  # type: ignore[union-attr]
-        with contextlib.suppress(OSError):
-            with urllib.request.urlopen(url + "api/snapshot", timeout=5) as r:
-                data: dict[str, Any] = json.load(r)
-                return data
+            err = proc.stderr.read() if proc.stderr is not None else ""
+            raise AssertionError(f"process ended ({proc.returncode}): {err[-3000:]}")
+        with (
+            contextlib.suppress(OSError),
+            urllib.request.urlopen(url + "api/snapshot", timeout=5) as r,
+        ):
+            data: dict[str, Any] = json.load(r)
+            return data
         time.sleep(0.2)
     raise AssertionError(f"{url} did not answer within {timeout_s} s")
 
