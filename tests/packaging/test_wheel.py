@@ -94,18 +94,20 @@ def test_the_wheel_installs_with_its_version_and_scenarios(
             "-c",
             "import isac_mission as im; print(im.__version__); print(im.__file__); "
             "print(im.scenario_names()); from isac_mission.config import SCENARIOS_DIR; "
-            "print(SCENARIOS_DIR); print((SCENARIOS_DIR.parent / 'py.typed').is_file())",
+            "print(SCENARIOS_DIR); print((SCENARIOS_DIR.parent / 'py.typed').is_file()); "
+            "print(sorted(p.name for p in (SCENARIOS_DIR.parent / 'console' / 'static').iterdir()))",
         ],
         tmp_path,
         env,
     )
-    version, where, names, scenarios, typed = out.splitlines()
+    version, where, names, scenarios, typed, static = out.splitlines()
     assert version == isac_mission.__version__
     venv = python.parent.parent
     assert Path(where).is_relative_to(venv), where
     assert Path(scenarios).is_relative_to(venv) and not Path(scenarios).is_symlink()
     assert {"paper", "paper-literal", "constrained"} <= set(eval(names))
     assert typed == "True"
+    assert {"index.html", "console.js", "draw.js", "console.css"} <= set(eval(static))
     cli = run([str(python.parent / "isac-mission"), "--version"], tmp_path, env)
     assert cli.strip() == f"isac-mission {isac_mission.__version__}"
 
