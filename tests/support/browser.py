@@ -20,7 +20,7 @@ from typing import Any, Final
 import yaml
 
 from tests.support.live_cli import ROOT, cli, start
-from tests.support.ports import free_port_block, free_tcp_port
+from tests.support.ports import free_tcp_port, sitl_ports
 
 CHROMIUM: Final = "/usr/bin/chromium"
 ARGS: Final = (
@@ -75,10 +75,7 @@ def start_run(
         str(out),
         "--zenoh-listen",
         endpoint,
-        "--mavlink-base-port",
-        str(free_port_block(3)),
-        "--gcs-base-port",
-        str(free_port_block(3)),
+        *sitl_ports(3).cli_args(),
         "--console",
         f"127.0.0.1:{port}",
         *extra,
