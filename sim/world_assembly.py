@@ -80,6 +80,9 @@ def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> Aut
         serial_baud=57600 if serial is None else serial.baud,
         cruise_speed_mps=scenario.v_max,
         battery=battery_settings(scenario, m),
+        battery_low_thr=scenario.battery.low_thr,
+        battery_crit_thr=scenario.battery.critical_thr,
+        battery_emergen_thr=scenario.battery.emergency_thr,
     )
 
 

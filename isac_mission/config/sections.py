@@ -87,9 +87,17 @@ class BatteryConfig(Section):
     climb_power_w_per_mps: float = Field(
         30.0, ge=0, description="Extra power per m/s of climb rate, W/(m/s)."
     )
+    low_thr: float = Field(0.15, ge=0, lt=1, description="BAT_LOW_THR, warning.")
+    critical_thr: float = Field(0.07, ge=0, lt=1, description="BAT_CRIT_THR, return.")
+    emergency_thr: float = Field(0.05, ge=0, lt=1, description="BAT_EMERGEN_THR, land.")
 
     @model_validator(mode="after")
     def _overrides_positive(self) -> BatteryConfig:
+        if not self.emergency_thr <= self.critical_thr <= self.low_thr:
+            raise ValueError(
+                "thresholds must satisfy emergency_thr <= critical_thr <= low_thr "
+                f"(got {self.emergency_thr}, {self.critical_thr}, {self.low_thr})"
+            )
         for m, wh in self.capacity_wh_by_uav.items():
             if m < 0 or not wh > 0:
                 raise ValueError(

@@ -26,6 +26,7 @@ from typing import ClassVar
 from pydantic import Field, model_validator
 
 from isac_mission.config.validation import Settings
+from isac_mission.errors import ConfigError
 
 
 class BatterySettings(Settings):
@@ -62,8 +63,9 @@ class BatterySettings(Settings):
     @model_validator(mode="after")
     def _voltages_ordered(self) -> BatterySettings:
         if not self.cell_empty_v < self.cell_full_v:
-            raise ValueError(
-                f"cell_empty_v ({self.cell_empty_v}) must be below cell_full_v ({self.cell_full_v})"
+            raise ConfigError(
+                f"BatterySettings: cell_empty_v ({self.cell_empty_v}) must be below cell_full_v"
+                f" ({self.cell_full_v})"
             )
         return self
 

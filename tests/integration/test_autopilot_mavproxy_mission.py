@@ -164,3 +164,37 @@ def upload(
                 1, 1, seq, frame, command, int(seq == 0), 1, 0, 0, 0, math.nan, x, y, z, 0
             )
         )
+
+
+def test_advertised_mission_capabilities_are_honoured(fly) -> None:
+    """AUTOPILOT_VERSION says MISSION_INT and MISSION_FLOAT: both item forms upload and
+    download, and agree."""
+    _runner, ap, client = fly()
+    assert client.command(mavlink2.MAV_CMD_REQUEST_MESSAGE, 148) == mavlink2.MAV_RESULT_ACCEPTED
+    caps = client.recv("AUTOPILOT_VERSION").capabilities
+    for bit in ("MISSION_INT", "MISSION_FLOAT", "COMMAND_INT", "PARAM_FLOAT", "MAVLINK2"):
+        assert caps & getattr(mavlink2, f"MAV_PROTOCOL_CAPABILITY_{bit}"), bit
+    lat, lon = 47.3978, 8.5457
+    client.send(mavlink2.MAVLink_mission_count_message(1, 1, 1, 0))
+    assert client.recv("MISSION_REQUEST_INT").seq == 0
+    client.send(  # answered in the float form
+        mavlink2.MAVLink_mission_item_message(
+            1, 1, 0, REL, mavlink2.MAV_CMD_NAV_WAYPOINT, 1, 1, 0, 0, 0, 0, lat, lon, 12.0, 0
+        )
+    )
+    assert client.recv("MISSION_ACK").type == mavlink2.MAV_MISSION_ACCEPTED
+    # MISSION_ITEM carries degrees in float32: half an ulp is 2^(e - 24) for a value in
+    # [2^e, 2^(e+1)): 1.9e-6 deg at 47 deg (e = 5), 4.8e-7 deg at 8.5 deg (e = 3).
+    ulp_half_e7 = 2.0 ** (5 - 24) * 1e7
+    stored = ap.mission_items[0]
+    assert abs(stored.x - lat * 1e7) <= ulp_half_e7
+    assert abs(stored.y - lon * 1e7) <= 2.0 ** (3 - 24) * 1e7
+    client.send(mavlink2.MAVLink_mission_request_message(1, 1, 0, 0))
+    as_float = client.recv("MISSION_ITEM")
+    client.send(mavlink2.MAVLink_mission_request_int_message(1, 1, 0, 0))
+    as_int = client.recv("MISSION_ITEM_INT")
+    assert (as_float.x, as_float.y) == pytest.approx((lat, lon), abs=ulp_half_e7 * 1e-7)
+    assert (as_int.x, as_int.y, as_int.z) == (stored.x, stored.y, 12.0)
+    assert as_float.command == as_int.command == mavlink2.MAV_CMD_NAV_WAYPOINT
+    client.send(mavlink2.MAVLink_mission_request_int_message(1, 1, 1, 0))
+    assert client.recv("MISSION_ACK").type == mavlink2.MAV_MISSION_INVALID_SEQUENCE
