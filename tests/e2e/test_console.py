@@ -147,16 +147,32 @@ async def test_live_console_draws_the_telemetry_commands_and_survives_connection
                 assert gap <= tolerance_m, (m, d, xy)
                 assert history[-1][0] - d["published_wall_s"] < 10.0  # a recent one
 
-            # R_th from the page reaches the ground loop.
+            # R_th from the page reaches the ground loop, and its reply is shown.
             await page.fill("#rth", "12")
             await page.click("#set-rth")
-            await page.wait_for_selector("#replies li", timeout=30_000)
-            await page.wait_for_function(
-                "[...document.querySelectorAll('#health tr')].some(r => "
-                "r.textContent.startsWith('operator commands') && "
-                "Number(r.lastChild.textContent) >= 1)",
-                timeout=PAGE_TIMEOUT_MS,
+            await page.wait_for_selector(
+                "#replies li[data-state='accepted']", timeout=PAGE_TIMEOUT_MS
             )
+            reply = await page.text_content("#replies li[data-state='accepted']")
+            assert reply is not None and reply.startswith("set") and "accepted" in reply
+            # A command the ground loop refuses (release of a vehicle it does not exclude) is
+            # shown refused with its reason.
+            await page.select_option("#uav-select", "1")
+            await page.click("button[data-command='release']")
+            await page.wait_for_selector(
+                "#replies li[data-state='refused']", timeout=PAGE_TIMEOUT_MS
+            )
+            refused = await page.text_content("#replies li[data-state='refused']")
+            assert refused is not None and "release U1: refused" in refused
+            # hold and resume one vehicle: both accepted.
+            for command in ("hold", "resume"):
+                await page.select_option("#uav-select", "2")
+                await page.click(f"button[data-command='{command}']")
+                await page.wait_for_function(
+                    "[...document.querySelectorAll(\"#replies li[data-state='accepted']\")]"
+                    f".some(li => li.textContent.startsWith('{command} U2'))",
+                    timeout=PAGE_TIMEOUT_MS,
+                )
             assert any(c.get("params") == {"rate_min_mbps": 12.0} for c in obs.controls)
             # ... and a malformed one is refused on the page, and nothing is sent.
             sent = len(obs.controls)

@@ -111,7 +111,7 @@ function renderPanels() {
   $("slots-total").textContent = c.N ? " / " + c.N : "";
   $("method").textContent = c.method || "-";
   $("plan-status").textContent = plan ? plan.status : "-";
-  $("reason").textContent = plan && plan.reason ? plan.reason : "";
+  showReason(plan);
   rows($("mission-table"), [
     ["plan slot", plan ? String(plan.slot) : "-"],
     ["tr(PCRB)", track ? fmt(track.pcrb_trace, 4) : "-"],
@@ -139,6 +139,12 @@ function renderPanels() {
   rows($("health"), counters.map(([k, v]) => [k, String(v)]).concat(extra, health && health.last_error ? [["last error", health.last_error]] : []));
 }
 
+function showReason(plan) {
+  const e = $("reason");
+  e.textContent = plan && plan.reason ? plan.status + ": " + plan.reason : "";
+  e.className = plan && plan.status !== "ok" ? "reason" : "reason ok";
+}
+
 function renderReplayPanels() {
   const rowsOut = [];
   $("slot").textContent = String(S.frame); $("slot").dataset.slot = String(S.frame);
@@ -146,7 +152,8 @@ function renderReplayPanels() {
   $("method").textContent = S.runs.map((r) => r.label).join(", ");
   const first = S.runs[0] && S.runs[0].frames[S.frame - 1];
   $("plan-status").textContent = first ? first.status : "-";
-  $("reason").textContent = first && first.reason ? first.reason : "";
+  showReason(first);
+  for (const panel of ["vehicles", "health"]) $(panel).closest(".panel").hidden = true;
   for (const run of S.runs) {
     const f = run.frames[S.frame - 1];
     if (!f) continue;
