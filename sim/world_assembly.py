@@ -93,6 +93,7 @@ def battery_settings(scenario: Scenario, m: int) -> BatterySettings:
     return BatterySettings(
         capacity_wh=b.capacity_wh_by_uav.get(m, b.capacity_wh),
         start_remaining=b.start_remaining,
+        min_remaining=b.min_remaining,
         hover_power_w=b.hover_power_w,
         speed_power_w_per_mps=b.speed_power_w_per_mps,
         climb_power_w_per_mps=b.climb_power_w_per_mps,

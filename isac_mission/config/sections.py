@@ -80,6 +80,13 @@ class BatteryConfig(Section):
         "whose vehicle 1 runs low).",
     )
     start_remaining: float = Field(1.0, gt=0, le=1, description="Charge at start, (0, 1].")
+    min_remaining: float = Field(
+        0.5,
+        ge=0,
+        lt=1,
+        description="Floor of the charge (PX4 SITL's SIM_BAT_MIN_PCT): 0 lets a pack run out "
+        "and the low-battery failsafe fire.",
+    )
     hover_power_w: float = Field(250.0, gt=0, description="Power drawn armed at rest, W.")
     speed_power_w_per_mps: float = Field(
         4.0, ge=0, description="Extra power per m/s of horizontal speed, W/(m/s)."

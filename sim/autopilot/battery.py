@@ -9,7 +9,8 @@ Power drawn, W (docs/service.md, "Battery and the low-battery failsafe"):
 
 with |v_h| the horizontal speed and the climb rate the upward speed, m/s. The energy drawn is
 integrated over simulation time; `remaining` = 1 - energy drawn / capacity (from
-`start_remaining`). The pack voltage falls linearly with the charge from `cells * cell_full_v`
+`start_remaining`), down to `min_remaining` (50 % by default, where PX4 SITL's simulated battery
+stops draining: SIM_BAT_MIN_PCT), below which nothing more is drawn. The pack voltage falls linearly with the charge from `cells * cell_full_v`
 to `cells * cell_empty_v` (no sag); the current is P / V.
 
 Warning levels as PX4's battery module sets them (src/lib/battery/battery.cpp,
@@ -35,6 +36,9 @@ class BatterySettings(Settings):
     Attributes:
         capacity_wh: Usable energy of a full pack, Wh.
         start_remaining: Charge at start, fraction of the capacity in (0, 1].
+        min_remaining: Floor of the charge, as PX4 SITL's simulated battery stops draining at
+            SIM_BAT_MIN_PCT (50 %): so a default run never meets the low-battery failsafe; 0
+            lets the battery run out.
         cells: Cells in series (PX4 BAT1_N_CELLS).
         cell_full_v: Voltage of a full cell, V (PX4 BAT1_V_CHARGED).
         cell_empty_v: Voltage of an empty cell, V (PX4 BAT1_V_EMPTY).
@@ -48,6 +52,13 @@ class BatterySettings(Settings):
 
     capacity_wh: float = Field(80.0, gt=0, description="Usable energy of a full pack, Wh.")
     start_remaining: float = Field(1.0, gt=0, le=1, description="Charge at start, (0, 1].")
+    min_remaining: float = Field(
+        0.5,
+        ge=0,
+        lt=1,
+        description="The charge never falls below this (PX4 SITL's SIM_BAT_MIN_PCT, 50 %): "
+        "0 lets the battery run out.",
+    )
     cells: int = Field(4, ge=1, le=14, description="Cells in series (BAT1_N_CELLS).")
     cell_full_v: float = Field(4.05, gt=0, description="Full cell voltage (BAT1_V_CHARGED), V.")
     cell_empty_v: float = Field(3.6, gt=0, description="Empty cell voltage (BAT1_V_EMPTY), V.")
@@ -148,8 +159,10 @@ class Battery:
         """Draw energy for `dt_s` seconds; the new warning level if it rose, else None."""
         self.power_w = self.power_for(armed, speed_h_mps, climb_mps)
         voltage = self.voltage_v
-        drawn_wh = self.power_w * dt_s / 3600.0
-        self.energy_used_wh = min(self.settings.capacity_wh, self.energy_used_wh + drawn_wh)
+        s = self.settings
+        floor_wh = s.capacity_wh * (1.0 - min(s.min_remaining, s.start_remaining))
+        drawn_wh = min(self.power_w * dt_s / 3600.0, max(0.0, floor_wh - self.energy_used_wh))
+        self.energy_used_wh += drawn_wh
         self.energy_drawn_wh += drawn_wh
         self.charge_drawn_mah += 1000.0 * drawn_wh / voltage
         level = warning_for(self.remaining, thresholds)

@@ -223,7 +223,7 @@ def statustexts(client: Client, n: int) -> list[tuple[int, str]]:
 
 def test_low_battery_warns_then_returns_at_the_critical_level(fly) -> None:
     _runner, ap, client = fly(
-        battery=BatterySettings(capacity_wh=4.0, hover_power_w=250.0),
+        battery=BatterySettings(capacity_wh=4.0, min_remaining=0.0),
         battery_low_thr=0.85,
         battery_crit_thr=0.75,
         battery_emergen_thr=0.05,
@@ -251,7 +251,7 @@ def test_low_battery_warns_then_returns_at_the_critical_level(fly) -> None:
 
 def test_emergency_battery_level_lands_where_it_is(fly) -> None:
     _runner, ap, client = fly(
-        battery=BatterySettings(capacity_wh=1.0, hover_power_w=250.0),
+        battery=BatterySettings(capacity_wh=1.0, min_remaining=0.0),
         battery_low_thr=0.8,
         battery_crit_thr=0.6,
         battery_emergen_thr=0.5,

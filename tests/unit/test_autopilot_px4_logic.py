@@ -26,11 +26,11 @@ PX4_THRESHOLDS = Thresholds(0.15, 0.07, 0.05)
 
 
 def test_energy_drawn_is_power_times_time_with_the_speed_and_climb_terms() -> None:
-    b = Battery(BatterySettings(capacity_wh=100.0))
+    b = Battery(BatterySettings(capacity_wh=100.0, min_remaining=0.0))
     for _ in range(3600):  # one hour at 1 s steps, hovering armed
         b.step(1.0, True, 0.0, 0.0, PX4_THRESHOLDS)
-    # 250 W for 1 h = 250 Wh of a 100 Wh pack: empty, and the energy drawn counted in full.
-    assert b.energy_drawn_wh == pytest.approx(250.0)
+    # 250 W for 1 h would be 250 Wh: a 100 Wh pack is empty after 100.
+    assert b.energy_drawn_wh == pytest.approx(100.0)
     assert b.remaining == 0.0
     b = Battery(BatterySettings(capacity_wh=100.0))
     b.step(36.0, True, 10.0, 2.0, PX4_THRESHOLDS)  # 0.01 h at 10 m/s climbing 2 m/s
@@ -39,6 +39,15 @@ def test_energy_drawn_is_power_times_time_with_the_speed_and_climb_terms() -> No
     assert b.remaining == pytest.approx(1.0 - 3.5 / 100.0)
     assert b.power_for(True, 0.0, -3.0) == 250.0, "descending costs no more than hovering"
     assert b.power_for(False, 10.0, 2.0) == 5.0, "disarmed: avionics only"
+
+
+def test_charge_stops_at_the_sitl_floor_by_default() -> None:
+    b = Battery(BatterySettings(capacity_wh=1.0))
+    for _ in range(100):  # 250 W for 100 s: 6.9 Wh asked of a 1 Wh pack
+        b.step(1.0, True, 0.0, 0.0, PX4_THRESHOLDS)
+    assert b.remaining == pytest.approx(0.5)
+    assert b.energy_drawn_wh == pytest.approx(0.5)
+    assert b.warning is BatteryWarning.NONE
 
 
 def test_voltage_falls_linearly_with_charge_and_current_is_power_over_voltage() -> None:
@@ -50,7 +59,7 @@ def test_voltage_falls_linearly_with_charge_and_current_is_power_over_voltage() 
 
 
 def test_warning_levels_rise_once_each_and_never_fall() -> None:
-    b = Battery(BatterySettings(capacity_wh=1.0, start_remaining=0.2))
+    b = Battery(BatterySettings(capacity_wh=1.0, start_remaining=0.2, min_remaining=0.0))
     rises = []
     for _ in range(400):  # 250 W drains 1 Wh in 14.4 s; 0.1 s steps
         level = b.step(0.1, True, 0.0, 0.0, PX4_THRESHOLDS)
@@ -197,4 +206,5 @@ def test_scenario_battery_reaches_each_vehicle() -> None:
     s = parse_scenario({"uavs": {"battery": {"capacity_wh_by_uav": {1: 2.5}}}}, "x.yaml")
     caps = [autopilot_settings(s, WorldOptions(), m).battery.capacity_wh for m in range(3)]
     assert caps == [80.0, 2.5, 80.0]
+    assert autopilot_settings(s, WorldOptions(), 1).battery.min_remaining == 0.5
     assert autopilot_settings(s, WorldOptions(), 0).cruise_speed_mps == s.v_max
