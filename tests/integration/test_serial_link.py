@@ -11,11 +11,11 @@ import pytest
 
 from isac_mission.errors import LinkError
 from isac_mission.mavwire.builders import Target, arm_command, gcs_heartbeat
-from isac_mission.mavwire.serial_link import SerialMavlinkLink, open_link
+from isac_mission.mavwire.serial_link import SerialMavlinkLink, SerialTransport, open_link
 from sim.autopilot.settings import AutopilotSettings
 from tests.support.ports import free_udp_ports
 from tests.support.pty_pair import PtyCable
-from tests.support.sim_harness import SimRunner, async_wait_until
+from tests.support.sim_harness import SimRunner, async_wait_until, wait_until
 
 pytestmark = pytest.mark.timeout(120)
 TIMEOUT_S = 30.0
@@ -59,3 +59,27 @@ async def test_a_missing_serial_device_is_a_link_error_naming_it() -> None:
         await link.open()
     assert not link.is_open
     await asyncio.sleep(0)
+
+
+def test_a_vehicle_whose_serial_peer_never_reads_drops_bytes_and_flies_on(
+    sim_runner: Callable[..., SimRunner],
+) -> None:
+    """Nobody reads the far end: the device's buffers fill, the vehicle's writes are dropped and
+    counted, and its event loop (the simulation) never blocks on the device."""
+    offboard, gcs = free_udp_ports(2)
+    with PtyCable() as cable:
+        settings = AutopilotSettings(
+            offboard_port=offboard,
+            gcs_port=gcs,
+            bind_port=0,
+            gcs_bind_port=0,
+            serial_device=cable.a,
+        )
+        runner = sim_runner([settings])
+        vehicle = runner.autopilots[0]
+        serial_link = runner.call(lambda: vehicle._links[-1])  # the third link: the device
+        transport = serial_link.transport
+        assert isinstance(transport, SerialTransport)
+        wait_until(lambda: transport.dropped_bytes > 0, TIMEOUT_S, "bytes dropped")
+        t_s = vehicle.state.time_s
+        wait_until(lambda: vehicle.state.time_s > t_s + 1.0, TIMEOUT_S, "simulation time on")

@@ -26,6 +26,8 @@ class PtyCable:
         self._m2, self._s2 = os.openpty()
         for fd in (self._s1, self._s2):
             tty.setraw(fd)
+        for fd in (self._m1, self._m2):
+            os.set_blocking(fd, False)
         self.a = os.ttyname(self._s1)
         self.b = os.ttyname(self._s2)
         self.bytes_relayed = 0
@@ -42,16 +44,27 @@ class PtyCable:
             for fd in ready:
                 try:
                     data = os.read(fd, 65536)
-                except OSError:  # EIO: no process has the slave open right now
+                except (BlockingIOError, OSError):  # EIO: nobody has the slave open now
                     continue
-                view = memoryview(data)
-                while view:
-                    try:
-                        n = os.write(other[fd], view)
-                    except OSError:
-                        break
-                    view = view[n:]
+                if not self._write_all(other[fd], data):
+                    return
                 self.bytes_relayed += len(data)
+
+    def _write_all(self, fd: int, data: bytes) -> bool:
+        """Write `data` to `fd`, waiting while the far end's buffer is full (nobody reading it,
+        like a cable) but not past `close()`; False when closed meanwhile."""
+        view = memoryview(data)
+        while view:
+            _, writable, _ = select.select([self._stop_r], [fd], [])
+            if not writable:
+                return False
+            try:
+                view = view[os.write(fd, view) :]
+            except BlockingIOError:
+                continue
+            except OSError:
+                return True  # the far end went away: the bytes are lost, as on a cable
+        return True
 
     def close(self) -> None:
         os.write(self._stop_w, b"x")
