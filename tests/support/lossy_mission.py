@@ -133,8 +133,10 @@ async def fly_lossy(
     seed: int = 1,
     speed: float = 4.0,
     lockstep: bool = True,
+    **live: Any,
 ) -> LossyRun:
-    """Fly `s` live once with `impairment` on the world's links (None: clean) and measure it."""
+    """Fly `s` live once with `impairment` on the world's links (None: clean) and measure it;
+    `live`: further LiveOptions."""
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
     ports = sitl_ports(s.M)
     opts = LiveOptions(
@@ -144,6 +146,7 @@ async def fly_lossy(
         out_dir=out_dir,
         zenoh_endpoint=endpoint,
         **ports.world_kwargs(),
+        **live,
     )
     world = World(
         s,
