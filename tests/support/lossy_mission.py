@@ -109,6 +109,8 @@ class LossyRun:
     hb_loss_run: list[int]
     """Per vehicle: the longest run of consecutive lost heartbeats (whole run)."""
     hb_loss_rate: float
+    hb_sent: int
+    """Heartbeats the vehicles offered to their offboard downlinks (the whole run)."""
     counters: dict[str, int]
 
     def warranted_exclusion_s(self, m: int) -> float:
@@ -214,5 +216,6 @@ def measure(s: Scenario, live: LiveResult, world: World, watches: list[RadioWatc
         any_silence_s=[w.longest_silence_s(t0, t1, heartbeats_only=False) for w in watches],
         hb_loss_run=[w.longest_hb_loss_run for w in watches],
         hb_loss_rate=lost / sent if sent else math.nan,
+        hb_sent=sent,
         counters=counters,
     )

@@ -132,8 +132,11 @@ class VehicleWatch:
         log.warning("vehicle %d: %s; planning the others around it", m, why)
 
     def positions(self, t_s: float, det_xy: FloatArray | None = None) -> FloatArray:
-        """[M, 2] positions (m): fresh telemetry, else det_xy (a slot's detection positions),
-        else NaN. An excluded vehicle holds where it was last seen."""
+        """[M, 2] positions (m): det_xy (a slot's detection positions: where each UAV was at the
+        slot boundary, the planning instant), else fresh telemetry, else NaN. An excluded vehicle
+        holds where it was last seen. (Telemetry second: over a radio with 100 ms of latency it
+        is 0.1-0.2 s old at the boundary, and planning from it stalled the accelerating
+        vehicles; docs/reliability.md, "Lossy, late radio links".)"""
         xy = (
             np.array(det_xy, dtype=float)
             if det_xy is not None
@@ -142,7 +145,9 @@ class VehicleWatch:
         for m in range(self.n_uavs):
             tel = self.telemetry.get(m)
             fresh = tel is not None and t_s - tel.t_s <= self.settings.telemetry_max_age_s
-            if tel is not None and ((fresh and tel.link == "ok") or m in self.excluded):
+            measured = bool(np.all(np.isfinite(xy[m])))
+            usable = fresh and tel is not None and tel.link == "ok" and not measured
+            if tel is not None and (usable or m in self.excluded):
                 xy[m] = tel.position_xy_m  # an excluded vehicle holds where it was last seen
         return xy
 
