@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import json
 import math
 import socket
 from dataclasses import dataclass, field
@@ -112,6 +113,10 @@ class LossyRun:
     hb_sent: int
     """Heartbeats the vehicles offered to their offboard downlinks (the whole run)."""
     counters: dict[str, int]
+    detections_lost: set[tuple[int, int]] = field(default_factory=set)
+    """(slot, UAV) of every detection the world's impaired Zenoh channel lost."""
+    detections_late_s: dict[tuple[int, int], float] = field(default_factory=dict)
+    """(slot, UAV) -> the delay (simulation s) of each detection that got through."""
 
     def warranted_exclusion_s(self, m: int) -> float:
         """The exclusion vehicle m's radio silence warrants: the silence's excess over the link
@@ -164,7 +169,17 @@ async def fly_lossy(
         ),
     )
     watches = [RadioWatch() for _ in range(s.M)]
+    detections_lost: set[tuple[int, int]] = set()
+    detections_late: dict[tuple[int, int], float] = {}
     world_stop = asyncio.Event()
+
+    def on_detection(args: tuple[Any, ...], delays: list[float]) -> None:
+        msg = json.loads(args[1])
+        key = (int(msg["slot"]), int(msg["uav"]))
+        if delays:
+            detections_late[key] = min(delays)
+        else:
+            detections_lost.add(key)
 
     async def run_world() -> None:
         try:
@@ -180,6 +195,9 @@ async def fly_lossy(
                         w.observe(world.clock.now_s, args[0], delays)
 
                     line.observer = observe
+            if world.detection_links is not None:
+                for line in world.detection_links.lines.values():
+                    line.observer = on_detection
             await world.run(world_stop)
         finally:
             await world.close()
@@ -190,7 +208,9 @@ async def fly_lossy(
     finally:
         world_stop.set()
         await asyncio.wait_for(task, timeout=60.0)
-    return measure(s, live, world, watches)
+    run = measure(s, live, world, watches)
+    run.detections_lost, run.detections_late_s = detections_lost, detections_late
+    return run
 
 
 def measure(s: Scenario, live: LiveResult, world: World, watches: list[RadioWatch]) -> LossyRun:
