@@ -19,6 +19,8 @@ import subprocess
 import time
 from pathlib import Path
 
+import pytest
+
 from isac_mission.bus import tcp_loopback
 from isac_mission.records import Trace, read_trace
 from tests.support.independent.constraints import check_constraints
@@ -91,16 +93,21 @@ def test_two_process_start_traces_slot_1_as_planned(tmp_path: Path) -> None:
     assert re.search(r"vehicle exclusions\s*│", log_text) is None, log_text[-3000:]
 
 
+@pytest.mark.parametrize(
+    "world",
+    [("--lockstep", "--lockstep-timeout", "1"), ()],
+    ids=["lockstep-1s-timeout", "free-running"],
+)
 def test_serve_frozen_with_sigstop_holds_then_replans_from_where_the_vehicles_are(
-    tmp_path: Path,
+    tmp_path: Path, world: tuple[str, ...]
 ) -> None:
-    """SIGSTOP `serve` for 5 s after a few slots, then SIGCONT. The world (lockstep with a 1 s
-    timeout, so that its time goes on without plans) keeps running: the vehicles take their
-    offboard-loss hold. The slots of the freeze are traced `held` with the positions the
+    """SIGSTOP `serve` for 5 s after a few slots, then SIGCONT. The world keeps running (in
+    lockstep with a 1 s timeout, so that its time goes on without plans, or free-running at
+    3x): the vehicles take their offboard-loss hold. The slots of the freeze are traced `held` with the positions the
     detections carry; the vehicles are back in OFFBOARD and the mission completes; the record
     checks clean on every slot."""
     n_slots = 24
-    serve, sim, path = _launch(tmp_path, n_slots, "--lockstep", "--lockstep-timeout", "1")
+    serve, sim, path = _launch(tmp_path, n_slots, *world)
     try:
         before = wait_for_slots(path, 6, serve, timeout_s=300)
         os.kill(serve.pid, signal.SIGSTOP)
@@ -121,6 +128,11 @@ def test_serve_frozen_with_sigstop_holds_then_replans_from_where_the_vehicles_ar
         f"{stall.group(1) if stall else '?'} s; replanned after "
         f"{waited.group(1) if waited else '?'} s"
     )
+    counters = {
+        name: re.search(rf"{name}\s*│\s*(\d+)\s*│", log_text)
+        for name in ("plans dropped after a stall", "plans late", "link interruptions")
+    }
+    print({k: (v.group(1) if v else 0) for k, v in counters.items()})
     assert stall is not None and float(stall.group(1)) >= FREEZE_WALL_S - 0.5, log_text[-3000:]
     held = [n for n, st in statuses.items() if st == "held"]
     assert held, statuses
