@@ -173,6 +173,11 @@ class MissionState:
         r_used = updated.r_used
         self.slot = det.slot
         plan = pending.plan
+        # A UAV measured with a share although this plan had it out (BS -1): the world was still
+        # on an earlier plan (this one came late), whose association goes with those shares.
+        assoc = plan.bs_of_uav
+        if self.assoc is not None:
+            assoc = np.where((assoc < 0) & (np.asarray(eta_used) > 0), self.assoc, assoc)
         self.eta, self.assoc = plan.bandwidth_share, plan.bs_of_uav
         self.pending = None
         rep = plan.report
@@ -182,7 +187,7 @@ class MissionState:
             status=rep.status,
             uav_xy=uav_xy,
             eta=np.asarray(eta_used, dtype=float),
-            assoc=plan.bs_of_uav,
+            assoc=assoc,
             target_true=None,
             target_est=self.belief.x,
             target_pred=pred.x,
