@@ -24,7 +24,7 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from isac_mission.console.feed import ClientFeed
+from isac_mission.console.feed import ClientFeed, batch_text
 from isac_mission.console.requests import (
     ControlRequest,
     LoginRequest,
@@ -37,8 +37,8 @@ from isac_mission.wire.strict_json import dumps_strict
 log = logging.getLogger(__name__)
 
 STATIC: Final = Path(__file__).parent / "static"
-MIN_SEND_INTERVAL_S: Final = 0.02
-"""A page gets at most one batch per 20 ms; what arrives meanwhile is coalesced."""
+MIN_SEND_INTERVAL_S: Final = 0.04
+"""A page gets at most one batch per 40 ms; what arrives meanwhile is coalesced."""
 SEND_TIMEOUT_S: Final = 10.0
 """A page that takes longer than this to accept one batch is dropped."""
 
@@ -108,7 +108,7 @@ def build_app(service: ConsoleService, replay: dict[str, Any] | None = None) -> 
                     waiter.cancel()
                     batch = feed.take()
                     if batch:
-                        text = dumps_strict(batch)
+                        text = batch_text(batch)
                         await asyncio.wait_for(websocket.send_text(text), SEND_TIMEOUT_S)
                     await asyncio.sleep(MIN_SEND_INTERVAL_S)
             finally:

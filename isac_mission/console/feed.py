@@ -4,16 +4,21 @@ Every update has a topic. A *state* topic (`telemetry/0`, `plan`, `track`, `heal
 only its latest value: a page that falls behind gets the newest state, not a backlog. An *event*
 topic (`series`, `reply`, `notice`) is appended to a bounded queue whose oldest items are dropped
 when it is full. `put` never blocks and never waits for a page; the page's sender task awaits
-`wait()` and sends `take()` as one message. So a slow or stalled page costs a bounded amount of
+`wait()` and sends `take()` as one message. `Hub.broadcast` encodes an update once for every
+page. So a slow or stalled page costs a bounded amount of
 memory and never delays the bus or the other pages.
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
+import logging
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Final
+
+log = logging.getLogger(__name__)
 
 EVENT_TOPICS: Final = frozenset({"series", "reply", "notice"})
 """Topics whose every item is kept (up to the queue's bound) instead of the latest one."""
@@ -38,12 +43,12 @@ class ClientFeed:
 
     max_events: int = MAX_EVENTS
     counters: FeedCounters = field(default_factory=FeedCounters)
-    _latest: dict[str, Any] = field(default_factory=dict)
-    _events: deque[tuple[str, Any]] = field(default_factory=deque)
+    _latest: dict[str, str] = field(default_factory=dict)
+    _events: deque[tuple[str, str]] = field(default_factory=deque)
     _ready: asyncio.Event | None = None
 
-    def put(self, topic: str, data: Any) -> None:
-        """Offer an update (never blocks)."""
+    def put(self, topic: str, data: str) -> None:
+        """Offer an update, `data` its encoded JSON (never blocks)."""
         self.counters.put += 1
         if topic in EVENT_TOPICS:
             if len(self._events) >= self.max_events:
@@ -63,11 +68,10 @@ class ClientFeed:
         """Updates waiting to be taken."""
         return len(self._latest) + len(self._events)
 
-    def take(self) -> list[dict[str, Any]]:
-        """Everything pending, state topics first, as `{"topic": ..., "data": ...}` items; the
-        feed is empty afterwards."""
-        out = [{"topic": t, "data": d} for t, d in self._latest.items()]
-        out += [{"topic": t, "data": d} for t, d in self._events]
+    def take(self) -> list[str]:
+        """Everything pending (encoded updates), state topics first; empty afterwards."""
+        out = list(self._latest.values())
+        out += [d for _, d in self._events]
         self._latest.clear()
         self._events.clear()
         if self._ready is not None:
@@ -102,5 +106,20 @@ class Hub:
         self.feeds.discard(feed)
 
     def broadcast(self, topic: str, data: Any) -> None:
+        """Encode `{"topic", "data"}` once and offer it to every page (nothing if no page)."""
+        if not self.feeds:
+            return
+        try:
+            text = json.dumps(
+                {"topic": topic, "data": data}, allow_nan=False, separators=(",", ":")
+            )
+        except (TypeError, ValueError) as err:  # a non-finite number: never sent as NaN
+            log.warning("console: update %s not sent: %s", topic, err)
+            return
         for feed in self.feeds:
-            feed.put(topic, data)
+            feed.put(topic, text)
+
+
+def batch_text(items: list[str]) -> str:
+    """One WebSocket message: the JSON array of encoded updates."""
+    return "[" + ",".join(items) + "]"

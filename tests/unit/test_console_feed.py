@@ -6,25 +6,35 @@ from __future__ import annotations
 
 import asyncio
 import json
+from typing import Any
 
 import numpy as np
 import pytest
 
 from isac_mission.config import load_scenario
-from isac_mission.console.feed import ClientFeed, Hub
+from isac_mission.console.feed import ClientFeed, Hub, batch_text
 from isac_mission.console.geometry import ellipse_2sigma, pcrb_parts
 from isac_mission.console.state import MissionView
 from isac_mission.wire import TelemetryMsg, TrackMsg, encode_telemetry, encode_track
 
 
+def _offer(feed: ClientFeed, topic: str, data: object) -> None:
+    feed.put(topic, json.dumps({"topic": topic, "data": data}))
+
+
+def _take(feed: ClientFeed) -> list[dict[str, Any]]:
+    out: list[dict[str, Any]] = json.loads(batch_text(feed.take()))
+    return out
+
+
 def test_state_topics_keep_only_their_latest_value_in_arrival_order() -> None:
     feed = ClientFeed()
     for i in range(100):
-        feed.put("telemetry/0", {"i": i})
-        feed.put("telemetry/1", {"i": i})
-    feed.put("plan", {"slot": 3})
-    feed.put("telemetry/0", {"i": 100})
-    batch = feed.take()
+        _offer(feed, "telemetry/0", {"i": i})
+        _offer(feed, "telemetry/1", {"i": i})
+    _offer(feed, "plan", {"slot": 3})
+    _offer(feed, "telemetry/0", {"i": 100})
+    batch = _take(feed)
     assert [u["topic"] for u in batch] == ["telemetry/1", "plan", "telemetry/0"]
     assert batch[-1]["data"] == {"i": 100}
     assert feed.counters.coalesced == 100 + 99
@@ -34,9 +44,9 @@ def test_state_topics_keep_only_their_latest_value_in_arrival_order() -> None:
 def test_events_are_kept_in_order_and_bounded() -> None:
     feed = ClientFeed(max_events=10)
     for n in range(25):
-        feed.put("series", {"slot": n})
-    feed.put("reply", {"id": "a"})
-    batch = feed.take()
+        _offer(feed, "series", {"slot": n})
+    _offer(feed, "reply", {"id": "a"})
+    batch = _take(feed)
     assert [u["data"].get("slot") for u in batch[:-1]] == list(range(16, 25))
     assert batch[-1] == {"topic": "reply", "data": {"id": "a"}}
     assert feed.counters.dropped == 16
@@ -53,7 +63,7 @@ def test_a_page_that_never_takes_costs_bounded_memory_and_never_blocks_the_other
             hub.broadcast("series", {"slot": n})
             if n % 100 == 0:
                 await asyncio.wait_for(live.wait(), 1.0)
-                got += len(live.take())
+                got += len(_take(live))
         return stalled.pending, got
 
     pending, got = asyncio.run(scenario())
@@ -61,18 +71,27 @@ def test_a_page_that_never_takes_costs_bounded_memory_and_never_blocks_the_other
     assert got > 100
 
 
+def test_the_hub_encodes_once_and_never_sends_a_non_finite_number() -> None:
+    hub, a, b = Hub(), ClientFeed(), ClientFeed()
+    hub.add(a)
+    hub.add(b)
+    hub.broadcast("plan", {"objective": 1.5})
+    hub.broadcast("track", {"x": [float("nan")]})
+    assert a.take() == b.take() == ['{"topic":"plan","data":{"objective":1.5}}']
+
+
 def test_wait_returns_at_once_when_something_is_pending_and_wakes_on_put() -> None:
     async def scenario() -> list[str]:
         feed = ClientFeed()
-        feed.put("plan", {})
+        _offer(feed, "plan", {})
         await asyncio.wait_for(feed.wait(), 0.5)
         feed.take()
         waiter = asyncio.create_task(feed.wait())
         await asyncio.sleep(0)
         assert not waiter.done()
-        feed.put("health", {})
+        _offer(feed, "health", {})
         await asyncio.wait_for(waiter, 0.5)
-        return [u["topic"] for u in feed.take()]
+        return [u["topic"] for u in _take(feed)]
 
     assert asyncio.run(scenario()) == ["health"]
 

@@ -76,10 +76,20 @@ function render() {
     }
   }
   pendingTelemetry = [];
-  renderPanels();
-  if (S.chartsDirty) { renderCharts(); S.chartsDirty = false; }
+  // The map every frame; the tables at most 4 times and the charts once a second (live), so
+  // that a busy mission costs the browser little; a trailing frame shows the final state.
+  const replay = S.mode === "replay";
+  if (replay || t0 - lastPanelsMs >= 250) { renderPanels(); lastPanelsMs = t0; } else later();
+  if (S.chartsDirty) {
+    if (replay || t0 - lastChartsMs >= 1000) { renderCharts(); S.chartsDirty = false; lastChartsMs = t0; } else later();
+  }
   M.frames++;
   return performance.now() - t0;
+}
+
+let lastPanelsMs = -1e9, lastChartsMs = -1e9, tail = null;
+function later() {
+  if (tail === null) tail = setTimeout(() => { tail = null; lastPanelsMs = -1e9; schedule(); }, 300);
 }
 
 function schedule() {

@@ -1,0 +1,137 @@
+"""The console's server over a real Zenoh hub and real HTTP / WebSocket clients on loopback:
+bus messages reach a page as updates (bad ones counted, not shown), every bad web request gets a
+4xx naming the field and sends nothing, a good command goes out on `control`, and a page that
+never reads does not hold up the others."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+import urllib.error
+import urllib.request
+from typing import Any
+
+import numpy as np
+import websockets
+
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
+from isac_mission.config import load_scenario
+from isac_mission.console import (
+    BusAccess,
+    ConsoleAddress,
+    ConsoleServer,
+    ConsoleService,
+    MissionView,
+)
+from isac_mission.wire import Keys, TelemetryMsg, decode_control, encode_telemetry
+from tests.support.ports import free_tcp_port
+
+TIMEOUT_S = 30.0
+KEYS = Keys("paper")
+
+
+def _post(url: str, body: bytes, content_type: str = "application/json") -> tuple[int, Any]:
+    req = urllib.request.Request(
+        url + "api/control", data=body, headers={"Content-Type": content_type}, method="POST"
+    )
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return r.status, json.load(r)
+    except urllib.error.HTTPError as err:
+        return err.code, json.load(err)
+
+
+def _telemetry(uav: int, x_m: float) -> bytes:
+    msg = TelemetryMsg(
+        3,
+        3.0,
+        uav,
+        np.array([x_m, 5.0]),
+        100.0,
+        np.zeros(2),
+        "offboard",
+        True,
+        False,
+        "ok",
+        published_wall_s=time.time(),
+    )
+    return encode_telemetry(msg)
+
+
+async def _until(pred: Any, what: str) -> None:
+    deadline = time.monotonic() + TIMEOUT_S
+    while not pred():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        await asyncio.sleep(0.05)
+
+
+async def test_console_server_pushes_bus_updates_and_validates_every_request() -> None:
+    endpoint = tcp_loopback(free_tcp_port())
+    s = load_scenario("paper")
+    service = ConsoleService(MissionView(s.trace_config()), BusAccess("paper", endpoint))
+    server = ConsoleServer(service, ConsoleAddress("127.0.0.1", free_tcp_port()))
+    url = server.start()
+    ws_url = url.replace("http://", "ws://") + "ws"
+    try:
+        async with await ZenohBus.open_async(BusSettings.hub(endpoint)) as hub:
+            await _until(lambda: service.status == "watching", "the console's bus")
+            async with (
+                hub.subscribe(KEYS.control) as controls,
+                websockets.connect(ws_url) as page,
+                websockets.connect(ws_url) as stalled,
+            ):
+                first = json.loads(await asyncio.wait_for(page.recv(), TIMEOUT_S))
+                assert first[0]["topic"] == "snapshot"
+                assert first[0]["data"]["config"]["M"] == 3
+                await asyncio.wait_for(stalled.recv(), TIMEOUT_S)  # then it never reads again
+                await hub.wait_for_subscribers(KEYS.telemetry(1), TIMEOUT_S)
+                hub.publish(KEYS.telemetry(1), b"garbage")
+                for i in range(2000):
+                    hub.publish(KEYS.telemetry(1), _telemetry(1, float(i)))
+                seen: list[float] = []
+                deadline = time.monotonic() + TIMEOUT_S
+                while (not seen or seen[-1] < 1999.0) and time.monotonic() < deadline:
+                    for u in json.loads(await asyncio.wait_for(page.recv(), TIMEOUT_S)):
+                        if u["topic"] == "telemetry/1":
+                            seen.append(u["data"]["position_xy_m"][0])
+                assert seen and seen[-1] == 1999.0  # the newest, whatever was coalesced
+                assert seen == sorted(seen)
+                assert service.view.rejected["payload not JSON"] == 1
+
+                # Bad requests: 4xx naming the field; nothing on the bus.
+                for body, ctype, status, field in (
+                    (b'{"command": "set"}', "text/plain", 415, "content-type"),
+                    (b"{", "application/json", 400, "body"),
+                    (b'{"command": "fly"}', "application/json", 422, "command"),
+                    (b'{"command": "set", "x": 1}', "application/json", 422, "x"),
+                    (
+                        b'{"command": "set", "params": {"rate_min_mbps": 0}}',
+                        "application/json",
+                        422,
+                        "control.params.rate_min_mbps",
+                    ),
+                    (b'{"command": "release"}', "application/json", 422, "control.uav"),
+                    (b'{"command": "hold", "uav": 3}', "application/json", 422, "control.uav"),
+                ):
+                    got, answer = await asyncio.to_thread(_post, url, body, ctype)
+                    assert (got, answer["field"]) == (status, field), answer
+                # A good one goes out, validated by the ground loop's own decoder.
+                got, answer = await asyncio.to_thread(
+                    _post, url, b'{"command": "set", "params": {"rate_min_mbps": 15}}'
+                )
+                assert got == 202
+                key, payload = await controls.get(TIMEOUT_S)
+                assert key == KEYS.control
+                sent = decode_control(payload)
+                assert sent.params == {"rate_min_mbps": 15.0}
+                assert json.loads(payload)["id"] == answer["id"]
+                # Nothing else was sent: the refused requests never reached the bus.
+                try:
+                    extra = await controls.get(1.0)
+                except TimeoutError:
+                    extra = None
+                assert extra is None
+    finally:
+        server.stop()
