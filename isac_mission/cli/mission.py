@@ -136,7 +136,9 @@ async def fly_mission(
     say = on_status or (lambda _msg: None)
     planning = planning_scenario(s, opts)
     kit = SolverKit(planning)
-    kit.warm_up()
+    # On a thread: the event loop meanwhile opens an embedded world's vehicles (ground stations
+    # see them at once) and the bus; the kit is not used by anything else until it returns.
+    await asyncio.to_thread(kit.warm_up)
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(
         s,

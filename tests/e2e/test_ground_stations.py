@@ -42,13 +42,15 @@ def _stop(proc: subprocess.Popen[str]) -> None:
 def _wait_for_fleet(seen: MavlinkListener, n: int, proc: subprocess.Popen[str]) -> float:
     """Wait for the first vehicle (generous: process start), then for all n system ids; the
     spread between the first and the last first heartbeat, wall seconds."""
-    deadline = time.monotonic() + START_TIMEOUT_S
+    started = time.monotonic()
+    deadline = started + START_TIMEOUT_S
     while not seen.systems():
         assert proc.poll() is None, proc.communicate()[1][-3000:]
         assert time.monotonic() < deadline, "no heartbeat through MAVProxy"
         time.sleep(0.05)
     seen.wait_for_systems(set(range(1, n + 1)), timeout_s=FLEET_UP_S)
     first = seen.first_heard_s
+    print(f"first heartbeat {min(first.values()) - started:.2f} s after the wait began")
     return max(first.values()) - min(first.values())
 
 
