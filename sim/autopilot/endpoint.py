@@ -50,6 +50,7 @@ import contextlib
 import functools
 import logging
 import math
+import time
 from collections import Counter
 from collections.abc import Callable
 from typing import Any
@@ -105,7 +106,8 @@ class Autopilot:
         self._telemetry = Telemetry(self._flight)
         commands = CommandHandler(self._flight, self._telemetry, self._reject)
         params = ParamProtocol(self._params, self._reject, self._flight.apply_param, self._sysid)
-        mission = MissionProtocol(self._flight, self._reject)
+        mission = MissionProtocol(self._flight, self._reject, time.monotonic)
+        self._mission = mission
         self._handlers: dict[str, Handler] = {
             "HEARTBEAT": self._on_heartbeat,
             "COMMAND_LONG": commands.on_command_long,
@@ -268,6 +270,7 @@ class Autopilot:
         built: dict[int, Any] = {}
         for link in self._links:
             link.send_due(now_s, self._telemetry.builders, built)
+        self._mission.tick()
         self._send_mission_events()
 
     def _send_mission_events(self) -> None:

@@ -256,7 +256,7 @@ class FlightLogic:
             self.landed = False
             self.landed_at_s = None
             logger.info("vehicle %d: airborne", self.system_id)
-        elif not self.landed and height < _LANDED_ALT_M and v_down >= -0.05:
+        elif not self.landed and height < _LANDED_ALT_M and abs(v_down) <= 0.05:
             self.landed = True
             self.landed_at_s = self.now_s
             logger.info("vehicle %d: landed", self.system_id)

@@ -5,7 +5,9 @@
   does not fly ends the upload with a MISSION_ACK naming the fault (MAV_MISSION_UNSUPPORTED,
   UNSUPPORTED_FRAME, INVALID_PARAMn) and the previous plan stays, as PX4 keeps it. A count of 0
   clears the plan; more than `MAX_ITEMS` is NO_SPACE. A new MISSION_COUNT restarts the upload.
-  An item out of order is answered by requesting the expected one again.
+  An item out of order is answered by requesting the expected one again; an unanswered request
+  is sent again after RETRY_S (0.25 s of wall time) and the upload given up after TIMEOUT_S (5 s)
+  without an item, as PX4 does (counted `mission_upload_timeout`).
 - Download: MISSION_REQUEST_LIST -> MISSION_COUNT, MISSION_REQUEST_INT (MISSION_REQUEST) ->
   MISSION_ITEM_INT (MISSION_ITEM); the client's closing MISSION_ACK is taken silently. A request
   out of range is MAV_MISSION_INVALID_SEQUENCE.
@@ -22,6 +24,7 @@ carries the request's mission_type.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -40,12 +43,24 @@ logger = logging.getLogger(__name__)
 MISSION = int(mavlink2.MAV_MISSION_TYPE_MISSION)
 
 
+RETRY_S = 0.25
+"""Wall seconds before an unanswered MISSION_REQUEST_INT is sent again (PX4's
+MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT)."""
+TIMEOUT_S = 5.0
+"""Wall seconds without an item before the upload is given up (PX4's
+MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT)."""
+
+
 @dataclass
 class _Upload:
-    """An upload in progress from `peer`."""
+    """An upload in progress from `peer` (client `target`, on `link`); wall times, s."""
 
     peer: Address
+    target: tuple[int, int]
+    link: VehicleLink
     count: int
+    last_item_wall_s: float
+    last_request_wall_s: float
     items: list[MissionItem] = field(default_factory=list)
 
 
@@ -56,10 +71,24 @@ def _kind(msg: Any) -> int:
 class MissionProtocol:
     """The mission protocol of one vehicle (handlers take (link, message, sender))."""
 
-    def __init__(self, flight: FlightLogic, reject: Reject) -> None:
+    def __init__(self, flight: FlightLogic, reject: Reject, wall_s: Callable[[], float]) -> None:
         self._flight = flight
         self._reject = reject
+        self._wall_s = wall_s
         self._upload: _Upload | None = None
+
+    def tick(self) -> None:
+        """Re-request the awaited item after RETRY_S; give the upload up after TIMEOUT_S."""
+        up = self._upload
+        if up is None:
+            return
+        now = self._wall_s()
+        if now - up.last_item_wall_s > TIMEOUT_S:
+            self._upload = None
+            self._reject("mission_upload_timeout", f"item {len(up.items)} from {up.peer}")
+            return
+        if now - up.last_request_wall_s > RETRY_S:
+            self._send_request(up, len(up.items))
 
     def _ack(self, link: VehicleLink, msg: Any, addr: Address, result: int) -> None:
         link.send(
@@ -69,12 +98,10 @@ class MissionProtocol:
             addr,
         )
 
-    def _request(self, link: VehicleLink, msg: Any, addr: Address, seq: int) -> None:
-        link.send(
-            mavlink2.MAVLink_mission_request_int_message(
-                msg.get_srcSystem(), msg.get_srcComponent(), seq, MISSION
-            ),
-            addr,
+    def _send_request(self, up: _Upload, seq: int) -> None:
+        up.last_request_wall_s = self._wall_s()
+        up.link.send(
+            mavlink2.MAVLink_mission_request_int_message(*up.target, seq, MISSION), up.peer
         )
 
     def on_count(self, link: VehicleLink, msg: Any, addr: Address) -> None:
@@ -94,8 +121,10 @@ class MissionProtocol:
             self._reject("mission_too_long", f"{count} items from {addr}")
             self._ack(link, msg, addr, mavlink2.MAV_MISSION_NO_SPACE)
         else:
-            self._upload = _Upload(addr, count)
-            self._request(link, msg, addr, 0)
+            now = self._wall_s()
+            target = (msg.get_srcSystem(), msg.get_srcComponent())
+            self._upload = _Upload(addr, target, link, count, now, now)
+            self._send_request(self._upload, 0)
 
     def on_item(self, link: VehicleLink, msg: Any, addr: Address) -> None:
         """MISSION_ITEM_INT or MISSION_ITEM of the upload in progress."""
@@ -105,8 +134,9 @@ class MissionProtocol:
             return
         expected = len(up.items)
         if int(msg.seq) != expected:
-            self._request(link, msg, addr, expected)
+            self._send_request(up, expected)
             return
+        up.last_item_wall_s = self._wall_s()
         item = MissionItem.from_message(msg)
         result = check_item(item)
         if result != mavlink2.MAV_MISSION_ACCEPTED:
@@ -116,7 +146,7 @@ class MissionProtocol:
             return
         up.items.append(item)
         if len(up.items) < up.count:
-            self._request(link, msg, addr, len(up.items))
+            self._send_request(up, len(up.items))
             return
         self._upload = None
         self._set_plan(up.items)

@@ -157,8 +157,8 @@ def upload(
     client.clear("MISSION_REQUEST_INT")
     client.send(mavlink2.MAVLink_mission_count_message(1, 1, len(items), 0))
     for seq, (command, x, y, z) in enumerate(items):
-        req = client.recv("MISSION_REQUEST_INT")
-        assert req.seq == seq
+        # The next item's request (a repeat of the last one may come first: retries at 0.25 s).
+        client.recv("MISSION_REQUEST_INT", lambda m, seq=seq: m.seq == seq)
         client.send(
             mavlink2.MAVLink_mission_item_int_message(
                 1, 1, seq, frame, command, int(seq == 0), 1, 0, 0, 0, math.nan, x, y, z, 0
@@ -198,3 +198,51 @@ def test_advertised_mission_capabilities_are_honoured(fly) -> None:
     assert as_float.command == as_int.command == mavlink2.MAV_CMD_NAV_WAYPOINT
     client.send(mavlink2.MAVLink_mission_request_int_message(1, 1, 1, 0))
     assert client.recv("MISSION_ACK").type == mavlink2.MAV_MISSION_INVALID_SEQUENCE
+
+
+def test_an_unanswered_mission_request_is_repeated_and_a_stalled_upload_given_up(fly) -> None:
+    _runner, ap, client = fly()
+    wp = (mavlink2.MAV_CMD_NAV_WAYPOINT, 473_977_000, 85_456_000, 10.0)
+    client.clear("MISSION_REQUEST_INT")
+    client.send(mavlink2.MAVLink_mission_count_message(1, 1, 2, 0))
+    assert client.recv("MISSION_REQUEST_INT").seq == 0
+    assert client.recv("MISSION_REQUEST_INT").seq == 0, "sent again, unanswered"
+    upload(client, [wp, wp])  # a fresh count restarts it, and it completes
+    assert client.recv("MISSION_ACK").type == mavlink2.MAV_MISSION_ACCEPTED
+    client.send(mavlink2.MAVLink_mission_count_message(1, 1, 3, 0))
+    client.clear("MISSION_REQUEST_INT")
+    wait_until(lambda: ap.rejected["mission_upload_timeout"] == 1, 15.0, "the upload given up")
+    client.clear("MISSION_REQUEST_INT")
+    with pytest.raises(AssertionError):
+        client.recv("MISSION_REQUEST_INT", timeout_s=1.0)
+    assert len(ap.mission_items) == 2, "the previous plan stays"
+
+
+def test_mavproxy_sends_rtl_and_a_force_disarm_in_the_air(sim_runner) -> None:
+    settings, _port, gcs_port = make_settings(rtl_return_alt_m=8.0, rtl_descend_alt_m=6.0)
+    ap = sim_runner([settings]).autopilots[0]
+    with MavProxy(f"udpin:127.0.0.1:{gcs_port}") as mp:
+        mp.wait_for(r"Detected vehicle 1:1", 30.0)
+        for attempt in range(2):
+            mark = mp.mark()
+            mp.send("vehicle 1")
+            mp.send("arm throttle")
+            mp.wait_for(r"ARM_DISARM: ACCEPTED", 30.0, since=mark)
+            mp.set_px4_mode(1, FlightMode.TAKEOFF)
+            wait_until(
+                lambda: ap.state.mode is FlightMode.HOLD and ap.state.altitude_m > 4.8,
+                30.0,
+                "took off",
+            )
+            mark = mp.mark()
+            if attempt == 0:
+                mp.send("long NAV_RETURN_TO_LAUNCH")
+                mp.wait_for(r"NAV_RETURN_TO_LAUNCH: ACCEPTED", 30.0, since=mark)
+                assert ap.state.mode is FlightMode.RTL
+                wait_until(lambda: ap.state.landed and not ap.state.armed, 60.0, "RTL done")
+            else:
+                mp.send("long COMPONENT_ARM_DISARM 0 21196")
+                mp.wait_for(r"ARM_DISARM: ACCEPTED", 30.0, since=mark)
+                assert not ap.state.armed
+                wait_until(lambda: ap.state.landed, 10.0, "dropped")
+                assert ap.state.altitude_m == 0.0
