@@ -30,15 +30,10 @@ from isac_mission.cli.ports import (
     GcsPortOpt,
     MavlinkBasePortOpt,
     MavlinkLocalBasePortOpt,
+    port_options,
 )
 from isac_mission.config import ImpairmentConfig, apply_impairment_flags
 from isac_mission.errors import ConfigError
-from isac_mission.mavwire.ports import (
-    GCS_LOCAL_BASE_PORT,
-    GCS_PORT,
-    OFFBOARD_BASE_PORT,
-    OFFBOARD_LOCAL_BASE_PORT,
-)
 
 if TYPE_CHECKING:
     from isac_mission.cli.mission import LiveOptions, LiveResult
@@ -70,10 +65,10 @@ def sim(
         ),
     ] = None,
     zenoh_mode: Annotated[str, typer.Option(help="Zenoh mode: peer, client or router.")] = "peer",
-    mavlink_base_port: MavlinkBasePortOpt = OFFBOARD_BASE_PORT,
-    mavlink_local_base_port: MavlinkLocalBasePortOpt = OFFBOARD_LOCAL_BASE_PORT,
-    gcs_port: GcsPortOpt = GCS_PORT,
-    gcs_local_base_port: GcsLocalBasePortOpt = GCS_LOCAL_BASE_PORT,
+    mavlink_base_port: MavlinkBasePortOpt = None,
+    mavlink_local_base_port: MavlinkLocalBasePortOpt = None,
+    gcs_port: GcsPortOpt = None,
+    gcs_local_base_port: GcsLocalBasePortOpt = None,
     start: Annotated[
         str,
         typer.Option(help="Slot 0 begins: immediate, or offboard (all vehicles up in OFFBOARD)."),
@@ -119,10 +114,9 @@ def sim(
             lockstep_timeout_s=lockstep_timeout,
             seed=seed,
             bus=bus,
-            mavlink_base_port=mavlink_base_port,
-            mavlink_local_base_port=mavlink_local_base_port,
-            gcs_port=gcs_port,
-            gcs_local_base_port=gcs_local_base_port,
+            **port_options(
+                s, mavlink_base_port, mavlink_local_base_port, gcs_port, gcs_local_base_port
+            ),
             start=start,  # type: ignore[arg-type]
             link_outages=parse_outages(inject_link_loss or [], s.M),
             impairment=world_impairment(s, impair_link or []),

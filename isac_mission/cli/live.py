@@ -27,12 +27,7 @@ from isac_mission.cli.ports import (
     GcsPortOpt,
     MavlinkBasePortOpt,
     MavlinkLocalBasePortOpt,
-)
-from isac_mission.mavwire.ports import (
-    GCS_LOCAL_BASE_PORT,
-    GCS_PORT,
-    OFFBOARD_BASE_PORT,
-    OFFBOARD_LOCAL_BASE_PORT,
+    port_options,
 )
 from isac_mission.quiet import quiet_highs_banner
 
@@ -52,10 +47,10 @@ def _live(
     out: Path | None,
     zenoh_listen: str | None,
     zenoh_connect: list[str],
-    mavlink_base_port: int,
-    mavlink_local_base_port: int,
-    gcs_port: int,
-    gcs_local_base_port: int,
+    mavlink_base_port: int | None,
+    mavlink_local_base_port: int | None,
+    gcs_port: int | None,
+    gcs_local_base_port: int | None,
     resume: bool,
     plan_budget: float,
     link_outages: list[str],
@@ -115,10 +110,9 @@ def _live(
         out_dir=out_dir,
         zenoh_endpoint=zenoh_listen,
         zenoh_connect=tuple(zenoh_connect),
-        mavlink_base_port=mavlink_base_port,
-        mavlink_local_base_port=mavlink_local_base_port,
-        gcs_port=gcs_port,
-        gcs_local_base_port=gcs_local_base_port,
+        **port_options(
+            s, mavlink_base_port, mavlink_local_base_port, gcs_port, gcs_local_base_port
+        ),
         vehicle_links=tuple(vehicle_links or ()),
         resume=resume,
         plan_budget_s=plan_budget if plan_budget > 0 else None,
@@ -266,10 +260,10 @@ def run(
             "tls/127.0.0.1:7447 with security.zenoh.tls)."
         ),
     ] = None,
-    mavlink_base_port: MavlinkBasePortOpt = OFFBOARD_BASE_PORT,
-    mavlink_local_base_port: MavlinkLocalBasePortOpt = OFFBOARD_LOCAL_BASE_PORT,
-    gcs_port: GcsPortOpt = GCS_PORT,
-    gcs_local_base_port: GcsLocalBasePortOpt = GCS_LOCAL_BASE_PORT,
+    mavlink_base_port: MavlinkBasePortOpt = None,
+    mavlink_local_base_port: MavlinkLocalBasePortOpt = None,
+    gcs_port: GcsPortOpt = None,
+    gcs_local_base_port: GcsLocalBasePortOpt = None,
     plan_budget: PlanBudgetOpt = 1.0,
     inject_link_loss: InjectLinkLossOpt = None,
     impair_link: ImpairLinkOpt = None,
@@ -318,12 +312,12 @@ def serve(
         list[str] | None, typer.Option(help="Zenoh endpoints to connect to.")
     ] = None,
     mavlink_base_port: Annotated[
-        int,
+        int | None,
         typer.Option(
-            help="The bridge of vehicle m listens on 127.0.0.1:(P + m) (PX4 SITL's offboard "
-            "ports: 14540)."
+            help="The bridge of vehicle m listens on 127.0.0.1:(P + m) (default: the scenario's "
+            "links.offboard_base_port, PX4 SITL's offboard ports 14540)."
         ),
-    ] = OFFBOARD_BASE_PORT,
+    ] = None,
     resume: Annotated[
         bool, typer.Option(help="Continue the trace in --out after its last slot.")
     ] = False,
@@ -352,9 +346,9 @@ def serve(
         zenoh_listen=zenoh_listen,
         zenoh_connect=zenoh_connect or [],
         mavlink_base_port=mavlink_base_port,
-        mavlink_local_base_port=OFFBOARD_LOCAL_BASE_PORT,
-        gcs_port=GCS_PORT,
-        gcs_local_base_port=GCS_LOCAL_BASE_PORT,
+        mavlink_local_base_port=None,
+        gcs_port=None,
+        gcs_local_base_port=None,
         resume=resume,
         plan_budget=plan_budget,
         link_outages=[],

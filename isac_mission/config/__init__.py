@@ -16,6 +16,7 @@ from isac_mission.config.impairment import (
     LinkImpairmentConfig,
     apply_impairment_flags,
 )
+from isac_mission.config.links import LinksConfig
 from isac_mission.config.loading import (
     SCENARIOS_DIR,
     load_scenario,
@@ -65,6 +66,7 @@ __all__ = [
     "ChannelImpairmentConfig",
     "ImpairmentConfig",
     "LinkImpairmentConfig",
+    "LinksConfig",
     "MavlinkSigningConfig",
     "MavlinkSigningKey",
     "PlannerConfig",

@@ -112,6 +112,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
         security=spec.security,
         mavlink_signing_key=mavlink_signing_key(spec.security.mavlink_signing),
         impairment=spec.impairment,
+        links=spec.links,
     )
     problems = _cross_field_problems(scenario, n_slots)
     if problems:

@@ -10,6 +10,7 @@ from typing import Any
 from pydantic import Field
 
 from isac_mission.config.impairment import ImpairmentConfig
+from isac_mission.config.links import LinksConfig
 from isac_mission.config.sections import (
     AreaConfig,
     BaseStationConfig,
@@ -44,6 +45,7 @@ class ScenarioFile(Section):
     planner: PlannerConfig = PlannerConfig()
     security: SecurityConfig = SecurityConfig()
     impairment: ImpairmentConfig = ImpairmentConfig()
+    links: LinksConfig = LinksConfig()
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,8 @@ class Scenario:
     """Resolved from security.mavlink_signing; None when signing is off. Never traced."""
     impairment: ImpairmentConfig = field(default_factory=ImpairmentConfig)
     """Fault injection on the simulated world's links (read by `sim` only; not traced)."""
+    links: LinksConfig = field(default_factory=LinksConfig)
+    """MAVLink ports of the live system (PX4 SITL's layout; the CLI's options override them)."""
 
     @property
     def radar_gain(self) -> float:
