@@ -190,6 +190,9 @@ class ControlDesk:
 
     def _resume(self, msg: ControlMsg, every: tuple[int, ...]) -> Outcome:
         """resume: undo an operator's hold."""
+        out = "" if msg.uav is None else self._out_of_mission(msg.uav)
+        if out:
+            return _refused(out)
         targets = tuple(m for m in every if self.vehicles.held.get(m) == HOLD_REASON)
         if not targets:
             if msg.uav is not None and self.vehicles.override(msg.uav):
