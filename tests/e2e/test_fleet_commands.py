@@ -119,9 +119,9 @@ async def _operate(s: Scenario, keys: Keys, seen: MavlinkListener, bus: ZenohBus
             await asyncio.to_thread(seen.wait_for_mode, sysid, "hold", 60.0)
         n = len(w.plans)
         await w.until(
-            lambda: any(all(_out(p, m) for m in range(s.M)) for _, p in w.plans[n:]),
+            lambda: any(p.plan.report.status == "no vehicles" for _, p in w.plans[n:]),
             WAIT_S,
-            "a plan with every vehicle held",
+            "a plan with every vehicle held (status 'no vehicles')",
         )
         reply = await w.request("resume-all-2", "resume")
         assert reply.accepted and reply.vehicles == (0, 1, 2)

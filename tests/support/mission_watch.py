@@ -34,7 +34,7 @@ async def open_client(endpoint: str, timeout_s: float) -> ZenohBus:
     deadline = time.monotonic() + timeout_s
     while True:
         try:
-            return ZenohBus.open(BusSettings(mode="client", connect=(endpoint,)))
+            return await ZenohBus.open_async(BusSettings(mode="client", connect=(endpoint,)))
         except Exception:
             if time.monotonic() > deadline:
                 raise

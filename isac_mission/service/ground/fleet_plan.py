@@ -115,7 +115,7 @@ class PlanningJob:
         eta[idx] = sub.bandwidth_share
         assoc = np.full(M, NO_BS, dtype=np.int64)
         assoc[idx] = sub.bs_of_uav
-        note = f"vehicles {list(self.excluded)} excluded (link lost), holding"
+        note = f"vehicles {list(self.excluded)} excluded (health says why), holding"
         reason = f"{sub.report.reason}; {note}" if sub.report.reason else note
         return SlotPlan(xy, assoc, eta, sub.pcrb_trace, replace(sub.report, reason=reason))
 
