@@ -42,6 +42,7 @@ INTEGER_PARAMS: dict[int, int] = {
 """Commands whose first n parameters are integers carried in floats (a mode, a message id)."""
 FORCE_DISARM_MAGIC = 21196
 """MAV_CMD_COMPONENT_ARM_DISARM param2 that disarms in the air (PX4's kill)."""
+REPOSITION_CHANGE_MODE = int(mavlink2.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE)
 RELATIVE_ALT_FRAMES = (
     mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT,
     mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
@@ -162,9 +163,10 @@ class CommandHandler:
             link.send(followup, addr)
 
     def _reposition(self, p: tuple[float, ...], frame: int | None) -> int:
-        """DO_REPOSITION: param1 speed (m/s, -1 default), param4 yaw (rad, NaN keep), lat, lon
-        (degrees; degE7 in COMMAND_INT; NaN here) and altitude (AMSL, above home in the
-        relative frames; NaN: the present one)."""
+        """DO_REPOSITION: param1 speed (m/s, -1 default), param2 flags (CHANGE_MODE: switch to
+        HOLD; without it only a vehicle already in HOLD moves, as PX4's navigator does), param4
+        yaw (rad, NaN keep), lat, lon (degrees; degE7 in COMMAND_INT; NaN here) and altitude
+        (AMSL, above home in the relative frames; NaN: the present one)."""
         flight = self._flight
         here = flight.vehicle.position_ned_m
         scale = 1e-7 if frame is not None else 1.0
@@ -181,6 +183,10 @@ class CommandHandler:
         pos = target.copy()
         self._clamp_position_setpoint(pos, ("reposition", 0))
         speed = p[0] if math.isfinite(p[0]) else -1.0
+        change_mode = math.isfinite(p[1]) and int(p[1]) & REPOSITION_CHANGE_MODE
+        if not change_mode and flight.mode is not FlightMode.HOLD:
+            # PX4: accepted, but the navigator repositions only in HOLD (or on a mode switch).
+            return RESULT_ACCEPTED if flight.armed and not flight.landed else RESULT_DENIED
         return flight.reposition(pos, speed, p[3])
 
     def _command_set_mode(self, base_mode: int, main_mode: int, sub_mode: int) -> int:

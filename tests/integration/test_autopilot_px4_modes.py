@@ -264,3 +264,19 @@ def test_emergency_battery_level_lands_where_it_is(fly) -> None:
     texts = [t for _, t in statustexts(client, 3)]
     assert texts[2] == "Dangerous battery level, executing Land in 0 seconds"
     wait_until(lambda: ap.state.landed and not ap.state.armed, 60.0, "landed and disarmed")
+
+
+def test_reposition_without_change_mode_is_ignored_outside_hold(fly) -> None:
+    _runner, ap, client = fly()
+    take_off(ap, client)
+    enter_offboard(ap, client, (0.0, 0.0, -TAKEOFF_ALT_M))
+    s = ap.settings
+    geo = ned_to_geodetic(np.array([30.0, 0.0, -8.0]), s.local_origin_xy_m, s.geo_origin)
+    result = client.command(
+        mavlink2.MAV_CMD_DO_REPOSITION, -1, 0, 0, math.nan, geo.lat_deg, geo.lon_deg, geo.alt_amsl_m
+    )
+    assert result == mavlink2.MAV_RESULT_ACCEPTED
+    t0 = ap.state.time_s
+    wait_until(lambda: ap.state.time_s > t0 + 3.0, 10.0, "3 s of simulation")
+    assert ap.state.mode is FlightMode.OFFBOARD
+    assert math.dist(tuple(ap.state.position_ned_m), (0.0, 0.0, -TAKEOFF_ALT_M)) < 0.3
