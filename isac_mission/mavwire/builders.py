@@ -99,6 +99,16 @@ def offboard_mode_command(target: Target) -> Any:
     return set_mode_command(target, PX4_MAIN_OFFBOARD)
 
 
+def request_position_command(target: Target) -> Any:
+    """MAV_CMD_REQUEST_MESSAGE for LOCAL_POSITION_NED: the position now, outside the streams (a
+    vehicle whose clock is held, as a lockstep simulation holds it, streams nothing else)."""
+    return command_long(
+        target,
+        mavlink2.MAV_CMD_REQUEST_MESSAGE,
+        (float(mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED),),
+    )
+
+
 def hold_mode_command(target: Target) -> Any:
     """DO_SET_MODE to PX4 HOLD (AUTO.LOITER: main mode 4, sub-mode 3)."""
     return set_mode_command(target, PX4_MAIN_AUTO, PX4_SUB_HOLD)

@@ -279,12 +279,19 @@ def _wait_for_slots(path: Path, n: int, proc: subprocess.Popen[str], timeout_s: 
     raise AssertionError(f"fewer than {n} slots in {path} after {timeout_s} s")
 
 
-def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "lockstep", [("--lockstep-timeout", "3"), ()], ids=["3s-timeout", "default-timeout"]
+)
+def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(
+    tmp_path: Path, lockstep: tuple[str, ...]
+) -> None:
     """serve + sim as two processes; SIGKILL the serve after a few slots; `serve --resume`
     continues from the trace's last complete slot (L+1 first, computed from L's estimate, P and
     J), re-attaches to the vehicles holding in the air, flies to slot N and lands them. The
-    world runs in lockstep with a short timeout: while no ground is up it moves on one slot per
-    timeout, and those slots are traced as slots without detections, not skipped."""
+    world runs in lockstep: with a short timeout, while no ground is up it moves on one slot per
+    timeout, and those slots are traced `unobserved` (or `held`), not skipped; with the default
+    (30 s) it holds its clock, and its vehicles send only heartbeats: the new bridges ask each
+    for its position (REQUEST_MESSAGE), so the resumed loop plans at once."""
     cfg = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
     n_slots = 24
     cfg["timing"]["duration_s"] = n_slots
@@ -302,7 +309,7 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(tmp_path: P
 
     first = start_serve()
     sim = start(
-        sim_argv(config, endpoint, ports, "--lockstep", "--lockstep-timeout", "3"),
+        sim_argv(config, endpoint, ports, "--lockstep", *lockstep),
         stdout=subprocess.DEVNULL,
     )
     procs = [first, sim]

@@ -23,6 +23,7 @@ from isac_mission.mavwire.builders import (
     offboard_mode_command,
     position_target_local_ned,
     position_type_mask,
+    request_position_command,
     takeoff_command,
 )
 from isac_mission.mavwire.dialect import mavlink2
@@ -94,6 +95,13 @@ def test_message_interval_command_stops_and_restores_a_stream() -> None:
     assert stop.command == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL
     assert (stop.param1, stop.param2) == (0.0, -1.0)
     assert wire(message_interval_command(VEHICLE, 32, 0.05)).param2 == pytest.approx(50_000.0)
+
+
+def test_request_position_command_asks_for_local_position_ned_once() -> None:
+    req = wire(request_position_command(VEHICLE))
+    assert req.command == mavlink2.MAV_CMD_REQUEST_MESSAGE
+    assert req.param1 == mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED == 32
+    assert (req.target_system, req.target_component) == (3, 1)
 
 
 @pytest.mark.parametrize(

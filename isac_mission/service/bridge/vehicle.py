@@ -31,6 +31,7 @@ from isac_mission.mavwire.builders import (
     gcs_heartbeat,
     hold_mode_command,
     land_command,
+    request_position_command,
 )
 from isac_mission.mavwire.serial_link import open_link
 from isac_mission.mavwire.status import VehicleStatus
@@ -341,6 +342,8 @@ class VehicleBridge:
             # once the world's clock arrives, and the ground loop would plan around every vehicle.
             return
         st = self.link.status()
+        if st.position_ned_m is None and not st.lost:  # heard, but no position (a held world)
+            self.link.send(request_position_command(self.link.target))
         self._supervise(st)
         msg = self.telemetry(st)
         if msg is not None and self._bus is not None:
