@@ -16,7 +16,8 @@ fields, each handed to `datagram_received(packet, (device, baud))`. The link's d
 then checks CRC and signature as for UDP; bytes between packets reach it as one chunk and are
 counted as `garbage`. `sendto(packet, addr)` writes to the device (addr ignored); a device whose
 output buffer is full (nobody reading, a slow radio) drops the rest of the packet, counted in
-`dropped_bytes`, as a radio would: the event loop never blocks on the device.
+`dropped_bytes`, as a radio would: the event loop never blocks on the device. A device that goes
+away (unplugged, hung up) is opened again by its path every 0.5 s until it is back.
 
 `open_link(url, ...)` is the service's link for a URL: a `MavlinkLink` (UDP) or a
 `SerialMavlinkLink` (serial).
@@ -155,43 +156,87 @@ class PacketFramer:
 class SerialTransport(asyncio.DatagramTransport):
     """A serial device as a datagram transport for `protocol` (module docstring).
 
-    Opens `device` at `baud` (OSError / ValueError if it cannot), calls
-    `protocol.connection_made(self)`, and from then on `protocol.datagram_received(packet,
-    (device, baud))` for every packet read. Must be created on the event loop that reads it.
+    Opens `device` at `baud` (OSError if it cannot), calls `protocol.connection_made(self)`, and
+    from then on `protocol.datagram_received(packet, (device, baud))` for every packet read.
+    When the device goes away (a read fails or hits end of file: unplugged, the other end of a
+    pty closed) the transport drops what is sent (`dropped_bytes`) and tries to open the same
+    path again every `reopen_s` wall seconds (a radio plugged back in, a udev symlink pointing
+    at the new device), counting `reopens`; the protocol sees no interruption but silence.
+    Must be created on the event loop that reads it.
     """
 
-    def __init__(self, protocol: asyncio.DatagramProtocol, device: str, baud: int) -> None:
+    def __init__(
+        self, protocol: asyncio.DatagramProtocol, device: str, baud: int, reopen_s: float = 0.5
+    ) -> None:
         super().__init__()
         self._loop = asyncio.get_running_loop()
         self._protocol = protocol
-        self.device, self.baud = device, baud
-        try:
-            self._serial: Any = serial.Serial(device, baudrate=baud, timeout=0, exclusive=True)
-        except serial.SerialException as err:
-            raise OSError(f"serial {device}: {err}") from err
-        self._fd: int = self._serial.fileno()
-        os.set_blocking(self._fd, False)
+        self.device, self.baud, self.reopen_s = device, baud, reopen_s
         self._framer = PacketFramer()
         self._closing = False
+        self._serial: Any = None
+        self._fd = -1
+        self._reopen: asyncio.Task[None] | None = None
         self.dropped_bytes = 0
-        """Bytes not written because the device's output buffer was full."""
-        self._loop.add_reader(self._fd, self._on_readable)
+        """Bytes not written: the device's output buffer was full, or the device was gone."""
+        self.reopens = 0
+        """Times the device was opened again after it went away."""
+        self._open_device()
         protocol.connection_made(self)
+
+    def _open_device(self) -> None:
+        try:
+            self._serial = serial.Serial(self.device, baudrate=self.baud, timeout=0, exclusive=True)
+        except (serial.SerialException, ValueError) as err:
+            raise OSError(f"serial {self.device}: {err}") from err
+        self._fd = self._serial.fileno()
+        os.set_blocking(self._fd, False)
+        self._framer = PacketFramer()
+        self._loop.add_reader(self._fd, self._on_readable)
+
+    def _drop_device(self) -> None:
+        """Stop reading and close the device (idempotent)."""
+        if self._fd >= 0:
+            with contextlib.suppress(ValueError, OSError):
+                self._loop.remove_reader(self._fd)
+            self._fd = -1
+        if self._serial is not None:
+            with contextlib.suppress(OSError, serial.SerialException):
+                self._serial.close()
+            self._serial = None
 
     def _on_readable(self) -> None:
         try:
             data = os.read(self._fd, _READ_SIZE)
         except BlockingIOError:
             return
-        except OSError as err:  # the other end closed (EIO on a pty), the device unplugged
-            log.warning("serial %s: %s", self.device, err)
-            self.close()
+        except OSError as err:  # EIO: the other end hung up, or the device is unplugged
+            self._lost(str(err))
             return
-        if not data:
+        if not data:  # end of file on a tty: hung up
+            self._lost("end of file")
             return
         addr = (self.device, self.baud)
         for packet in self._framer.feed(data):
             self._protocol.datagram_received(packet, addr)
+
+    def _lost(self, why: str) -> None:
+        log.warning("serial %s: lost (%s); reopening every %g s", self.device, why, self.reopen_s)
+        self._drop_device()
+        if self._reopen is None and not self._closing:
+            self._reopen = self._loop.create_task(self._reopen_loop())
+
+    async def _reopen_loop(self) -> None:
+        while not self._closing:
+            await asyncio.sleep(self.reopen_s)
+            try:
+                self._open_device()
+            except OSError:
+                continue
+            self.reopens += 1
+            log.info("serial %s: open again", self.device)
+            break
+        self._reopen = None
 
     # asyncio.DatagramTransport
     def sendto(self, data: Any, addr: Any = None) -> None:
@@ -199,13 +244,14 @@ class SerialTransport(asyncio.DatagramTransport):
         if self._closing:
             return
         buf = bytes(data)
-        try:
-            written = os.write(self._fd, buf)
-        except BlockingIOError:
-            written = 0
-        except OSError as err:
-            log.debug("serial %s: write failed: %s", self.device, err)
-            written = 0
+        written = 0
+        if self._fd >= 0:
+            try:
+                written = os.write(self._fd, buf)
+            except BlockingIOError:
+                pass
+            except OSError as err:
+                log.debug("serial %s: write failed: %s", self.device, err)
         if written < len(buf):
             self.dropped_bytes += len(buf) - written
 
@@ -222,10 +268,10 @@ class SerialTransport(asyncio.DatagramTransport):
         if self._closing:
             return
         self._closing = True
-        with contextlib.suppress(ValueError, OSError):
-            self._loop.remove_reader(self._fd)
-        with contextlib.suppress(OSError, serial.SerialException):
-            self._serial.close()
+        if self._reopen is not None:
+            self._reopen.cancel()
+            self._reopen = None
+        self._drop_device()
         self._loop.call_soon(self._protocol.connection_lost, None)
 
     def abort(self) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -83,3 +84,40 @@ def test_a_vehicle_whose_serial_peer_never_reads_drops_bytes_and_flies_on(
         wait_until(lambda: transport.dropped_bytes > 0, TIMEOUT_S, "bytes dropped")
         t_s = vehicle.state.time_s
         wait_until(lambda: vehicle.state.time_s > t_s + 1.0, TIMEOUT_S, "simulation time on")
+
+
+async def test_a_serial_link_that_goes_away_is_opened_again_when_its_device_is_back(
+    sim_runner: Callable[..., SimRunner], tmp_path: Path
+) -> None:
+    """Both ends open a stable path (a symlink, as udev's /dev/serial/by-id/...); the "radio" is
+    unplugged (the pty pair closes: reads fail) and another one plugged in at the same paths."""
+    offboard, gcs = free_udp_ports(2)
+    radio_vehicle, radio_service = tmp_path / "radio-vehicle", tmp_path / "radio-service"
+    first = PtyCable()
+    radio_vehicle.symlink_to(first.a)
+    radio_service.symlink_to(first.b)
+    settings = AutopilotSettings(
+        offboard_port=offboard,
+        gcs_port=gcs,
+        bind_port=0,
+        gcs_bind_port=0,
+        serial_device=str(radio_vehicle),
+    )
+    sim_runner([settings])
+    link = open_link(f"serial:{radio_service}", system_id=1, lost_after_s=1.0, lost_min_wall_s=1.0)
+    try:
+        async with link:
+            await link.wait_for(lambda st: not st.lost, TIMEOUT_S, "a heartbeat over the first")
+            first.close()
+            await link.wait_for(lambda st: st.lost, TIMEOUT_S, "the link lost")
+            with PtyCable() as second:
+                for path, end in ((radio_vehicle, second.a), (radio_service, second.b)):
+                    path.unlink()
+                    path.symlink_to(end)
+                await link.wait_for(lambda st: not st.lost, TIMEOUT_S, "heard over the second")
+                transport = link._transport
+                assert isinstance(transport, SerialTransport) and transport.reopens >= 1
+                assert second.bytes_relayed > 0
+    finally:
+        if first._thread.is_alive():
+            first.close()
