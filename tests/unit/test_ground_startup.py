@@ -96,6 +96,8 @@ def test_a_stall_closes_the_gate_until_telemetry_newer_than_the_stall_plus_settl
     for m in range(3):
         vehicles.on_telemetry(_tel(m, 5.0))
     assert gate.try_open(vehicles, 5.0)
+    wall.t += 3.0  # before the loop's first tick (its start-up) is no stall
+    assert gate.tick() is None and not gate.closed
     wall.t += 0.05
     assert gate.tick() is None and not gate.closed
     wall.t += 5.0  # SIGSTOP

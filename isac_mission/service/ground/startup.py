@@ -65,7 +65,8 @@ class PlanningGate:
     reason: str = "start"
     since_wall_s: float = field(default=0.0)
     fresh_after_wall_s: float = 0.0
-    last_tick_wall_s: float = 0.0
+    last_tick_wall_s: float | None = None
+    """Wall time of the loop's last tick (None before the first: no stall before it runs)."""
     waits: list[GateWait] = field(default_factory=list)
     stalls_s: list[float] = field(default_factory=list)
     """Wall length of every stall noticed (s)."""
@@ -74,15 +75,15 @@ class PlanningGate:
 
     def __post_init__(self) -> None:
         now = self.wall()
-        self.since_wall_s = self.fresh_after_wall_s = self.last_tick_wall_s = now
+        self.since_wall_s = self.fresh_after_wall_s = now
         self.closed = self.settings.wait_for_telemetry
 
     def tick(self) -> float | None:
         """Note that the loop runs now; returns the stall (wall s) when the previous tick was more
         than `stall_gap_s` ago, and closes the gate (None otherwise)."""
         now = self.wall()
-        gap = now - self.last_tick_wall_s
-        self.last_tick_wall_s = now
+        last, self.last_tick_wall_s = self.last_tick_wall_s, now
+        gap = 0.0 if last is None else now - last
         if gap <= self.settings.stall_gap_s:
             return None
         self.stalls_s.append(gap)
