@@ -95,6 +95,8 @@ class FlightLogic:
         self.battery = Battery(settings.battery)
         self.battery_action_due: tuple[FlightMode, float] | None = None
         """A low-battery action and the simulation time it is due (COM_BAT_ACT_T)."""
+        self.battery_thresholds = failsafes.battery_thresholds(self)
+        """BAT_LOW_THR, BAT_CRIT_THR, BAT_EMERGEN_THR in force (refreshed on PARAM_SET)."""
         self.mission = MissionRunner()
         """The uploaded plan and its progress (flown in MISSION)."""
         self.offboard_sp: Guidance | None = None
@@ -115,6 +117,7 @@ class FlightLogic:
         """Push a changed parameter into the live limits."""
         if name in LIMIT_FIELDS:
             self.limits = replace(self.limits, **{LIMIT_FIELDS[name]: self.params[name].value})
+        self.battery_thresholds = failsafes.battery_thresholds(self)
 
     def step(self, now_s: float, dt_s: float) -> None:
         """Advance to simulation time `now_s` (s) by `dt_s` (s): failsafes, physics, battery,
@@ -134,13 +137,9 @@ class FlightLogic:
         v1 = self.vehicle
         self.accel_ned_mps2 = (v1.velocity_ned_mps - v0.velocity_ned_mps) / dt_s
         self.yaw_rate_rps = wrap_pi(v1.yaw_rad - v0.yaw_rad) / dt_s
-        speed_h = float(np.hypot(v1.velocity_ned_mps[0], v1.velocity_ned_mps[1]))
+        vn, ve, vd = v1.velocity_ned_mps.tolist()
         level = self.battery.step(
-            dt_s,
-            self.armed,
-            speed_h,
-            -float(v1.velocity_ned_mps[2]),
-            failsafes.battery_thresholds(self),
+            dt_s, self.armed, math.hypot(vn, ve), -vd, self.battery_thresholds
         )
         if level is not None:
             failsafes.on_battery_warning(self, level)

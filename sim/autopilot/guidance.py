@@ -6,6 +6,7 @@ Frames and units: local NED (north, east, down), m, m/s, s; arrays of shape (3,)
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -34,7 +35,13 @@ class Guidance:
         """The airframe's limits with the horizontal speed capped at `max_speed_mps`."""
         if self.max_speed_mps is None or self.max_speed_mps >= limits.max_horizontal_speed_mps:
             return limits
-        return replace(limits, max_horizontal_speed_mps=max(self.max_speed_mps, 0.1))
+        return _capped(limits, max(self.max_speed_mps, 0.1))
+
+
+@functools.lru_cache(maxsize=64)
+def _capped(limits: VehicleLimits, speed_mps: float) -> VehicleLimits:
+    """`limits` with the horizontal speed capped at `speed_mps` (cached: built once per cap)."""
+    return replace(limits, max_horizontal_speed_mps=speed_mps)
 
 
 def goto(target_ned_m: FloatArray, speed_mps: float | None, yaw_rad: float = math.nan) -> Guidance:
