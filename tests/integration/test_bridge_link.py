@@ -54,7 +54,8 @@ async def test_link_lost_is_reported_and_offboard_resumes_when_heartbeats_return
         async with r.bridge() as bridge, hub.subscribe(KEYS.telemetry(0)) as sub:
             await asyncio.wait_for(bridge.prepare((300.0, 300.0), ALTITUDE_M), TIMEOUT_S)
             goal = np.array([330.0, 300.0])
-            bridge.set_waypoint(goal, r.now_s() + 20.0)
+            # Due after the radio silence below (a plan past its time is dropped for a hover).
+            bridge.set_waypoint(goal, r.now_s() + 120.0)
 
             # The vehicle stops sending HEARTBEAT: everything else flows, the link is not lost.
             to_vehicle(message_interval_command(Target(1), 0, None))
