@@ -212,6 +212,7 @@ async def _mission(slots: int, console: bool, tmp: Path, seconds: float) -> dict
             [sys.executable, __file__, "--client", url, endpoint, str(seconds), str(client_out)],
             cwd=ROOT,
         )
+    wall0 = time.monotonic()
     try:
         result = await run_embedded(s, opts, asyncio.Event())
     finally:
@@ -219,6 +220,7 @@ async def _mission(slots: int, console: bool, tmp: Path, seconds: float) -> dict
             await asyncio.to_thread(client.wait, 300)
         if server is not None:
             server.stop()
+    wall_s = time.monotonic() - wall0
     jitter = np.concatenate(
         [np.abs(np.array(p) * 1e3 - 50.0) for p in result.setpoint_periods_s.values()]
     )
@@ -227,6 +229,8 @@ async def _mission(slots: int, console: bool, tmp: Path, seconds: float) -> dict
         "det_to_setpoint_median_ms": float(np.median(result.detection_to_setpoint_s) * 1e3),
         "slots": len(result.report.records),
     }
+    if server is not None:
+        out["console_thread_cpu_pct"] = 100.0 * server.cpu_s / wall_s
     if console and client_out.exists():
         out["client"] = json.loads(client_out.read_text())
     return out

@@ -15,6 +15,7 @@ import ipaddress
 import logging
 import socket
 import threading
+import time
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -109,6 +110,8 @@ class ConsoleServer:
         self._thread: threading.Thread | None = None
         self._started = threading.Event()
         self.error: BaseException | None = None
+        self.cpu_s = 0.0
+        """CPU time (s) the console's thread used (uvicorn, the pages, the view), once stopped."""
 
     @property
     def url(self) -> str:
@@ -151,12 +154,14 @@ class ConsoleServer:
     async def _main(self) -> None:
         assert self._server is not None and self._sock is not None
         self._loop = asyncio.get_running_loop()
+        cpu0 = time.thread_time()
         self.service.start()
         self._started.set()
         try:
             await self._server.serve(sockets=[self._sock])
         finally:
             await self.service.stop()
+            self.cpu_s = time.thread_time() - cpu0
 
     def stop(self, timeout_s: float = 10.0) -> None:
         """Stop serving and close the console's bus sessions (idempotent)."""
