@@ -5,7 +5,8 @@
   loop, a screenshot is saved, and 20 WebSocket connections opened and dropped leave the service's
   plan rate and memory alone;
 - `view` over `simulate` traces: slider, play/pause, two methods side by side;
-- with Zenoh security on, a page without the operator password cannot send a control.
+- with Zenoh security on, a page without the operator password cannot send a control;
+- `serve` (the world in a separate `sim`) serves the same live page.
 """
 
 from __future__ import annotations
@@ -42,8 +43,8 @@ from tests.support.browser import (
     stop,
     wait_http,
 )
-from tests.support.live_cli import ROOT, cli, start
-from tests.support.ports import free_tcp_port
+from tests.support.live_cli import ROOT, cli, serve_argv, sim_argv, start
+from tests.support.ports import free_tcp_port, sitl_ports
 
 KEYS = Keys("paper")
 PAGE_TIMEOUT_MS = 240_000
@@ -348,3 +349,38 @@ async def test_a_page_without_the_operator_password_cannot_send_a_control(tmp_pa
     finally:
         out = stop(proc)
     assert proc.returncode == 0, out[-3000:]
+
+
+async def test_serve_serves_the_console_of_a_mission_whose_world_runs_elsewhere(
+    tmp_path: Path,
+) -> None:
+    config = short_config(tmp_path, 12)
+    ports = sitl_ports(3)
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    port = free_tcp_port()
+    url = f"http://127.0.0.1:{port}/"
+    serve = start(
+        serve_argv(
+            config,
+            tmp_path / "out",
+            endpoint,
+            ports.offboard_base,
+            "--console",
+            f"127.0.0.1:{port}",
+        )
+    )
+    world = start(sim_argv(config, endpoint, ports))
+    try:
+        await asyncio.to_thread(wait_http, url, serve)
+        async with browser() as b:
+            page = await b.new_page()
+            await page.goto(url)
+            await wait_slot(page, 3)
+            drawn = await page.evaluate("window.consoleState.M.drawn")
+            assert sorted(drawn) == ["0", "1", "2"]
+        out, err = await asyncio.to_thread(serve.communicate, None, 300)
+        assert serve.returncode == 0, err[-3000:]
+        assert f"console: {url}" in out
+    finally:
+        stop(world, 60)
+        stop(serve, 60)
