@@ -151,3 +151,12 @@ def test_statustext_is_forgotten_after_ten_seconds() -> None:
     w = OverrideWatch()
     w.on_statustext(0.0, "Low battery level, return advised")
     assert w.cause(5.0) == "low battery" and w.cause(10.5) is None
+
+
+def test_a_ground_station_taking_a_vehicle_held_on_control_is_an_override() -> None:
+    rig = Rig()
+    flying(rig, 20.0)
+    rig.keeper.take("control: hold")
+    assert rig.see(status("hold", 20.5)) == "control: hold"  # the hold asked for
+    assert rig.see(status("rtl", 21.0)) == "operator: RTL"  # then MAVProxy's RTL
+    assert rig.counters.overrides == 2

@@ -73,6 +73,11 @@ class OverrideKeeper:
         in OFFBOARD and airborne (an operator's switch)."""
         if not flying or st.lost:
             return
+        if self.reason == "control: hold" and (
+            st.mode not in ("hold", "offboard", "unknown") or not st.airborne
+        ):
+            self.take(self.texts.reason(st, now))  # a ground station took the held vehicle
+            return
         if self.reason:
             if self.reason.startswith(("control:", "landed", "killed")):
                 return  # an operator's fleet command, or out of the mission

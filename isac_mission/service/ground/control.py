@@ -168,6 +168,9 @@ class ControlDesk:
         targets = []
         for m in every:
             out = self._out_of_mission(m)
+            override = self.vehicles.override(m)
+            if not out and override and not override.startswith("control:"):
+                out = f"vehicle {m} is not the service's ({override}): use the ground station"
             if holding and self.vehicles.held.get(m) == HOLD_REASON:
                 out = f"vehicle {m} is held already"
             if out and msg.uav is not None:
