@@ -82,7 +82,16 @@ async def _override(w: MissionWatch, m: int, prefix: str) -> str:
 
 
 async def _others_fly_on(w: MissionWatch, out: set[int], n_uavs: int, plans: int = 4) -> None:
-    n = len(w.plans)
+    """Wait for the first plan that leaves `out` out; it and the next plans leave them out and
+    plan every other vehicle."""
+
+    def first_without() -> int | None:
+        return next((i for i, (_, p) in enumerate(w.plans) if all(_out(p, m) for m in out)), None)
+
+    await w.until(lambda: first_without() is not None, WAIT_S, f"a plan without {sorted(out)}")
+    i = first_without()
+    assert i is not None
+    n = max(i, len(w.plans) - 1)
     await w.until(lambda: len(w.plans) >= n + plans, WAIT_S, f"{plans} more plans")
     for _, p in w.plans[n:]:
         for m in range(n_uavs):

@@ -47,7 +47,8 @@ class Rig:
         self.now = 10.0
         self.counters = BridgeCounters()
         self.watch = LinkWatch(BridgeSettings(index=1, interruption_after_s=1.0), self.counters)
-        self.stream: Any = SimpleNamespace(follow_vehicle=False, reanchored=0)
+        self.stream: Any = SimpleNamespace(follow_vehicle=False, reanchored=0, streaming=True)
+        self.stream.stop = lambda: setattr(self.stream, "streaming", False)
         self.stream.reanchor = lambda st: setattr(
             self.stream, "reanchored", self.stream.reanchored + 1
         )
@@ -135,6 +136,12 @@ def test_landing_and_a_kill_take_it_out_for_good() -> None:
     rig2 = Rig()
     flying(rig2, 20.0)
     assert rig2.see(status("land", 20.0, landed_state=ON_GROUND)) == "landed"
+    assert not rig2.stream.streaming and rig.stream.streaming is False
+    rig3 = Rig()  # an RTL of its own that ends on the ground
+    flying(rig3, 20.0)
+    assert rig3.see(status("rtl", 20.0)) == "operator: RTL" and rig3.stream.streaming
+    assert rig3.see(status("rtl", 80.0, landed_state=ON_GROUND)) == "landed"
+    assert not rig3.stream.streaming
 
 
 def test_no_override_while_waiting_for_its_own_offboard_command() -> None:

@@ -88,6 +88,7 @@ class OverrideKeeper:
             if reason != self.reason:
                 log.warning("vehicle %d: %s (was %s)", self.index, reason, self.reason)
                 self.reason = reason
+                self._stop_if_out()
             return
         leaving = st.mode not in ("offboard", "unknown") or not st.airborne
         if not leaving or not self.offboard.want or not reentry_idle or self.offboard.awaiting:
@@ -104,6 +105,13 @@ class OverrideKeeper:
         self.stream.follow_vehicle = True
         self.counters.overrides += 1
         log.warning("vehicle %d: %s; not commanding it", self.index, reason)
+        self._stop_if_out()
+
+    def _stop_if_out(self) -> None:
+        """A vehicle on the ground (landed, or killed) is out of the mission: no more setpoints
+        (there is nothing to hand back, and setpoints on the ground are refused)."""
+        if self.reason.startswith(("landed", "killed")):
+            self.stream.stop()
 
     def hand_back(self, st: VehicleStatus, command: bool) -> None:
         """The service flies the vehicle again toward the current goal; `command`: switch it to
