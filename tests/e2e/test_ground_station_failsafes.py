@@ -136,18 +136,39 @@ async def test_rtl_and_force_disarm_from_mavproxy_take_vehicles_out_for_good(
 async def test_the_low_battery_failsafe_returns_a_vehicle_and_the_mission_goes_on(
     paper: Scenario, tmp_path: Path
 ) -> None:
-    # Vehicle 1's small pack reaches PX4's critical level (BAT_CRIT_THR) some 30 s into the
-    # mission: "Critical battery level, executing RTL", then COM_LOW_BAT_ACT's RTL.
-    battery = paper.battery.model_copy(update={"capacity_wh_by_uav": {1: 6.0}})
+    # Vehicle 1's small pack (8 Wh, allowed to run out) reaches the critical level (20 % here)
+    # some 40 s into the mission: "Critical battery level, executing RTL in 5 seconds", then
+    # COM_LOW_BAT_ACT's RTL; at the emergency level (2 %, some 17 s later) it lands.
+    battery = paper.battery.model_copy(
+        update={
+            "capacity_wh_by_uav": {1: 8.0},
+            "min_remaining": 0.0,
+            "low_thr": 0.3,
+            "critical_thr": 0.2,
+            "emergency_thr": 0.02,
+        }
+    )
     s = paper.with_changes(N=150, battery=battery)
 
     async def operate(w: MissionWatch, seen: MavlinkListener, mp: MavProxy) -> None:
-        why = await _override(w, 1, "RTL: ")
-        assert why == "RTL: low battery", why
-        await asyncio.to_thread(seen.wait_for_mode, 2, "rtl", 60.0)
-        assert any(h.vehicles.get(1) == "excluded: RTL: low battery" for h in w.health)
+        await w.until(
+            lambda: any(t.override == "RTL: low battery" for t in w.telemetry.get(1, [])),
+            WAIT_S,
+            "vehicle 1 reported 'RTL: low battery'",
+        )
+        taken = [t for t in w.telemetry[1] if t.override]
+        assert taken[0].override == "RTL: low battery" and taken[0].mode == "rtl", taken[0]
+        await w.until(
+            lambda: any(h.vehicles.get(1, "").endswith("low battery") for h in w.health),
+            WAIT_S,
+            "health saying why",
+        )
         await _others_fly_on(w, {1}, s.M)
-        await _override(w, 1, "landed")  # home, landed and disarmed on its own
+        await _override(w, 1, "landed")  # landed and disarmed on its own
+        # Never taken back: from the failsafe on, only its own modes (RTL, then LAND).
+        modes = {t.mode for t in w.telemetry[1] if t.t_s >= taken[0].t_s}
+        assert modes <= {"rtl", "land"}, modes
+        assert seen.mode(2) in ("rtl", "land")
         await _others_fly_on(w, {1}, s.M)
 
     result = await _mission(s, tmp_path, 7, operate)

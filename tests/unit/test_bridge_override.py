@@ -99,6 +99,7 @@ def test_a_failsafe_names_its_cause_from_the_statustext() -> None:
     flying(rig, 20.0)
     rig.keeper.texts.on_statustext(19.5, "Critical battery level, executing RTL in 5 seconds")
     assert rig.see(status("rtl", 25.0)) == "RTL: low battery"
+    assert rig.see(status("land", 45.0)) == "LAND: low battery"  # the cause is kept
     rig2 = Rig()
     flying(rig2, 20.0)
     rig2.keeper.texts.on_statustext(19.8, "Geofence breached")

@@ -84,7 +84,7 @@ class OverrideKeeper:
             if st.airborne and st.mode == "offboard":
                 self.hand_back(st, command=False)
                 return
-            reason = self.texts.reason(st, now)
+            reason = self.texts.reason(st, now, self.reason)
             if reason != self.reason:
                 log.warning("vehicle %d: %s (was %s)", self.index, reason, self.reason)
                 self.reason = reason

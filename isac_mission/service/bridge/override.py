@@ -70,12 +70,15 @@ class OverrideWatch:
                     return cause
         return None
 
-    def reason(self, st: VehicleStatus, now_s: float) -> str:
-        """Why vehicle status `st` is an override (the `override` text)."""
+    def reason(self, st: VehicleStatus, now_s: float, was: str = "") -> str:
+        """Why vehicle status `st` is an override (the `override` text); `was`: the override
+        so far, whose failsafe cause is kept once its STATUSTEXT is old ("RTL: low battery"
+        then "LAND: low battery", not "operator: LAND")."""
         if not st.airborne:
             return "landed" if st.landed else "killed: disarmed in the air"
         mode = {"hold": "HOLD", "rtl": "RTL", "land": "LAND", "mission": "MISSION"}.get(
             st.mode, st.mode.upper()
         )
-        cause = self.cause(now_s)
+        kept = was.partition(": ")[2] if not was.startswith("operator") else ""
+        cause = self.cause(now_s) or kept or None
         return f"{mode}: {cause}" if cause else f"operator: {mode}"
