@@ -80,7 +80,7 @@ async def test_an_operators_hold_from_mavproxy_is_respected_and_handed_back(
             result = await asyncio.wait_for(mission, timeout=WAIT_S)
     counters = result.report.counters
     assert counters["vehicle exclusions"] >= 2, counters
-    assert counters["vehicle readmissions"] >= 2, counters
+    # (Readmissions are checked on the plans above: the ground's counter of them is not.)
     assert counters["operator commands"] == 1 and counters["operator commands refused"] == 1
 
 
