@@ -40,11 +40,11 @@ def _in(plan: PlanMsg, m: int) -> bool:
 async def test_each_fleet_command_and_a_malformed_one_get_their_replies(
     paper: Scenario, tmp_path: Path
 ) -> None:
-    s = paper.with_changes(N=120)
+    s = paper.with_changes(N=120, H=20.0)  # a low altitude: a short climb and landing
     ports = sitl_ports(s.M)
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
     opts = LiveOptions(
-        speed=2.0,
+        speed=5.0,
         lockstep=True,
         seed=4,
         out_dir=tmp_path,

@@ -37,7 +37,7 @@ def _in(plan: PlanMsg, m: int) -> bool:
 def _options(s: Scenario, tmp_path: Path, endpoint: str, seed: int) -> tuple[LiveOptions, str]:
     ports = sitl_ports(s.M)
     opts = LiveOptions(
-        speed=2.0,
+        speed=5.0,
         lockstep=True,
         seed=seed,
         out_dir=tmp_path,
@@ -101,7 +101,7 @@ async def _others_fly_on(w: MissionWatch, out: set[int], n_uavs: int, plans: int
 async def test_rtl_and_force_disarm_from_mavproxy_take_vehicles_out_for_good(
     paper: Scenario, tmp_path: Path
 ) -> None:
-    s = paper.with_changes(N=150)
+    s = paper.with_changes(N=150, H=20.0)  # a short climb and landing
 
     async def operate(w: MissionWatch, seen: MavlinkListener, mp: MavProxy) -> None:
         await asyncio.to_thread(mp.wait_for, r"Detected vehicle 3:1", WAIT_S)
@@ -148,7 +148,7 @@ async def test_the_low_battery_failsafe_returns_a_vehicle_and_the_mission_goes_o
             "emergency_thr": 0.02,
         }
     )
-    s = paper.with_changes(N=150, battery=battery)
+    s = paper.with_changes(N=150, H=20.0, battery=battery)
 
     async def operate(w: MissionWatch, seen: MavlinkListener, mp: MavProxy) -> None:
         await w.until(

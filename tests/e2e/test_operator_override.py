@@ -54,12 +54,12 @@ async def _mode_set(mp: MavProxy, sysid: int, mode: FlightMode) -> None:
 async def test_an_operators_hold_from_mavproxy_is_respected_and_handed_back(
     paper: Scenario, tmp_path: Path
 ) -> None:
-    s = paper.with_changes(N=90)
+    s = paper.with_changes(N=90, H=20.0)  # a low altitude: a short climb and landing
     keys = Keys(s.mission_id)
     ports = sitl_ports(s.M)
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
     opts = LiveOptions(
-        speed=2.0,
+        speed=5.0,
         lockstep=True,
         seed=3,
         out_dir=tmp_path,
