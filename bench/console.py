@@ -25,7 +25,6 @@ import argparse
 import asyncio
 import contextlib
 import json
-import random
 import socket
 import subprocess
 import sys
@@ -37,32 +36,15 @@ from typing import Any
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-background-networking", "--disable-component-update"]
 
 
 def _free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    from tests.support.ports import free_port_block
 
-
-def _free_udp_block(n: int) -> int:
-    for _ in range(500):
-        base = random.randrange(30000, 60000 - n)
-        socks = []
-        try:
-            for p in range(base, base + n):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                socks.append(s)
-                s.bind(("127.0.0.1", p))
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise RuntimeError("no free UDP block")
+    return free_port_block(1, socket.SOCK_STREAM)
 
 
 # ------------------------------------------------------------------------------ the client
@@ -187,6 +169,7 @@ async def _mission(slots: int, console: bool, tmp: Path, seconds: float) -> dict
         ConsoleService,
         MissionView,
     )
+    from tests.support.ports import sitl_ports
 
     s = load_scenario(ROOT / "config" / "paper.yaml").with_changes(N=slots, H=30.0, dH=15.0)
     endpoint = tcp_loopback(_free_tcp_port())
@@ -194,10 +177,7 @@ async def _mission(slots: int, console: bool, tmp: Path, seconds: float) -> dict
         speed=1.0,
         out_dir=tmp / f"run-{time.monotonic_ns()}",
         zenoh_endpoint=endpoint,
-        mavlink_base_port=_free_udp_block(3),
-        mavlink_local_base_port=_free_udp_block(3),
-        gcs_port=_free_udp_block(1),
-        gcs_local_base_port=_free_udp_block(3),
+        **sitl_ports(s.M).world_kwargs(),
     )
     server = client = None
     client_out = tmp / f"client-{time.monotonic_ns()}.json"

@@ -21,7 +21,6 @@ import re
 import signal
 import socket
 import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +39,7 @@ from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import bound_update, compare_pcrb, cv_model, jacobian
-from tests.support.live_cli import serve_argv, sim_argv, start
+from tests.support.live_cli import serve_argv, sim_argv, start, wait_for_slots
 from tests.support.ports import free_port_block, sitl_ports
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -264,21 +263,6 @@ async def test_restarted_ground_loop_continues_with_the_next_slot(
 # --------------------------------------------------------------------------- end to end
 
 
-def _wait_for_slots(path: Path, n: int, proc: subprocess.Popen[str], timeout_s: float) -> Trace:
-    """Poll the trace file (generous bound) until it holds n complete slots."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            err = proc.stderr.read() if proc.stderr else ""
-            raise AssertionError(f"process exited with {proc.returncode}: {err[-3000:]}")
-        if path.exists():
-            trace = read_trace(path)
-            if len(trace.slots) >= n:
-                return trace
-        time.sleep(0.2)
-    raise AssertionError(f"fewer than {n} slots in {path} after {timeout_s} s")
-
-
 @pytest.mark.parametrize(
     "lockstep", [("--lockstep-timeout", "3"), ()], ids=["3s-timeout", "default-timeout"]
 )
@@ -314,7 +298,7 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(
     )
     procs = [first, sim]
     try:
-        _wait_for_slots(path, 6, first, timeout_s=240)
+        wait_for_slots(path, 6, first, timeout_s=240)
         first.kill()  # SIGKILL: no handler, no flush, no landing
         first.wait(timeout=30)
         before = read_trace(path)
@@ -324,7 +308,7 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(
         second = start_serve("--resume")
         procs.append(second)
         # Fail fast (and not only at the end) when the restarted service does not go on.
-        _wait_for_slots(path, last.slot + 1, second, timeout_s=60)
+        wait_for_slots(path, last.slot + 1, second, timeout_s=60)
         out_text, err_text = second.communicate(timeout=240)
         assert second.returncode == 0, err_text[-3000:]
         sim.send_signal(signal.SIGINT)
