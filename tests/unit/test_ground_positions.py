@@ -1,6 +1,7 @@
-"""Where the ground loop plans from (service/ground/exclusion.py `VehicleWatch.positions`): the
-slot's detection positions first, where the UAVs were at the boundary, then fresh telemetry,
-which over a late radio is a round trip older (docs/reliability.md, "Lossy, late radio links")."""
+"""Where the ground loop plans from (service/ground/exclusion.py `VehicleWatch.positions`):
+current telemetry (at most `telemetry_current_s` old), else the slot's detection positions, where
+the UAVs were at the boundary, which beat late telemetry (over a late radio a round trip older;
+docs/reliability.md, "Lossy, late radio links"), else fresh telemetry."""
 
 from __future__ import annotations
 
@@ -25,6 +26,14 @@ def test_detection_positions_win_over_telemetry_which_fills_the_gaps() -> None:
     det = np.array([[0.5, 0.0], [np.nan, np.nan], [200.5, 0.0]])  # UAV 1's detection missing
     xy = watch.positions(10.0, det)
     np.testing.assert_array_equal(xy, [[0.5, 0.0], [100.0, 0.0], [200.5, 0.0]])
+    # Current telemetry (0.01 s old) wins over the detections.
+    for m in range(3):
+        watch.on_telemetry(_tel(m, 9.99, (100.0 * m, 1.0)))
+    np.testing.assert_array_equal(
+        watch.positions(10.0, det), [[0.0, 1.0], [100.0, 1.0], [200.0, 1.0]]
+    )
+    for m in range(3):
+        watch.on_telemetry(_tel(m, 9.9, (100.0 * m, 0.0)))
     # Without detections (a slot's own update), telemetry as before; stale telemetry: nothing.
     np.testing.assert_array_equal(watch.positions(10.0), [[0.0, 0.0], [100.0, 0.0], [200.0, 0.0]])
     assert np.all(np.isnan(watch.positions(20.0)))

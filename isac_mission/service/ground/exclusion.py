@@ -132,11 +132,12 @@ class VehicleWatch:
         log.warning("vehicle %d: %s; planning the others around it", m, why)
 
     def positions(self, t_s: float, det_xy: FloatArray | None = None) -> FloatArray:
-        """[M, 2] positions (m): det_xy (a slot's detection positions: where each UAV was at the
-        slot boundary, the planning instant), else fresh telemetry, else NaN. An excluded vehicle
-        holds where it was last seen. (Telemetry second: over a radio with 100 ms of latency it
-        is 0.1-0.2 s old at the boundary, and planning from it stalled the accelerating
-        vehicles; docs/reliability.md, "Lossy, late radio links".)"""
+        """[M, 2] positions (m) at the planning instant t_s (simulation s): telemetry at most
+        `telemetry_current_s` old; else det_xy (a slot's detection positions: where each UAV was
+        at the boundary), which beats late telemetry (over a radio with 100 ms of latency it is
+        0.1-0.2 s old, and planning from it stalled the accelerating vehicles; docs/reliability.md,
+        "Lossy, late radio links"); else fresh telemetry; else NaN. An excluded vehicle holds
+        where it was last seen."""
         xy = (
             np.array(det_xy, dtype=float)
             if det_xy is not None
@@ -144,10 +145,13 @@ class VehicleWatch:
         )
         for m in range(self.n_uavs):
             tel = self.telemetry.get(m)
-            fresh = tel is not None and t_s - tel.t_s <= self.settings.telemetry_max_age_s
+            if tel is None:
+                continue
+            age_s = t_s - tel.t_s
+            live = tel.link == "ok" and age_s <= self.settings.telemetry_max_age_s
             measured = bool(np.all(np.isfinite(xy[m])))
-            usable = fresh and tel is not None and tel.link == "ok" and not measured
-            if tel is not None and (usable or m in self.excluded):
+            current = age_s <= self.settings.telemetry_current_s
+            if (live and (current or not measured)) or m in self.excluded:
                 xy[m] = tel.position_xy_m  # an excluded vehicle holds where it was last seen
         return xy
 

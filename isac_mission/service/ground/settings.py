@@ -18,7 +18,9 @@ class GroundSettings(Settings):
     slot boundary before a partial update; detection_wall_wait_s: the same bound in wall seconds,
     counted from the first detection of the slot or from the clock reaching the slot's end,
     whichever comes first (for a held or stalled clock);
-    telemetry_max_age_s: older telemetry is not used as a UAV position; trace_config: entries
+    telemetry_max_age_s: older telemetry is not used as a UAV position; telemetry_current_s:
+    telemetry at most this old at the planning instant is the UAV's position, older telemetry
+    yields to the slot's detection position (exclusion.py `positions`); trace_config: entries
     that override or extend the trace's config line.
 
     Faults (docs/reliability.md): plan_budget_s: wall seconds a slot's planning may take (None:
@@ -47,6 +49,7 @@ class GroundSettings(Settings):
     detection_wait_s: float = Field(0.5, ge=0.0)
     detection_wall_wait_s: float = Field(2.0, gt=0.0)
     telemetry_max_age_s: float = Field(1.0, gt=0.0)
+    telemetry_current_s: float = Field(0.05, ge=0.0)
     trace_config: dict[str, object] = Field(default_factory=dict)
     plan_budget_s: float | None = Field(1.0, gt=0.0)
     vehicle_lost_after_s: float = Field(1.5, gt=0.0)
