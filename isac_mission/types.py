@@ -73,3 +73,23 @@ class SlotPlan:
     bandwidth_share: FloatArray
     pcrb_trace: float
     report: SolveReport
+    uav_velocity_mps: FloatArray | None = None
+    """[M, 2] the velocity planned at the slot's end (planner.vehicle_model); None: the paper's
+    kinematics (each leg flown at its constant velocity)."""
+    horizon: HorizonPlan | None = None
+    """The whole planned horizon (method horizon), for the warm start of the next slot."""
+
+
+@dataclass(frozen=True)
+class HorizonPlan:
+    """A receding-horizon plan of slots n..n+L-1.
+
+    uav_xy_m [L, M, 2]: waypoints at the ends of the horizon slots; uav_velocity_mps [L, M, 2] or
+    None: velocities there (planner.vehicle_model); bandwidth_share [L, M]; pcrb_trace [L]:
+    tr(PCRB) predicted along the horizon (the bound's recursion at the predicted states).
+    """
+
+    uav_xy_m: FloatArray
+    uav_velocity_mps: FloatArray | None
+    bandwidth_share: FloatArray
+    pcrb_trace: FloatArray

@@ -183,6 +183,28 @@ class TrackerConfig(Section):
     )
 
 
+class HorizonConfig(Section):
+    """The receding-horizon planner (method `horizon`, planning/horizon.py; docs/model.md,
+    "Receding horizon")."""
+
+    length: int = Field(3, ge=1, le=10, description="L, slots planned ahead (slot n..n+L-1).")
+    discount: float = Field(
+        1.0, gt=0, le=1, description="gamma: horizon slot l's tr(PCRB) weighs gamma^l."
+    )
+    terminal_weight: float = Field(
+        1.0, ge=0, description="Extra weight of the last horizon slot's tr(PCRB) (1 = none)."
+    )
+    max_iterations: int = Field(
+        60, ge=1, description="IPOPT's iteration cap (no wall-clock limit): at the cap, fallback."
+    )
+    leg_samples: int = Field(
+        4,
+        ge=1,
+        le=16,
+        description="Points per leg (interior and end) at which the safety distances are kept.",
+    )
+
+
 class PlannerConfig(Section):
     association: Literal["resolve", "keep"] = Field(
         "resolve",
@@ -217,6 +239,29 @@ class PlannerConfig(Section):
         50, ge=1, description="IPOPT's iteration cap of the polish (no wall-clock limit)."
     )
     solver: str = Field("CLARABEL", description="cvxpy solver for the SOCP subproblems.")
+    vehicle_model: bool = Field(
+        False,
+        description="Plan on the vehicles' dynamics (model/vehicle.py: V_max and uavs.max_accel_"
+        "mps2, positions and velocities at slot boundaries); false = the paper's kinematics.",
+    )
+    safety_margin: Literal["covariance", "none"] = Field(
+        "covariance",
+        description="covariance: 14j keeps D_s plus a margin from the predicted target "
+        "covariance and 14i/14a a margin for the vehicles' tracking error (docs/model.md, "
+        "'Safety'); none: D_s as printed in the paper.",
+    )
+    safety_confidence_sigma: float = Field(
+        5.0,
+        ge=0,
+        description="k of the 14j margin: k standard deviations of the predicted target position.",
+    )
+    tracking_margin_m: float = Field(
+        1.0,
+        ge=0,
+        description="The vehicles' tracking error of a planned leg (docs/model.md, 'Safety'), "
+        "kept on 14i (twice), 14j and the rate and control ranges when safety_margin is on.",
+    )
+    horizon: HorizonConfig = HorizonConfig()
     feasibility_tol_m: float = Field(
         1e-6, gt=0, description="Slack allowed when re-checking 14a-14j on a returned plan."
     )

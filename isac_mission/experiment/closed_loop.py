@@ -119,16 +119,21 @@ def run_closed_loop(
     )
     uav_xy, eta, assoc = s.uav_start_xy.copy(), np.full(s.M, 1.0 / s.M), None
     velocity = np.zeros((s.M, 2))
+    plan: SlotPlan | None = None
     rows: dict[str, list[object]] = {
         k: [] for k in ("est", "pcrb", "solve_s", "status", "uav_xy", "eta", "assoc")
     }
     for n in range(1, s.N + 1):
         predicted = predict(model, state)
         pred = predicted.prediction
-        slot_input = SlotInput(uav_xy, eta, assoc, pred.x, predicted.prior, velocity)
+        slot_input = SlotInput(
+            uav_xy, eta, assoc, pred.x, predicted.prior, velocity, None, pred.P, plan
+        )
         plan = plan_slot(slot_input, kit, method)
-        # The kinematic model flies each leg at constant velocity.
-        velocity = (plan.uav_xy_m - uav_xy) / s.dt
+        if plan.uav_velocity_mps is not None:
+            velocity = plan.uav_velocity_mps  # the vehicle model's planned end velocity
+        else:
+            velocity = (plan.uav_xy_m - uav_xy) / s.dt  # each leg flown at constant velocity
         uav_xy, eta, assoc = plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav
         # Measurements at the planned positions: noise from the true geometry; the filter and the
         # bound use the variances at the predicted state (the target's truth is not theirs).

@@ -50,9 +50,11 @@ class SlotInput:
     prev_xy [M, 2]: where the UAVs are (q_{n-1}); prev_eta [M]: last slot's shares;
     prev_assoc [M] or None: last slot's BS per UAV; x_pred [4]: predicted target state;
     J_pred [4, 4]: prior information of the bound at this slot; prev_velocity [M, 2] or None:
-    the vehicles' velocities now (used when planner.accel_limit_mps2 is set); keep_out_xy
-    [L, 2] or None: vehicles outside this plan that every planned UAV keeps D_s from (the kit
-    must be built with n_keep_out = L).
+    the vehicles' velocities now (used when planner.accel_limit_mps2 or planner.vehicle_model
+    is set); keep_out_xy [L, 2] or None: vehicles outside this plan that every planned UAV keeps
+    D_s from (the kit must be built with n_keep_out = L); target_cov_pred [4, 4] or None: the
+    tracker's predicted covariance of the target (the safety rule; None: J_pred^-1);
+    prev_plan: last slot's plan (the horizon's warm start), None at the first slot.
     """
 
     prev_xy: FloatArray
@@ -62,6 +64,8 @@ class SlotInput:
     J_pred: FloatArray
     prev_velocity: FloatArray | None = None
     keep_out_xy: FloatArray | None = None
+    target_cov_pred: FloatArray | None = None
+    prev_plan: SlotPlan | None = None
 
 
 class SolverKit:
