@@ -23,6 +23,7 @@ import numpy as np
 from isac_mission.bus import ZenohBus
 from isac_mission.bus.security import default_endpoint, secured_settings
 from isac_mission.config import Scenario
+from isac_mission.config.live_settings import LIVE_SETTINGS, LiveSettings
 from isac_mission.errors import IsacError
 from isac_mission.mavwire.ports import (
     GCS_LOCAL_BASE_PORT,
@@ -58,8 +59,9 @@ class LiveOptions:
     waypoint by the slot's end; plan_rate_factor, plan_safety_margin_m: the planner asks for
     R_th x factor and D_s + margin, so that a vehicle a few metres off its waypoint still meets
     14a, 14i and 14j; plan_accel_fraction: the planner keeps each waypoint reachable with this
-    fraction of the vehicles' acceleration limit a_max (0: off, the paper's kinematics)
-    (docs/model.md, "Live service")."""
+    fraction of the vehicles' acceleration limit a_max (0: off, the paper's kinematics);
+    plan_vehicle_model: plan on the vehicles' dynamics (planner.vehicle_model). Defaults:
+    isac_mission.config.live_settings.LIVE_SETTINGS (docs/model.md, "Live service")."""
 
     speed: float = 1.0
     lockstep: bool = False
@@ -74,10 +76,11 @@ class LiveOptions:
     gcs_local_base_port: int = GCS_LOCAL_BASE_PORT
     vehicle_links: tuple[str, ...] = ()
     resume: bool = False
-    plan_speed_fraction: float = 0.9
-    plan_rate_factor: float = 1.05
-    plan_safety_margin_m: float = 10.0
-    plan_accel_fraction: float = 0.8
+    plan_speed_fraction: float = LIVE_SETTINGS.speed_fraction
+    plan_rate_factor: float = LIVE_SETTINGS.rate_factor
+    plan_safety_margin_m: float = LIVE_SETTINGS.safety_margin_m
+    plan_accel_fraction: float = LIVE_SETTINGS.accel_fraction
+    plan_vehicle_model: bool = LIVE_SETTINGS.vehicle_model
     link_outages: tuple[str, ...] = ()
     """Embedded world only: scheduled radio failures `VEHICLE:START_S:DURATION_S`
     (sim.world_options)."""
@@ -90,6 +93,17 @@ class LiveOptions:
     @property
     def trace_path(self) -> Path:
         return self.out_dir / f"trace_{self.method}.jsonl"
+
+    @property
+    def live_settings(self) -> LiveSettings:
+        """The planning margins of these options (isac_mission.config.live_settings)."""
+        return LiveSettings(
+            speed_fraction=self.plan_speed_fraction,
+            rate_factor=self.plan_rate_factor,
+            safety_margin_m=self.plan_safety_margin_m,
+            accel_fraction=self.plan_accel_fraction,
+            vehicle_model=self.plan_vehicle_model,
+        )
 
 
 @dataclass
@@ -109,19 +123,9 @@ class LiveResult:
 
 
 def planning_scenario(s: Scenario, opts: LiveOptions) -> Scenario:
-    """The scenario the live planner plans with: V_max, R_th and D_s with the live margins, and
-    the vehicles' acceleration limit (docs/model.md, "Live service"). `simulate` on this scenario
-    is the offline twin of a live run."""
-    return s.with_changes(
-        v_max=s.v_max * opts.plan_speed_fraction,
-        r_th=s.r_th * opts.plan_rate_factor,
-        d_safe=s.d_safe + opts.plan_safety_margin_m,
-        planner=s.planner.model_copy(
-            update={"accel_limit_mps2": s.a_max * opts.plan_accel_fraction}
-            if opts.plan_accel_fraction > 0
-            else {}
-        ),
-    )
+    """The scenario the live planner plans with: `opts.live_settings` applied to `s`
+    (isac_mission.config.live_settings; `simulate --live-settings` plans on the same)."""
+    return opts.live_settings.apply(s)
 
 
 async def fly_mission(

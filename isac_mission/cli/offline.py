@@ -12,6 +12,7 @@ from isac_mission.cli.app import ConfigArg, app, console, err_console, load_or_e
 from isac_mission.quiet import quiet_highs_banner
 
 if TYPE_CHECKING:
+    from isac_mission.config import Scenario
     from isac_mission.planning.slot import Method
 
 
@@ -56,12 +57,22 @@ def simulate(
     ] = "proposed,sd,aba,crb",
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 2,
     plots: Annotated[bool, typer.Option(help="Write the Fig. 2 / Fig. 3 style PNGs.")] = True,
+    live_settings: Annotated[
+        bool,
+        typer.Option(
+            "--live-settings",
+            help="Plan with exactly what `run` and `serve` plan with (margins, vehicle model; "
+            "docs/model.md, 'Live service').",
+        ),
+    ] = False,
 ) -> None:
     """Offline closed loop (Section II-C) for every method, Monte Carlo with common random numbers."""
     from isac_mission.experiment.report import simulate_report
     from isac_mission.planning.slot import METHODS
 
     s = load_or_exit(config)
+    if live_settings:
+        s = _with_live_settings(s)
     chosen = [m.strip() for m in methods.split(",") if m.strip()]
     unknown = sorted(set(chosen) - set(METHODS))
     if unknown or not chosen:
@@ -79,3 +90,16 @@ def simulate(
         plots=plots,
         console=console,
     )
+
+
+def _with_live_settings(s: Scenario) -> Scenario:
+    """`s` with the live service's planning settings, and a table of what they change."""
+    from isac_mission.config.live_settings import LIVE_SETTINGS
+
+    table = Table(title="live settings (as `run` and `serve` plan)")
+    for col in ("quantity", "scenario", "live"):
+        table.add_column(col)
+    for row in LIVE_SETTINGS.changes(s):
+        table.add_row(*row)
+    console.print(table)
+    return LIVE_SETTINGS.apply(s)
