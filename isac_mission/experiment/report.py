@@ -18,6 +18,13 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from isac_mission.config import Scenario
+from isac_mission.experiment.bootstrap import Interval
+from isac_mission.experiment.comparison import (
+    BASELINE,
+    FIGURES,
+    reductions_against_baseline,
+    run_figures,
+)
 from isac_mission.experiment.montecarlo import (
     PAPER_REDUCTIONS,
     MethodSummary,
@@ -27,6 +34,7 @@ from isac_mission.experiment.montecarlo import (
     trace_path,
 )
 from isac_mission.planning.slot import Method
+from isac_mission.types import FloatArray
 
 TABLE_WIDTH_NOT_TERMINAL = 160
 """Columns a table is rendered in when the console is not a terminal (at least)."""
@@ -38,7 +46,17 @@ LABELS = {
     "aba": "ABA",
     "crb": "CRB-criterion",
     "comm": "Comm-optimal",
+    "horizon": "Horizon",
 }
+
+FIGURE_HEADS = {
+    "pcrb": "tr(PCRB)",
+    "pcrb_from11": "slots 11..N",
+    "pcrb_late": "2nd half",
+    "loc_mse": "RMSE loc (2..N)",
+    "vel_mse": "RMSE vel (2..N)",
+}
+"""Column heads of the figures of experiment/comparison.py (tr(PCRB) = whole trace, m² + (m/s)²)."""
 
 
 def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
@@ -70,6 +88,51 @@ def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
             f"{s.solve_median_ms:.1f}",
             f"{s.solve_p95_ms:.1f}",
         )
+    return t
+
+
+def figures_table(summaries: Sequence[MethodSummary], title: str) -> Table:
+    """One row per method: whole tr(PCRB) (mission mean, slots 11..N, second half), location and
+    velocity RMSE over slots 2..N pooled over runs, MSE / tr(PCRB_pos), plan time."""
+    t = Table(title=title)
+    heads = ["method", *FIGURE_HEADS.values(), "MSE/PCRB", "plan ms med", "p95"]
+    for col in heads:
+        t.add_column(col, justify="right" if col != "method" else "left")
+    for s in summaries:
+        t.add_row(
+            LABELS.get(s.method, s.method),
+            f"{s.pcrb_total:.4g}",
+            f"{s.pcrb_from11:.4g}",
+            f"{s.pcrb_late:.4g}",
+            f"{s.loc_rmse_from2:.4g}",
+            f"{s.vel_rmse_from2:.4g}",
+            f"{s.efficiency:.3f}",
+            f"{s.solve_median_ms:.1f}",
+            f"{s.solve_p95_ms:.1f}",
+        )
+    return t
+
+
+def interval_cell(iv: Interval | None) -> str:
+    """'+18.6 % [16.6, 20.5]' (estimate and interval, %), or '-' when there is none."""
+    if iv is None:
+        return "-"
+    return f"{iv.estimate:+.1f} % [{iv.low:+.1f}, {iv.high:+.1f}]"
+
+
+def against_baseline_table(
+    reductions: dict[str, dict[str, Interval | None]], runs: int, level: float = 0.95
+) -> Table:
+    """Per method: % reduction of each figure against `proposed` with its paired interval."""
+    t = Table(
+        title=f"Against {LABELS[BASELINE]}: % reduction (positive = lower than {LABELS[BASELINE]}), "
+        f"paired bootstrap {level:.0%} interval over {runs} runs"
+    )
+    t.add_column("method")
+    for key in FIGURES:
+        t.add_column(FIGURE_HEADS[key], justify="right")
+    for method, row in reductions.items():
+        t.add_row(LABELS.get(method, method), *(interval_cell(row[k]) for k in FIGURES))
     return t
 
 
@@ -172,6 +235,16 @@ def simulate_report(
     rows = reduction_rows(summaries) if "proposed" in summaries else []
     if rows:
         print_table(console, reduction_table(rows))
+    figures: dict[str, dict[str, FloatArray]] = {m: run_figures(results[m]) for m in methods}
+    print_table(
+        console,
+        figures_table(
+            list(summaries.values()), f"{s.mission_id}: tr(PCRB) and errors, {runs} runs"
+        ),
+    )
+    against = reductions_against_baseline(figures, seed=seed)
+    if against:
+        print_table(console, against_baseline_table(against, runs))
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = {
         "config": s.trace_config(),
@@ -179,6 +252,11 @@ def simulate_report(
         "seed": seed,
         "methods": {m: asdict(v) for m, v in summaries.items()},
         "reductions": rows,
+        "against_proposed": {
+            m: {k: None if iv is None else asdict(iv) for k, iv in row.items()}
+            for m, row in against.items()
+        },
+        "per_run": {m: {k: v.tolist() for k, v in f.items()} for m, f in figures.items()},
     }
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     if plots:

@@ -1,0 +1,100 @@
+"""Per-run figures of a Monte Carlo and every method's reduction against `proposed`, with paired
+bootstrap 95 % intervals over runs (experiment/bootstrap.py).
+
+Figures (docs/model.md, "Metrics"), per run r over its slots (slot 1 = index 0):
+- `pcrb`: mission-mean tr(PCRB) = mean over slots 1..N of tr(C_n), C_n = J_n^-1 (m^2 + (m/s)^2);
+- `pcrb_from11`: the same over slots 11..N (NaN when N < 11), the tracking phase after the
+  initial transient;
+- `pcrb_late`: the same over the second half, slots floor(N/2)+1..N;
+- `loc_mse`, `vel_mse`: mean over slots 2..N of ||p_hat - p||^2 (m^2) and ||v_hat - v||^2;
+  the RMSE pooled over runs is sqrt(mean over runs), every run having the same slots.
+A reduction is 100 (1 - other / proposed) for the means and 100 (1 - sqrt(other / proposed)) for
+the RMSEs (positive: the method is lower than `proposed`), the runs paired by seed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from isac_mission.experiment.bootstrap import (
+    Interval,
+    PairedStatistic,
+    paired_bootstrap,
+    reduction_of_means,
+    reduction_of_rms,
+)
+from isac_mission.experiment.closed_loop import RunResult
+from isac_mission.types import FloatArray
+
+FROM_SLOT = 11
+"""First slot of the tracking-phase mean `pcrb_from11` (1-based)."""
+
+FIGURES: dict[str, PairedStatistic] = {
+    "pcrb": reduction_of_means,
+    "pcrb_from11": reduction_of_means,
+    "pcrb_late": reduction_of_means,
+    "loc_mse": reduction_of_rms,
+    "vel_mse": reduction_of_rms,
+}
+"""The per-run figures and the statistic that turns two methods' values into a % reduction."""
+
+BASELINE = "proposed"
+
+
+def run_figures(results: Sequence[RunResult]) -> dict[str, FloatArray]:
+    """Per-run figures [R] of one method's runs (keys of FIGURES, see the module docstring)."""
+    err = np.array([r.est - r.true for r in results])  # [R, N, 4]
+    C = np.array([r.pcrb for r in results])  # [R, N, 4, 4]
+    tr = np.trace(C, axis1=-2, axis2=-1)  # [R, N]
+    n = tr.shape[1]
+    from11 = (
+        tr[:, FROM_SLOT - 1 :].mean(axis=1) if n >= FROM_SLOT else np.full(len(results), math.nan)
+    )
+    return {
+        "pcrb": tr.mean(axis=1),
+        "pcrb_from11": from11,
+        "pcrb_late": tr[:, n // 2 :].mean(axis=1),
+        "loc_mse": np.sum(err[:, 1:, :2] ** 2, axis=-1).mean(axis=1),
+        "vel_mse": np.sum(err[:, 1:, 2:] ** 2, axis=-1).mean(axis=1),
+    }
+
+
+def pooled(figures: Mapping[str, FloatArray]) -> dict[str, float]:
+    """The figures over all runs: means, and RMSEs (m, m/s) for the two MSEs."""
+    mean = {k: float(np.mean(v)) for k, v in figures.items()}
+    return {
+        "pcrb": mean["pcrb"],
+        "pcrb_from11": mean["pcrb_from11"],
+        "pcrb_late": mean["pcrb_late"],
+        "loc_rmse": math.sqrt(mean["loc_mse"]),
+        "vel_rmse": math.sqrt(mean["vel_mse"]),
+    }
+
+
+def reductions_against_baseline(
+    figures_by_method: Mapping[str, Mapping[str, FloatArray]],
+    *,
+    baseline: str = BASELINE,
+    seed: int = 0,
+    level: float = 0.95,
+) -> dict[str, dict[str, Interval | None]]:
+    """Per method other than `baseline`: each figure's % reduction against it, paired bootstrap
+    interval over runs (None when it cannot be formed: one run, or a figure NaN such as slots
+    11..N of a short mission). {} when `baseline` was not run."""
+    if baseline not in figures_by_method:
+        return {}
+    base = figures_by_method[baseline]
+    out: dict[str, dict[str, Interval | None]] = {}
+    for method, figs in figures_by_method.items():
+        if method == baseline:
+            continue
+        row: dict[str, Interval | None] = {}
+        for key, statistic in FIGURES.items():
+            b, o = base[key], figs[key]
+            ok = b.size >= 2 and bool(np.all(np.isfinite(b)) and np.all(np.isfinite(o)))
+            row[key] = paired_bootstrap(b, o, statistic, level=level, seed=seed) if ok else None
+        out[method] = row
+    return out
