@@ -11,9 +11,13 @@ import numpy as np
 
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
+from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.records import read_trace
+from isac_mission.service.ground.fleet_plan import Planner
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.types import SlotPlan
 from isac_mission.wire import Keys, decode_health, decode_plan, decode_track
 from sim.world import run_world
 from sim.world_options import WorldOptions
@@ -22,7 +26,13 @@ from tests.support.ports import sitl_ports
 
 
 async def _mission(
-    s: Scenario, port: int, trace: Path, *, slots: int, resume: bool = False
+    s: Scenario,
+    port: int,
+    trace: Path,
+    *,
+    slots: int,
+    resume: bool = False,
+    planner: Planner = plan_slot,
 ) -> tuple[list[bytes], list[bytes], list[bytes], int]:
     s = dataclasses.replace(s, N=slots)
     endpoint = tcp_loopback(port)
@@ -31,7 +41,8 @@ async def _mission(
     tracks: list[bytes] = []
     health: list[bytes] = []
     with ZenohBus.open(BusSettings.hub(endpoint)) as bus:
-        loop = GroundLoop(s, bus, GroundSettings(trace_path=trace, resume=resume))
+        settings = GroundSettings(trace_path=trace, resume=resume, planner=planner)
+        loop = GroundLoop(s, bus, settings)
 
         async def collect(key: str, into: list[bytes]) -> None:
             async with bus.subscribe(key) as sub:
@@ -98,3 +109,39 @@ async def test_restarted_ground_loop_resumes_from_the_last_traced_slot(
     assert state.slot == 4
     np.testing.assert_allclose(state.bound.J, first.slots[-1].J)
     np.testing.assert_allclose(state.belief.P, first.slots[-1].P)
+
+
+async def test_ground_loop_gives_the_planner_the_predicted_covariance_and_last_plan(
+    paper: Scenario, free_tcp_port: int, tmp_path: Path
+) -> None:
+    """Over the wire: slot n's planner input carries last slot's plan as published (the whole
+    fleet is active) and the EKF's predicted covariance F P_{n-1} F^T + W, recomputed here from
+    the traced P of slot n-1 (P0 before slot 1)."""
+    inputs: list[SlotInput] = []
+
+    def recording(inp: SlotInput, kit: SolverKit, method: Method) -> SlotPlan:
+        inputs.append(inp)
+        return plan_slot(inp, kit, method)
+
+    trace_path = tmp_path / "live.jsonl"
+    plans, _, _, slots = await _mission(
+        paper, free_tcp_port, trace_path, slots=5, planner=recording
+    )
+    assert slots == 5
+    published = {(p := decode_plan(b)).slot: p for b in plans}
+    trace = read_trace(trace_path)
+    F, W = transition_matrix(paper.dt), process_noise(paper.dt, paper.kappa)
+    posteriors = [paper.P0, *(np.asarray(r.P) for r in trace.slots)]
+    assert len(inputs) == 5  # plans 1..5 (none after the last slot)
+    assert inputs[0].prev_plan is None
+    for n, inp in enumerate(inputs, start=1):
+        assert inp.target_cov_pred is not None
+        want = F @ posteriors[n - 1] @ F.T + W
+        np.testing.assert_allclose(inp.target_cov_pred, want, rtol=1e-9, atol=1e-12)
+        if n > 1:
+            prev = inp.prev_plan
+            assert prev is not None
+            sent = published[n - 1]
+            np.testing.assert_allclose(prev.uav_xy_m, sent.plan.uav_xy_m, atol=1e-6)
+            np.testing.assert_allclose(prev.bandwidth_share, sent.plan.bandwidth_share, atol=1e-9)
+            np.testing.assert_array_equal(prev.bs_of_uav, sent.plan.bs_of_uav)

@@ -21,7 +21,7 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import PlanningObjective
-from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan, SolveReport
+from isac_mission.types import FloatArray, Gaussian, HorizonPlan, IntArray, SlotPlan, SolveReport
 
 NO_BS = -1
 """bs_of_uav of a vehicle outside the plan."""
@@ -61,8 +61,10 @@ class PlanningJob:
     """Everything needed to plan slot `slot` (arrays over all M vehicles).
 
     uav_xy [M, 2], uav_v [M, 2]: positions and velocities now (m, m/s); prev_eta [M];
-    prev_assoc [M] or None; prediction: the predicted target for the slot; J_pred [4, 4]: the
-    bound's prior information; excluded: vehicles outside the plan (sorted).
+    prev_assoc [M] or None; prediction: the predicted target for the slot (its P is the
+    planner's target_cov_pred); J_pred [4, 4]: the bound's prior information; excluded: vehicles
+    outside the plan (sorted); prev_plan: last slot's plan of the same active vehicles, over
+    those vehicles only (`active_part`), None when there is none or the active set changed.
     """
 
     slot: int
@@ -75,6 +77,7 @@ class PlanningJob:
     prediction: Gaussian
     J_pred: FloatArray
     excluded: tuple[int, ...] = ()
+    prev_plan: SlotPlan | None = None
 
     @property
     def active(self) -> tuple[int, ...]:
@@ -101,6 +104,8 @@ class PlanningJob:
             J_pred=self.J_pred,
             prev_velocity=None if self.uav_v is None else self.uav_v[idx],
             keep_out_xy=self.uav_xy[list(self.excluded)] if self.excluded else None,
+            target_cov_pred=self.prediction.P,
+            prev_plan=self.prev_plan,
         )
         plan = planner(inp, kit, self.method)
         if not self.excluded:
@@ -117,7 +122,26 @@ class PlanningJob:
         assoc[idx] = sub.bs_of_uav
         note = f"vehicles {list(self.excluded)} excluded (health says why), holding"
         reason = f"{sub.report.reason}; {note}" if sub.report.reason else note
-        return SlotPlan(xy, assoc, eta, sub.pcrb_trace, replace(sub.report, reason=reason))
+        velocity = None
+        if sub.uav_velocity_mps is not None:  # a holding vehicle's planned velocity is 0
+            velocity = np.zeros((M, 2))
+            velocity[idx] = sub.uav_velocity_mps
+        horizon = None
+        if sub.horizon is not None:
+            h = sub.horizon
+            L = h.uav_xy_m.shape[0]
+            h_xy = np.repeat(np.asarray(self.uav_xy, dtype=float)[None], L, axis=0)
+            h_xy[:, idx] = h.uav_xy_m
+            h_eta = np.zeros((L, M))
+            h_eta[:, idx] = h.bandwidth_share
+            h_v = None
+            if h.uav_velocity_mps is not None:
+                h_v = np.zeros((L, M, 2))
+                h_v[:, idx] = h.uav_velocity_mps
+            horizon = HorizonPlan(h_xy, h_v, h_eta, h.pcrb_trace)
+        return SlotPlan(
+            xy, assoc, eta, sub.pcrb_trace, replace(sub.report, reason=reason), velocity, horizon
+        )
 
     def hold(self, reason: str, status: str, solve_s: float = 0.0) -> SlotPlan:
         """Every vehicle holds where it is, with last slot's shares and association (a plan that
@@ -157,3 +181,33 @@ class PlanningJob:
         return replace(
             plan, report=replace(plan.report, status="solver error", reason=note, solve_s=solve_s)
         )
+
+
+def active_part(plan: SlotPlan, active: tuple[int, ...]) -> SlotPlan:
+    """The part of a plan over all M vehicles that concerns the `active` ones (sorted indices):
+    the inverse of PlanningJob's widening, so that the planner's prev_plan is over the vehicles
+    it plans (waypoints, shares, association, velocities and the horizon, indexed by vehicle)."""
+    idx = list(active)
+    if len(idx) == len(plan.bandwidth_share):
+        return plan
+    h = plan.horizon
+    horizon = (
+        None
+        if h is None
+        else HorizonPlan(
+            h.uav_xy_m[:, idx],
+            None if h.uav_velocity_mps is None else h.uav_velocity_mps[:, idx],
+            h.bandwidth_share[:, idx],
+            h.pcrb_trace,
+        )
+    )
+    v = plan.uav_velocity_mps
+    return SlotPlan(
+        plan.uav_xy_m[idx],
+        plan.bs_of_uav[idx],
+        plan.bandwidth_share[idx],
+        plan.pcrb_trace,
+        plan.report,
+        None if v is None else v[idx],
+        horizon,
+    )

@@ -16,7 +16,7 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord
-from isac_mission.service.ground.fleet_plan import KitCache, PlanningJob
+from isac_mission.service.ground.fleet_plan import KitCache, PlanningJob, active_part
 from isac_mission.tracking.cycle import CycleModel, SlotPrediction, TrackState, predict, update
 from isac_mission.tracking.pcrb import Bound
 from isac_mission.types import (
@@ -58,6 +58,9 @@ class MissionState:
         self.assoc: IntArray | None = None
         self.pending: PendingSlot | None = None
         self.kits = KitCache(kit)
+        self.last_plan: tuple[int, tuple[int, ...], SlotPlan] | None = None
+        """(slot, active vehicles, plan) of the last committed plan: the next job's prev_plan
+        when the next slot follows it with the same active vehicles."""
 
     @classmethod
     def resumed(cls, s: Scenario, kit: SolverKit, method: Method, last: SlotRecord) -> MissionState:
@@ -81,8 +84,17 @@ class MissionState:
     ) -> PlanningJob:
         """Predict slot n+1: the planning job from the UAVs' current positions uav_xy [M, 2]
         (and velocities uav_v [M, 2], for a dynamics-aware planner), planning without the
-        `excluded` vehicles (fleet_plan.py). Nothing changes until `commit`."""
+        `excluded` vehicles (fleet_plan.py). Nothing changes until `commit`. The job carries
+        the planner's prev_plan: last slot's plan when the active vehicles are the same (over
+        them only), else None."""
         predicted = predict(self.model, TrackState(self.belief, self.bound))
+        excluded = tuple(sorted(excluded))
+        active = tuple(m for m in range(self.scenario.M) if m not in excluded)
+        prev_plan = None
+        if self.last_plan is not None:
+            slot, last_active, plan = self.last_plan
+            if slot == self.slot and last_active == active:
+                prev_plan = active_part(plan, active)
         return PlanningJob(
             slot=self.slot + 1,
             method=self.method,
@@ -93,7 +105,8 @@ class MissionState:
             prev_assoc=self.assoc,
             prediction=predicted.prediction,
             J_pred=predicted.prior,
-            excluded=tuple(sorted(excluded)),
+            excluded=excluded,
+            prev_plan=prev_plan,
         )
 
     def commit(self, job: PlanningJob, plan: SlotPlan) -> PendingSlot:
@@ -102,6 +115,7 @@ class MissionState:
             raise ValueError(f"job for slot {job.slot}, but the next slot is {self.slot + 1}")
         predicted = SlotPrediction(job.prediction, job.J_pred)
         self.pending = PendingSlot(job.slot, predicted, plan)
+        self.last_plan = (job.slot, job.active, plan)
         return self.pending
 
     def plan_next(
@@ -140,6 +154,7 @@ class MissionState:
         if det.slot != n:
             raise ValueError(f"slot {det.slot} is not the next slot {n}")
         predicted = predict(self.model, TrackState(self.belief, self.bound))
+        self.last_plan = None  # this slot had no plan of ours: the next one starts afresh
         known = np.isfinite(det.uav_xy_m)
         xy = np.where(known, det.uav_xy_m, np.nan)
         assoc = self.assoc if self.assoc is not None else np.full(self.scenario.M, -1)
