@@ -17,6 +17,7 @@ call the same function. The strategies share it:
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from typing import Literal
@@ -24,6 +25,7 @@ from typing import Literal
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.model.vehicle import VehicleModel
 from isac_mission.planning.association import AssociationLP, associate
 from isac_mission.planning.bandwidth import BandwidthSubproblem, optimise_shares
 from isac_mission.planning.basins import screen_leaders
@@ -146,7 +148,19 @@ def evade_target(
 
 def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> SlotPlan:
     """Plan one slot with the given strategy. An infeasible slot returns a best-effort plan (the
-    communication-optimal one, or staying put for sd) with report.status == "infeasible"."""
+    communication-optimal one, or staying put for sd) with report.status == "infeasible".
+
+    With planner.vehicle_model the waypoints keep within the exact reach a_max dt^2 / 4 of the
+    coasting point (model/vehicle.py) and the plan carries the mean-velocity leg's end velocity
+    (q_n - q_{n-1}) / dt as uav_velocity_mps (docs/model.md, "Vehicle model")."""
+    plan = _plan_slot(inp, kit, method)
+    if kit.scenario.planner.vehicle_model and plan.uav_velocity_mps is None:
+        end_v = VehicleModel.of(kit.scenario).end_velocity(inp.prev_xy, plan.uav_xy_m)
+        plan = dataclasses.replace(plan, uav_velocity_mps=end_v)
+    return plan
+
+
+def _plan_slot(inp: SlotInput, kit: SolverKit, method: Method) -> SlotPlan:
     t0 = time.perf_counter()
     s = kit.scenario
     cfg = s.planner
@@ -161,7 +175,10 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         )
     serving = s.bs_xy[assoc]
     ballistic = None
-    if cfg.accel_limit_mps2 is not None and inp.prev_velocity is not None:
+    reach_m = VehicleModel.of(s).reach_radius_m if cfg.vehicle_model else np.inf
+    if not cfg.vehicle_model and cfg.accel_limit_mps2 is not None:
+        reach_m = cfg.accel_limit_mps2 * s.dt**2 / 4
+    if np.isfinite(reach_m) and inp.prev_velocity is not None:
         # Where the vehicles coast to, pulled inside the 14h disk: a vehicle a little faster than
         # the planner's V_max has to slow down anyway.
         coast = inp.prev_velocity * s.dt
@@ -176,9 +193,7 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
         inp.x_pred[:2],
         s,
         ballistic_xy=ballistic,
-        accel_radius_m=(cfg.accel_limit_mps2 or 0.0) * s.dt**2 / 4
-        if ballistic is not None
-        else np.inf,
+        accel_radius_m=reach_m if ballistic is not None else np.inf,
         keep_out_xy=inp.keep_out_xy if n_keep_out else None,
     )
     moves = method not in ("sd",)
