@@ -24,7 +24,13 @@ The third table replays the proposed method's slot inputs through `proposed-sca`
 alone) and `proposed` (Algorithm 2 + the polish, planning/polish.py), interleaved slot by slot:
 median plan time of each, their ratio, IPOPT's iterations and the polish's gain in tr(PCRB).
 
-Run: python bench/planner.py [--slots 20] [--slots-24 6] [--quick]
+The last table, "plan time per method and M", gives for each method of --methods (default: every
+one of proposed, sd, aba, crb, horizon that planning.slot.METHODS has) and each M its median and
+p95 plan time and the ratio of its median to the proposed method's at the same M, all from this
+one run. --methods-only times just those cells (no solver, reference or polish cells).
+
+Run: python bench/planner.py [--slots 20] [--slots-24 6] [--quick] [--methods proposed,horizon]
+     python bench/planner.py --methods-only [--methods ...]   (the per-method table alone)
      python bench/planner.py --compare-tree DIR [--rounds 3]   (before/after, docs/performance.md)
      python bench/planner.py --profile M                       (cProfile of the proposed method)
 """
@@ -43,6 +49,7 @@ import time
 import tracemalloc
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -52,6 +59,7 @@ from isac_mission.planning.positions import PositionSubproblem
 from isac_mission.planning.slot import METHODS, Method, SlotInput, SolverKit, plan_slot
 
 SIZES = ((3, 5), (6, 8), (12, 12), (24, 20))
+DEFAULT_METHODS = tuple(m for m in ("proposed", "sd", "aba", "crb", "horizon") if m in METHODS)
 MEMORY_SLOTS = 3
 
 
@@ -211,11 +219,49 @@ def profile(m: int, slots: int) -> None:
     pstats.Stats(prof).sort_stats("cumulative").print_stats(30)
 
 
+def method_table(cells: list[Cell], methods: list[str]) -> None:
+    """Median / p95 plan time per method and M, and the median's ratio to proposed's (same M)."""
+    print("\nplan time per method and M (ms; ratio = median / proposed's median at the same M)")
+    head = f"{'M':>3} {'slots':>5} " + " ".join(
+        f"{m + ' med':>14} {'p95':>7} {'ratio':>6}" for m in methods
+    )
+    print(head)
+    for m_uavs in sorted({c.m for c in cells}):
+        row = {c.method: c.times_s * 1e3 for c in cells if c.m == m_uavs and c.solver == "CLARABEL"}
+        base = float(np.median(row["proposed"])) if "proposed" in row else math.nan
+        n = len(next(iter(row.values())))
+        cols = []
+        for method in methods:
+            ms = row[method]
+            med = float(np.median(ms))
+            cols.append(f"{med:>14.1f} {np.percentile(ms, 95):>7.1f} {med / base:>6.2f}")
+        print(f"{m_uavs:>3} {n:>5} " + " ".join(cols))
+
+
+def parse_methods(text: str) -> list[Method]:
+    """--methods: comma-separated names of planning.slot.METHODS (exit with a message if not)."""
+    chosen = [m.strip() for m in text.split(",") if m.strip()]
+    unknown = sorted(set(chosen) - set(METHODS))
+    if unknown or not chosen:
+        raise SystemExit(f"--methods: unknown {unknown}; choose from {', '.join(METHODS)}")
+    return [cast("Method", m) for m in chosen]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--slots", type=int, default=20, help="slots per cell for M <= 12")
     ap.add_argument("--slots-24", type=int, default=6, help="slots per cell at M = 24")
     ap.add_argument("--quick", action="store_true", help="smoke run: M = 3, 6; 4 slots")
+    ap.add_argument(
+        "--methods",
+        default=",".join(DEFAULT_METHODS),
+        help=f"methods timed per M (default {','.join(DEFAULT_METHODS)})",
+    )
+    ap.add_argument(
+        "--methods-only",
+        action="store_true",
+        help="only the per-method timing table (no solver, reference or polish cells)",
+    )
     ap.add_argument(
         "--compare-tree",
         metavar="DIR",
@@ -238,6 +284,7 @@ def main() -> None:
             str(Path(args.compare_tree).resolve()), args.rounds, args.slots, args.slots_24
         )
         return
+    methods = parse_methods(args.methods)
     sizes = SIZES[:2] if args.quick else SIZES
     solvers = (
         ("CLARABEL/cvxpy", "reference") if args.quick else ("CLARABEL/cvxpy", "SCS", "reference")
@@ -246,10 +293,16 @@ def main() -> None:
     cells: list[Cell] = []
     for m, k in sizes:
         slots = 4 if args.quick else (args.slots_24 if m >= 24 else args.slots)
-        for method in METHODS:
+        for method in methods:
             cells.append(run_cell(m, k, slots, method, "CLARABEL"))
+        if args.methods_only:
+            continue
         for solver in solvers:
             cells.append(run_cell(m, k, slots, "proposed", solver))
+    if args.methods_only or "proposed" not in methods:
+        method_table(cells, list(methods))
+        print(f"\ntotal {time.perf_counter() - t_start:.0f} s")
+        return
     base = next(float(np.median(c.times_s)) for c in cells if c.m == 3 and c.method == "proposed")
     ref = {c.m: float(np.median(c.times_s)) for c in cells if c.solver == "reference"}
     print("per-slot planning time and memory (one closed-loop run per cell, seed 100)")
@@ -284,6 +337,7 @@ def main() -> None:
             print(f"{c.m:>3} {n:>5} {dq50:>13.2e} {dq:>10.2e} {dtr50:>+11.1e} {dtr:>+12.1e}")
     print("d tr = tr(PCRB) of the default plan / reference plan - 1 (negative: default better)")
     polish_table(cells)
+    method_table(cells, list(methods))
     print(f"\ntotal {time.perf_counter() - t_start:.0f} s")
 
 
