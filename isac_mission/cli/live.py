@@ -236,7 +236,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
 
 
 MethodOpt = Annotated[
-    str, typer.Option(help="Planning method: proposed, proposed-sca, sd, aba, crb, comm.")
+    str, typer.Option(help="Planning method: proposed, proposed-sca, sd, aba, crb, comm, horizon.")
 ]
 SpeedOpt = Annotated[float, typer.Option(help="Simulation seconds per wall second.")]
 

@@ -53,7 +53,8 @@ def simulate(
         Path | None, typer.Option(help="Output folder (traces, plots, summary).")
     ] = None,
     methods: Annotated[
-        str, typer.Option(help="Comma-separated: proposed, proposed-sca, sd, aba, crb, comm.")
+        str,
+        typer.Option(help="Comma-separated: proposed, proposed-sca, sd, aba, crb, comm, horizon."),
     ] = "proposed,sd,aba,crb",
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 2,
     plots: Annotated[bool, typer.Option(help="Write the Fig. 2 / Fig. 3 style PNGs.")] = True,

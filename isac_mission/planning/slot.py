@@ -12,7 +12,9 @@ call the same function. The strategies share it:
 - sd: static deployment, UAVs stay where they are, shares optimised;
 - aba: average bandwidth (eta = 1/M), positions by Algorithm 1;
 - crb: the proposed optimiser with the measurement-only objective tr(J_M^-1);
-- comm: the communication-optimal plan of Section III-A.
+- comm: the communication-optimal plan of Section III-A;
+- horizon: slots n..n+L-1 planned together on the bound's recursion (planning/horizon.py), the
+  first flown; the polished per-slot plan is its start and its fallback.
 """
 
 from __future__ import annotations
@@ -31,9 +33,11 @@ from isac_mission.planning.bandwidth import BandwidthSubproblem, optimise_shares
 from isac_mission.planning.basins import screen_leaders
 from isac_mission.planning.communication import communication_optimal, lemma1_shares
 from isac_mission.planning.feasibility import SlotConstraints, capacity_ok, operating_area
+from isac_mission.planning.horizon import plan_horizon
+from isac_mission.planning.horizon_nlp import HorizonNLP
 from isac_mission.planning.polish import PolishNLP
 from isac_mission.planning.positions import PositionSubproblem, optimise_positions
-from isac_mission.tracking.pcrb import PlanningObjective, SensingParams
+from isac_mission.tracking.pcrb import PlanningObjective, SensingParams, scaled_inverse
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 
 EARLY_POLISH_GAIN = 1e-6
@@ -41,8 +45,8 @@ EARLY_POLISH_GAIN = 1e-6
 (relative) there: a smaller gain means Algorithm 2 had nearly converged, and its end point (which
 the polish may then match only to IPOPT's tolerance) is polished instead."""
 
-Method = Literal["proposed", "proposed-sca", "sd", "aba", "crb", "comm"]
-METHODS: tuple[Method, ...] = ("proposed", "proposed-sca", "sd", "aba", "crb", "comm")
+Method = Literal["proposed", "proposed-sca", "sd", "aba", "crb", "comm", "horizon"]
+METHODS: tuple[Method, ...] = ("proposed", "proposed-sca", "sd", "aba", "crb", "comm", "horizon")
 
 
 @dataclass(frozen=True)
@@ -88,6 +92,7 @@ class SolverKit:
         self.shares = BandwidthSubproblem(s.M, "closed-form" if fast else "HIGHS")
         self.association = AssociationLP(s.M, s.K, s.n_a, shortcut=fast)
         self._polish: PolishNLP | None = None
+        self._horizon: HorizonNLP | None = None
 
     @property
     def polish(self) -> PolishNLP:
@@ -97,7 +102,14 @@ class SolverKit:
             self._polish = PolishNLP(s, self.n_keep_out, s.planner.polish_max_iterations)
         return self._polish
 
-    def warm_up(self) -> None:
+    @property
+    def horizon(self) -> HorizonNLP:
+        """The receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept."""
+        if self._horizon is None:
+            self._horizon = HorizonNLP(self.scenario, self.n_keep_out)
+        return self._horizon
+
+    def warm_up(self, method: Method = "proposed") -> None:
         """Solve every problem once so that the first real slot does not pay for compilation."""
         s = self.scenario
         plan_slot(
@@ -111,7 +123,7 @@ class SolverKit:
                 keep_out_xy=np.full((self.n_keep_out, 2), -1e6) if self.n_keep_out else None,
             ),
             self,
-            "proposed",
+            method,
         )
 
 
@@ -162,6 +174,22 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
 
 def _plan_slot(inp: SlotInput, kit: SolverKit, method: Method) -> SlotPlan:
     t0 = time.perf_counter()
+    if method == "horizon":
+        base = plan_slot(inp, kit, "proposed")
+        cov = inp.target_cov_pred
+        return plan_horizon(
+            inp.prev_xy,
+            inp.prev_velocity,
+            inp.keep_out_xy,
+            inp.x_pred,
+            inp.J_pred,
+            scaled_inverse(inp.J_pred) if cov is None else cov,
+            inp.prev_plan,
+            base,
+            kit.horizon,
+            kit.sensing,
+            t0,
+        )
     s = kit.scenario
     cfg = s.planner
     n_keep_out = 0 if inp.keep_out_xy is None else len(inp.keep_out_xy)

@@ -1,0 +1,221 @@
+"""Method `horizon`: plan slots n..n+L-1 together, fly the first, re-plan every slot.
+
+Each slot (docs/model.md, "Receding horizon"):
+1. the polished per-slot plan (`proposed`) is computed: it fixes slot n's association, which
+   the horizon keeps over all L slots, it is one start point, and it is the fallback;
+2. the horizon NLP (planning/horizon_nlp.py) is solved from the better (lower horizon objective)
+   of two starts: last slot's horizon shifted by one slot (the warm start), and the per-slot plan
+   continued at constant velocity;
+3. the answer's first slot is kept if IPOPT succeeded and it passes the exact checks of 14a-14j
+   on the slot (SlotConstraints.feasible, which every other method's plan passes too) and the
+   vehicle model's leg limits; otherwise the per-slot plan is returned, saying why.
+
+Pure: no clock, no RNG, no I/O.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.model.vehicle import end_accelerations, velocity_control_points
+from isac_mission.planning.feasibility import SlotConstraints, operating_area
+from isac_mission.planning.horizon_nlp import HorizonNLP, HorizonSlotData, horizon_weights
+from isac_mission.planning.safety import target_clearance_m
+from isac_mission.tracking.pcrb import (
+    Bound,
+    SensingParams,
+    measurement_information,
+    predict_information,
+)
+from isac_mission.types import FloatArray, HorizonPlan, SlotPlan
+
+TOLERANCE = 1e-6
+"""Relative slack of the exact leg checks (IPOPT's constraint tolerance is 1e-8)."""
+
+
+def horizon_bound_traces(
+    s: Scenario,
+    J_pred: FloatArray,
+    x_pred: FloatArray,
+    xy: FloatArray,
+    eta: FloatArray,
+    sensing: SensingParams,
+) -> FloatArray:
+    """tr(PCRB) [L] along a horizon plan xy [L, M, 2], eta [L, M] by the bound's recursion
+    (tracking/pcrb.py): J_1 = J_pred + J_M,1; J_pred,l+1 = (F C_l F^T + W)^-1, every J_M at
+    the constant-velocity predicted state of its slot."""
+    F = transition_matrix(s.dt)
+    W = process_noise(s.dt, s.kappa)
+    x = np.asarray(x_pred, dtype=float)
+    prior = np.asarray(J_pred, dtype=float)
+    out = []
+    for h in range(len(xy)):
+        d = np.linalg.norm(x[None, :2] - xy[h], axis=1)
+        info = prior + measurement_information(x, xy[h], sensing.variances(d, eta[h]))
+        bound = Bound.from_information(0.5 * (info + info.T))
+        out.append(bound.trace)
+        prior = predict_information(bound, F, W)
+        x = F @ x
+    return np.asarray(out)
+
+
+def predicted_clearances(s: Scenario, target_cov_pred: FloatArray, length: int) -> FloatArray:
+    """clearance_m [L]: target_clearance_m for the covariance predicted l slots further (no
+    measurement in between: the largest the tracker's uncertainty can be there)."""
+    F = transition_matrix(s.dt)
+    W = process_noise(s.dt, s.kappa)
+    P = np.asarray(target_cov_pred, dtype=float)
+    out = []
+    for _ in range(length):
+        out.append(target_clearance_m(s, P))
+        P = F @ P @ F.T + W
+    return np.asarray(out)
+
+
+def _continue(
+    xy1: FloatArray, v1: FloatArray, eta1: FloatArray, length: int, dt: float, s: Scenario
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """A horizon start from a first slot (xy1 [M, 2], v1 [M, 2], eta1 [M]): constant velocity
+    (clipped into the area), the same shares."""
+    lo, hi = operating_area(s)
+    xy = np.array([np.clip(xy1 + h * dt * v1, lo, hi) for h in range(length)])
+    v = np.repeat(v1[None], length, axis=0)
+    return xy, v, np.repeat(eta1[None], length, axis=0)
+
+
+def _shifted(
+    prev: HorizonPlan, length: int, M: int, dt: float, s: Scenario
+) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """Last slot's horizon shifted by one slot, its end continued at constant velocity; None if
+    its shape does not match (fleet or length changed)."""
+    if prev.uav_xy_m.shape != (length, M, 2):
+        return None
+    xy = prev.uav_xy_m
+    if prev.uav_velocity_mps is not None:
+        v = prev.uav_velocity_mps
+    else:
+        steps = np.diff(np.concatenate([xy[:1], xy]), axis=0) / dt
+        v = steps
+    lo, hi = operating_area(s)
+    xy_new = np.concatenate([xy[1:], np.clip(xy[-1:] + dt * v[-1:], lo, hi)])
+    v_new = np.concatenate([v[1:], v[-1:]])
+    eta_new = np.concatenate([prev.bandwidth_share[1:], prev.bandwidth_share[-1:]])
+    return xy_new, v_new, eta_new
+
+
+def legs_ok(
+    s: Scenario, prev_xy: FloatArray, prev_v: FloatArray, xy: FloatArray, v: FloatArray
+) -> bool:
+    """True if the Hermite legs (prev_xy, prev_v) -> (xy, v) [M, 2] are within a_max and V_max
+    (the vehicle model's exact limits, with relative slack TOLERANCE)."""
+    a0, a1 = end_accelerations(prev_xy, prev_v, xy, v, s.dt)
+    _, mid, v_end = velocity_control_points(prev_xy, prev_v, xy, v, s.dt)
+    acc_ok = max(np.max(np.linalg.norm(a0, axis=1)), np.max(np.linalg.norm(a1, axis=1)))
+    speed = max(np.max(np.linalg.norm(mid, axis=1)), np.max(np.linalg.norm(v_end, axis=1)))
+    return bool(acc_ok <= s.a_max * (1 + TOLERANCE) and speed <= s.v_max * (1 + TOLERANCE))
+
+
+def plan_horizon(
+    inp_prev_xy: FloatArray,
+    inp_prev_velocity: FloatArray | None,
+    inp_keep_out: FloatArray | None,
+    x_pred: FloatArray,
+    J_pred: FloatArray,
+    target_cov_pred: FloatArray,
+    prev_plan: SlotPlan | None,
+    base: SlotPlan,
+    nlp: HorizonNLP,
+    sensing: SensingParams,
+    t0: float,
+) -> SlotPlan:
+    """The horizon plan of this slot, or `base` (the polished per-slot plan, already feasible
+    or already the best effort) with the reason when the horizon's answer is not kept.
+
+    inp_*: the slot's SlotInput fields (m, m/s); base: plan_slot(..., "proposed"); t0: the
+    perf_counter time the slot's planning started (for solve_s)."""
+    s = nlp.scenario
+    M, L, dt = s.M, nlp.length, s.dt
+    prev_v = np.zeros((M, 2)) if inp_prev_velocity is None else np.asarray(inp_prev_velocity)
+
+    def fall_back(why: str) -> SlotPlan:
+        report = replace(
+            base.report,
+            reason=f"horizon: {why}; per-slot plan"
+            + (f"; {base.report.reason}" * bool(base.report.reason)),
+            solve_s=time.perf_counter() - t0,
+        )
+        return replace(base, report=report)
+
+    if base.report.status != "ok":
+        return fall_back("the per-slot plan is infeasible")
+    serving = s.bs_xy[base.bs_of_uav]
+    nearest = np.argmin(np.linalg.norm(base.uav_xy_m[:, None, :] - s.bs_xy[None], axis=-1), axis=1)
+    data = HorizonSlotData(
+        prev_xy=np.asarray(inp_prev_xy, dtype=float),
+        prev_velocity=prev_v if nlp.vehicle_model else np.zeros((M, 2)),
+        serving_xy=serving,
+        control_xy=s.bs_xy[nearest],
+        keep_out_xy=np.zeros((0, 2)) if inp_keep_out is None else np.asarray(inp_keep_out),
+        x_pred=np.asarray(x_pred, dtype=float),
+        J_pred=np.asarray(J_pred, dtype=float),
+        clearance_m=predicted_clearances(s, target_cov_pred, L),
+    )
+    v1 = (
+        base.uav_velocity_mps
+        if base.uav_velocity_mps is not None
+        else (base.uav_xy_m - data.prev_xy) / dt
+    )
+    starts = [_continue(base.uav_xy_m, v1, base.bandwidth_share, L, dt, s)]
+    if prev_plan is not None and prev_plan.horizon is not None:
+        shifted = _shifted(prev_plan.horizon, L, M, dt, s)
+        if shifted is not None:
+            starts.append(shifted)
+    weights = horizon_weights(L, s.planner.horizon.discount, s.planner.horizon.terminal_weight)
+
+    def value(xy: FloatArray, eta: FloatArray) -> float:
+        return float(weights @ horizon_bound_traces(s, J_pred, x_pred, xy, eta, sensing))
+
+    start = min(starts, key=lambda st: value(st[0], st[2]))
+    sol = nlp.solve(start[0], start[1] if nlp.vehicle_model else None, start[2], data)
+    if not sol.success:
+        return fall_back(f"IPOPT {sol.status} after {sol.iterations} it")
+    xy1, eta1 = sol.uav_xy_m[0], sol.bandwidth_share[0]
+    cons = SlotConstraints(
+        data.prev_xy, serving, s.bs_xy, data.x_pred[:2], s, keep_out_xy=inp_keep_out
+    )
+    if not bool(cons.feasible(xy1[None], eta1[None])[0]):
+        bad = ", ".join(cons.describe_violations(xy1, eta1))
+        return fall_back(f"IPOPT's answer violates {bad}")
+    velocity1 = None
+    if sol.uav_velocity_mps is not None:
+        velocity1 = sol.uav_velocity_mps[0]
+        if not legs_ok(s, data.prev_xy, prev_v, xy1, velocity1):
+            return fall_back("IPOPT's first leg breaks the vehicle limits")
+    traces = horizon_bound_traces(s, J_pred, x_pred, sol.uav_xy_m, sol.bandwidth_share, sensing)
+    report = replace(
+        base.report,
+        reason="",
+        solve_s=time.perf_counter() - t0,
+        polish=f"horizon: IPOPT {sol.status} in {sol.iterations} it, "
+        f"objective {value(start[0], start[2]):.6g} -> {float(weights @ traces):.6g}",
+        objective_history=(*base.report.objective_history, float(traces[0])),
+    )
+    return SlotPlan(
+        uav_xy_m=xy1,
+        bs_of_uav=base.bs_of_uav,
+        bandwidth_share=eta1,
+        pcrb_trace=float(traces[0]),
+        report=report,
+        uav_velocity_mps=velocity1,
+        horizon=HorizonPlan(
+            uav_xy_m=sol.uav_xy_m,
+            uav_velocity_mps=sol.uav_velocity_mps,
+            bandwidth_share=sol.bandwidth_share,
+            pcrb_trace=traces,
+        ),
+    )

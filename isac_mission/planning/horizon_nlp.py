@@ -1,0 +1,338 @@
+"""The receding-horizon problem of slots n..n+L-1 as one NLP, built once and solved by IPOPT.
+
+    min  sum_l w_l tr(C_l),  C_l = (J_pred,l + J_M(Q_l, eta_l; x_l))^-1,
+         J_pred,1 = the slot's prior information, J_pred,l+1 = (F C_l F^T + W)^-1,
+         x_l = F^(l-1) x_pred (the constant-velocity prediction)
+    s.t. for every horizon slot l and UAV m (slot n's association kept over the horizon):
+         eta_lm R~(|q_lm - w_k(m)| + e) >= R_th                       (14a, with the link margin)
+         |q_lm - w_c(m)| + e <= d_th                                   (14b)
+         sum_m eta_lm = 1, eta_lm >= 0                                 (14c, 14d)
+         paper kinematics: |q_lm - q_l-1,m| <= V_max dt                (14h)
+         vehicle model: the Hermite leg (q, v)_l-1 -> (q, v)_l within a_max and V_max
+         at leg_samples points s of each leg: |q_m(s) - p(s)| >= c_l   (14j, c_l the clearance)
+                                              |q_i(s) - q_j(s)| >= D_s + 2e, |q_m(s) - k| >= D_s + 2e
+         0 <= q_lm <= area                                             (operating area, bounds)
+
+with w_l = discount^(l-1) (times terminal_weight on the last slot). The derivatives are CasADi's
+(automatic differentiation, exact). Everything that changes per slot is a parameter: the UAVs'
+positions and velocities, the serving and control BSs, the keep-out points, the predicted state,
+the prior information, the clearances c_l and the objective's scale.
+
+Scaling: q_lm = q_m,n-1 + S z_lm with S = V_max dt; v_lm = V_max u_lm; every J is Jacobi-scaled
+symbolically before it is inverted; the objective is divided by its value at the start point.
+Distances are constrained squared in units of S^2, tightened by SOLVER_MARGIN_M.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
+from isac_mission.planning.polish import MIN_SHARE, RATE_MARGIN, _information_terms
+from isac_mission.planning.positions import SOLVER_MARGIN_M
+from isac_mission.planning.safety import SafetyMargins
+from isac_mission.types import FloatArray
+
+IPOPT_OPTIONS: dict[str, Any] = {
+    "print_level": 0,
+    "sb": "yes",
+    "tol": 1e-7,
+    "constr_viol_tol": 1e-8,
+    "acceptable_iter": 0,
+    "mu_strategy": "adaptive",
+    "hessian_approximation": "exact",
+}
+"""IPOPT's options of the horizon (max_iter from planner.horizon.max_iterations)."""
+
+
+def horizon_weights(length: int, discount: float, terminal_weight: float) -> FloatArray:
+    """w [L]: discount^l (l = 0..L-1), the last one times terminal_weight."""
+    w = discount ** np.arange(length, dtype=float)
+    w[-1] *= terminal_weight
+    return np.asarray(w)
+
+
+@dataclass(frozen=True)
+class HorizonSlotData:
+    """One slot's parameters of the horizon NLP.
+
+    prev_xy [M, 2] (m), prev_velocity [M, 2] (m/s; zeros for the paper's kinematics);
+    serving_xy, control_xy [M, 2]: the serving BS (14a) and the control BS (14b) per UAV;
+    keep_out_xy [n_keep_out, 2]; x_pred [4]: slot n's predicted target state; J_pred [4, 4];
+    clearance_m [L]: the 14j distance per horizon slot.
+    """
+
+    prev_xy: FloatArray
+    prev_velocity: FloatArray
+    serving_xy: FloatArray
+    control_xy: FloatArray
+    keep_out_xy: FloatArray
+    x_pred: FloatArray
+    J_pred: FloatArray
+    clearance_m: FloatArray
+
+
+@dataclass(frozen=True)
+class HorizonSolution:
+    """uav_xy_m [L, M, 2], uav_velocity_mps [L, M, 2] or None, bandwidth_share [L, M] (each row
+    renormalised to sum 1); status: IPOPT's return_status; success; iterations."""
+
+    uav_xy_m: FloatArray
+    uav_velocity_mps: FloatArray | None
+    bandwidth_share: FloatArray
+    status: str
+    success: bool
+    iterations: int
+
+
+class HorizonNLP:
+    """The horizon problem for the scenario's M UAVs and n_keep_out keep-out points."""
+
+    def __init__(self, scenario: Scenario, n_keep_out: int = 0) -> None:
+        s = scenario
+        cfg = s.planner.horizon
+        M, L, K = s.M, cfg.length, cfg.leg_samples
+        self.scenario = s
+        self.n_keep_out = n_keep_out
+        self.length = L
+        self.vehicle_model = s.planner.vehicle_model
+        self.step_m = S = s.v_max * s.dt
+        margins = SafetyMargins.of(s)
+        self.margins = margins
+        dt = s.dt
+        F = transition_matrix(dt)
+        W = process_noise(dt, s.kappa)
+
+        z = ca.SX.sym("z", L * M * 2)
+        u = ca.SX.sym("u", L * M * 2) if self.vehicle_model else ca.SX.sym("u", 0)
+        eta = ca.SX.sym("eta", L * M)
+        prev = ca.SX.sym("prev", M * 2)
+        v0 = ca.SX.sym("v0", M * 2)
+        serving = ca.SX.sym("serving", M * 2)
+        control = ca.SX.sym("control", M * 2)
+        keep_out = ca.SX.sym("keep_out", n_keep_out * 2)
+        x_pred = ca.SX.sym("x_pred", 4)
+        j_pred = ca.SX.sym("j_pred", 4, 4)
+        clearance = ca.SX.sym("clearance", L)
+        f_scale = ca.SX.sym("f_scale")
+        params = [prev, v0, serving, control, keep_out, x_pred, ca.reshape(j_pred, 16, 1)]
+        params += [clearance, f_scale]
+        self._param_sizes = [int(p.numel()) for p in params]
+
+        def q(h: int, m: int) -> ca.SX:  # position [2] at the end of horizon slot h (0-based)
+            if h < 0:
+                return prev[2 * m : 2 * m + 2]
+            i = 2 * (h * M + m)
+            return prev[2 * m : 2 * m + 2] + S * z[i : i + 2]
+
+        def v(h: int, m: int) -> ca.SX:  # velocity [2] there (vehicle model only)
+            if h < 0:
+                return v0[2 * m : 2 * m + 2]
+            i = 2 * (h * M + m)
+            return s.v_max * u[i : i + 2]
+
+        def along(h: int, m: int, frac: float) -> ca.SX:  # position on leg h at fraction frac
+            if self.vehicle_model:
+                leg = hermite_position(q(h - 1, m), v(h - 1, m), q(h, m), v(h, m), dt, frac)
+                return ca.SX(leg)
+            return q(h - 1, m) + frac * (q(h, m) - q(h - 1, m))
+
+        def sq(d: ca.SX) -> ca.SX:
+            return ca.sumsqr(d) / S**2
+
+        g: list[ca.SX] = []
+        lbg: list[float] = []
+        ubg: list[float] = []
+
+        def add(expr: ca.SX, lo: float, hi: float) -> None:
+            g.append(expr)
+            lbg.append(lo)
+            ubg.append(hi)
+
+        inf = float("inf")
+        e = margins.link_m
+        d_ctrl2 = (max(s.d_th - e - SOLVER_MARGIN_M, 0.0) / S) ** 2
+        sep2 = ((margins.separation_m + SOLVER_MARGIN_M) / S) ** 2 if s.d_safe > 0 else 0.0
+        fracs = [(k + 1) / K for k in range(K)]
+        weights = horizon_weights(L, cfg.discount, cfg.terminal_weight)
+        objective = ca.SX(0.0)
+        J_prior = j_pred
+        for h in range(L):
+            x_l = ca.mtimes(ca.DM(np.linalg.matrix_power(F, h)), x_pred)
+            J = J_prior
+            for m in range(M):
+                qm = q(h, m)
+                em = eta[h * M + m]
+                J = J + _information_terms(qm, em, x_l, s)
+                d2 = ca.sumsqr(qm - serving[2 * m : 2 * m + 2])
+                dist2 = d2 if e == 0 else (ca.sqrt(d2 + 1e-12) + e) ** 2
+                rate = em * s.B * ca.log1p(s.rho0 / (dist2 + s.dH**2)) / (np.log(2.0) * s.r_th)
+                add(rate - 1.0, RATE_MARGIN, inf)
+                add(sq(qm - control[2 * m : 2 * m + 2]), -inf, d_ctrl2)
+                if self.vehicle_model:
+                    legs = (q(h - 1, m), v(h - 1, m), q(h, m), v(h, m), dt)
+                    for acc in end_accelerations(*legs):
+                        add(ca.sumsqr(acc) / s.a_max**2, -inf, 1.0)
+                    for vc in velocity_control_points(*legs)[1:]:
+                        add(ca.sumsqr(vc) / s.v_max**2, -inf, 1.0)
+                else:
+                    add(sq(qm - q(h - 1, m)), -inf, ((S - SOLVER_MARGIN_M) / S) ** 2)
+                for frac in fracs:
+                    p = x_pred[:2] + (h - 1 + frac) * dt * x_pred[2:]
+                    add(sq(along(h, m, frac) - p) - (clearance[h] / S) ** 2, 0.0, inf)
+                    for k in range(n_keep_out):
+                        add(sq(along(h, m, frac) - keep_out[2 * k : 2 * k + 2]), sep2, inf)
+            for i in range(M):
+                for j in range(i + 1, M):
+                    for frac in fracs:
+                        add(sq(along(h, i, frac) - along(h, j, frac)), sep2, inf)
+            add(ca.sum1(eta[h * M : (h + 1) * M]), 1.0, 1.0)
+            C = _jacobi_inverse(0.5 * (J + J.T))
+            objective = objective + weights[h] * ca.trace(C)
+            if h + 1 < L:
+                P = ca.mtimes(ca.mtimes(ca.DM(F), C), ca.DM(F.T)) + ca.DM(W)
+                J_prior = _jacobi_inverse(0.5 * (P + P.T))
+
+        x = ca.vertcat(z, u, eta)
+        p = ca.vertcat(*params)
+        self.n_x = int(x.numel())
+        self._lbg = np.array(lbg, dtype=float)
+        self._ubg = np.array(ubg, dtype=float)
+        nlp = {"x": x, "p": p, "f": objective / f_scale, "g": ca.vertcat(*g)}
+        opts: dict[str, Any] = {
+            "print_time": False,
+            "ipopt": {**IPOPT_OPTIONS, "max_iter": cfg.max_iterations},
+        }
+        self.solver = ca.nlpsol("horizon", "ipopt", nlp, opts)
+        # For tests and the start point's scale: the weighted objective itself and its gradient.
+        self.objective = ca.Function("f", [x, p], [objective])
+        self.gradient = ca.Function("df", [x, p], [ca.gradient(objective, x)])
+        self.constraints = ca.Function("g", [x, p], [ca.vertcat(*g)])
+
+    @property
+    def lbg(self) -> FloatArray:
+        return self._lbg
+
+    @property
+    def ubg(self) -> FloatArray:
+        return self._ubg
+
+    def pack(
+        self,
+        xy: FloatArray,
+        velocity: FloatArray | None,
+        eta: FloatArray,
+        data: HorizonSlotData,
+        f_scale: float = 1.0,
+    ) -> tuple[FloatArray, FloatArray]:
+        """(x, p) for a horizon plan xy [L, M, 2], velocity [L, M, 2] (vehicle model) and shares
+        eta [L, M], with this slot's data."""
+        z = (np.asarray(xy, dtype=float) - data.prev_xy[None]) / self.step_m
+        parts = [z.reshape(-1)]
+        if self.vehicle_model:
+            if velocity is None:
+                raise ValueError("the vehicle model needs planned velocities")
+            parts.append(np.asarray(velocity, dtype=float).reshape(-1) / self.scenario.v_max)
+        parts.append(np.asarray(eta, dtype=float).reshape(-1))
+        x = np.concatenate(parts)
+        values = [
+            data.prev_xy,
+            data.prev_velocity,
+            data.serving_xy,
+            data.control_xy,
+            data.keep_out_xy,
+            data.x_pred,
+            np.asarray(data.J_pred, dtype=float).reshape(-1, order="F"),
+            data.clearance_m,
+            np.array([f_scale]),
+        ]
+        p = np.concatenate([np.asarray(val, dtype=float).reshape(-1) for val in values])
+        if len(p) != sum(self._param_sizes):
+            raise ValueError(f"{len(p)} parameters, the NLP has {sum(self._param_sizes)}")
+        return x, p
+
+    def unpack(
+        self, x: FloatArray, data: HorizonSlotData
+    ) -> tuple[FloatArray, FloatArray | None, FloatArray]:
+        """(xy [L, M, 2], velocity [L, M, 2] or None, eta [L, M]) of the NLP variables x."""
+        s = self.scenario
+        L, M = self.length, s.M
+        n = L * M * 2
+        xy = data.prev_xy[None] + self.step_m * np.asarray(x[:n]).reshape(L, M, 2)
+        velocity = None
+        if self.vehicle_model:
+            velocity = s.v_max * np.asarray(x[n : 2 * n]).reshape(L, M, 2)
+            n *= 2
+        eta = np.asarray(x[n:], dtype=float).reshape(L, M)
+        return xy, velocity, eta
+
+    def bounds(self, data: HorizonSlotData) -> tuple[FloatArray, FloatArray]:
+        """(lbx, ubx): the operating area on the positions, shares in [MIN_SHARE, 1]."""
+        from isac_mission.planning.feasibility import operating_area
+
+        s = self.scenario
+        L, M = self.length, s.M
+        lo, hi = operating_area(s)
+        lbz = np.broadcast_to((lo[None] - data.prev_xy) / self.step_m, (L, M, 2)).reshape(-1)
+        ubz = np.broadcast_to((hi[None] - data.prev_xy) / self.step_m, (L, M, 2)).reshape(-1)
+        n_u = L * M * 2 if self.vehicle_model else 0
+        big = 1e3  # the speed constraints bound u; IPOPT wants finite-ish bounds elsewhere
+        lbx = np.concatenate([lbz, np.full(n_u, -big), np.full(L * M, MIN_SHARE)])
+        ubx = np.concatenate([ubz, np.full(n_u, big), np.ones(L * M)])
+        return lbx, ubx
+
+    def solve(
+        self,
+        xy0: FloatArray,
+        velocity0: FloatArray | None,
+        eta0: FloatArray,
+        data: HorizonSlotData,
+    ) -> HorizonSolution:
+        """Solve from the start (xy0 [L, M, 2], velocity0, eta0 [L, M])."""
+        x0, p = self.pack(xy0, velocity0, eta0, data)
+        f0 = float(self.objective(x0, p))
+        x0, p = self.pack(xy0, velocity0, eta0, data, f0 if np.isfinite(f0) and f0 > 0 else 1.0)
+        lbx, ubx = self.bounds(data)
+        x0 = np.clip(x0, lbx, ubx)
+        sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg)
+        stats = self.solver.stats()
+        xy, velocity, eta = self.unpack(np.asarray(sol["x"], dtype=float).ravel(), data)
+        eta = np.maximum(eta, 0.0)
+        eta = eta / eta.sum(axis=1, keepdims=True)
+        return HorizonSolution(
+            uav_xy_m=xy,
+            uav_velocity_mps=velocity,
+            bandwidth_share=eta,
+            status=str(stats.get("return_status", "unknown")),
+            success=bool(stats.get("success", False)),
+            iterations=int(stats.get("iter_count", 0)),
+        )
+
+
+def _jacobi_inverse(A: ca.SX) -> ca.SX:
+    """A^-1 [4, 4] of a symmetric positive-definite SX matrix, Jacobi-scaled first, by 2 x 2
+    blocks (Schur complement; a far smaller expression, and Hessian, than a symbolic solve)."""
+    d = 1.0 / ca.sqrt(ca.diag(A))
+    D = ca.diag(d)
+    S = ca.mtimes(ca.mtimes(D, A), D)
+    P, Q, R = S[:2, :2], S[:2, 2:], S[2:, 2:]
+    P_inv = _inverse_2x2(P)
+    schur_inv = _inverse_2x2(R - ca.mtimes(ca.mtimes(Q.T, P_inv), Q))
+    X = ca.mtimes(P_inv, Q)  # P^-1 Q
+    top_right = -ca.mtimes(X, schur_inv)
+    top_left = P_inv + ca.mtimes(ca.mtimes(X, schur_inv), X.T)
+    inv = ca.vertcat(ca.horzcat(top_left, top_right), ca.horzcat(top_right.T, schur_inv))
+    return ca.mtimes(ca.mtimes(D, inv), D)
+
+
+def _inverse_2x2(A: ca.SX) -> ca.SX:
+    """A^-1 of a 2 x 2 SX matrix by its adjugate."""
+    det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    adj = ca.vertcat(ca.horzcat(A[1, 1], -A[0, 1]), ca.horzcat(-A[1, 0], A[0, 0]))
+    return adj / det

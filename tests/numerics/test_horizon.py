@@ -1,0 +1,197 @@
+"""The receding-horizon planner (method horizon): derivatives, bound recursion, constraints,
+fallback, vehicle limits; each checked against something computed independently."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from isac_mission.config import Scenario, load_scenario
+from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
+from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
+from isac_mission.planning.horizon import horizon_bound_traces, legs_ok
+from isac_mission.planning.horizon_nlp import HorizonSlotData, horizon_weights
+from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.tracking.pcrb import SensingParams
+from tests.support.independent.constraints import check_constraints
+from tests.support.independent.pcrb import bound_update, cv_model, jacobian
+
+
+def _scenario(**horizon: object) -> Scenario:
+    s = load_scenario("paper")
+    planner = s.planner.model_copy(update={"horizon": s.planner.horizon.model_copy(update=horizon)})
+    return s.with_changes(planner=planner)
+
+
+def _vehicle(s: Scenario) -> Scenario:
+    return s.with_changes(planner=s.planner.model_copy(update={"vehicle_model": True}))
+
+
+def _inputs(s: Scenario, method: str = "horizon", seed: int = 5) -> list[SlotInput]:
+    return record_slot_inputs(s, method, draw_run_noise(s, seed), SolverKit(s))[1]  # type: ignore[arg-type]
+
+
+def _data(s: Scenario, inp: SlotInput, L: int) -> HorizonSlotData:
+    nearest = np.argmin(np.linalg.norm(inp.prev_xy[:, None] - s.bs_xy[None], axis=-1), axis=1)
+    return HorizonSlotData(
+        prev_xy=inp.prev_xy,
+        prev_velocity=np.zeros((s.M, 2)) if inp.prev_velocity is None else inp.prev_velocity,
+        serving_xy=s.bs_xy[nearest],
+        control_xy=s.bs_xy[nearest],
+        keep_out_xy=np.zeros((0, 2)),
+        x_pred=inp.x_pred,
+        J_pred=inp.J_pred,
+        clearance_m=np.full(L, s.d_safe),
+    )
+
+
+def _random_horizon(
+    s: Scenario, inp: SlotInput, L: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    step = np.cumsum(rng.uniform(-15, 15, size=(L, s.M, 2)), axis=0)
+    xy = inp.prev_xy[None] + step
+    velocity = rng.uniform(-20, 20, size=(L, s.M, 2))
+    eta = rng.dirichlet(np.ones(s.M), size=L)
+    return xy, velocity, eta
+
+
+@pytest.mark.parametrize("vehicle_model", [False, True])
+def test_horizon_gradient_matches_central_finite_differences(vehicle_model: bool) -> None:
+    s = _scenario()
+    if vehicle_model:
+        s = _vehicle(s)
+    L = s.planner.horizon.length
+    nlp = SolverKit(s).horizon
+    inp = _inputs(s, "proposed")[12]
+    rng = np.random.default_rng(4)
+    xy, velocity, eta = _random_horizon(s, inp, L, rng)
+    x, p = nlp.pack(xy, velocity if vehicle_model else None, eta, _data(s, inp, L))
+    grad = np.asarray(nlp.gradient(x, p)).ravel()
+    fd = np.empty_like(x)
+    for i in range(len(x)):
+        h = 1e-6 * max(1.0, abs(x[i]))
+        up, down = x.copy(), x.copy()
+        up[i] += h
+        down[i] -= h
+        fd[i] = (float(nlp.objective(up, p)) - float(nlp.objective(down, p))) / (2 * h)
+    scale = np.max(np.abs(grad))
+    np.testing.assert_allclose(grad, fd, rtol=1e-4, atol=1e-6 * scale)
+
+
+def test_horizon_objective_is_the_bound_recursion_recomputed_independently() -> None:
+    s = _scenario(length=4, discount=0.8, terminal_weight=2.0)
+    L = 4
+    nlp = SolverKit(s).horizon
+    inp = _inputs(s, "proposed")[20]
+    xy, _, eta = _random_horizon(s, inp, L, np.random.default_rng(9))
+    x, p = nlp.pack(xy, None, eta, _data(s, inp, L))
+    # Independent: hand-written H, the square-root-information update of tests/support.
+    F, W = cv_model(s.dt, s.kappa)
+    sensing = SensingParams.from_scenario(s)
+    state = np.asarray(inp.x_pred, dtype=float)
+    traces = []
+    C = None
+    for h in range(L):
+        d = np.linalg.norm(state[None, :2] - xy[h], axis=1)
+        r_diag = sensing.variances(d, eta[h])
+        H = jacobian(state, xy[h])
+        if h == 0:
+            J = inp.J_pred + H.T @ np.diag(1.0 / r_diag) @ H
+            C = np.linalg.inv(J)
+        else:
+            C, _ = bound_update(C, F, W, H, r_diag)
+        traces.append(np.trace(C))
+        state = F @ state
+    expected = float(horizon_weights(L, 0.8, 2.0) @ np.array(traces))
+    assert float(nlp.objective(x, p)) == pytest.approx(expected, rel=1e-8)
+    ours = horizon_bound_traces(s, inp.J_pred, inp.x_pred, xy, eta, sensing)
+    np.testing.assert_allclose(ours, traces, rtol=1e-8)
+
+
+def test_every_horizon_plan_of_a_simulate_trace_passes_the_independent_check(
+    tmp_path: Path,
+) -> None:
+    s = load_scenario("paper")
+    run_monte_carlo(s, ["horizon"], runs=2, seed=21, trace_dir=tmp_path)
+    for run in range(2):
+        assert check_constraints(trace_path(tmp_path, "horizon", run)) == []
+
+
+def test_horizon_plans_carry_their_horizon_and_beat_the_per_slot_start() -> None:
+    s = load_scenario("paper")
+    kit = SolverKit(s)
+    inputs = _inputs(s)
+    kept = 0
+    for inp in inputs[1::6]:
+        plan = plan_slot(inp, kit, "horizon")
+        base = plan_slot(inp, kit, "proposed")
+        if plan.horizon is None:  # fell back: the per-slot plan itself, saying why
+            assert plan.report.reason.startswith("horizon: ")
+            np.testing.assert_array_equal(plan.uav_xy_m, base.uav_xy_m)
+            continue
+        kept += 1
+        L = s.planner.horizon.length
+        assert plan.horizon.uav_xy_m.shape == (L, s.M, 2)
+        np.testing.assert_array_equal(plan.uav_xy_m, plan.horizon.uav_xy_m[0])
+        assert plan.pcrb_trace == pytest.approx(plan.horizon.pcrb_trace[0])
+        # The per-slot plan continued at constant velocity is one feasible start: the
+        # horizon's optimum is no worse on the horizon objective (the starts are feasible).
+        v = (base.uav_xy_m - inp.prev_xy) / s.dt
+        cont = np.array([base.uav_xy_m + h * s.dt * v for h in range(L)])
+        eta = np.repeat(base.bandwidth_share[None], L, axis=0)
+        w = horizon_weights(L, 1.0, 1.0)
+        start_value = w @ horizon_bound_traces(s, inp.J_pred, inp.x_pred, cont, eta, kit.sensing)
+        assert w @ plan.horizon.pcrb_trace <= start_value * (1 + 1e-6)
+    assert kept >= len(inputs[1::6]) // 2
+
+
+def test_a_horizon_solve_at_its_iteration_cap_falls_back_to_the_per_slot_plan() -> None:
+    s = _scenario(max_iterations=1)
+    kit = SolverKit(s)
+    inp = _inputs(s, "proposed")[15]
+    inp = replace(inp, prev_plan=None)
+    plan = plan_slot(inp, kit, "horizon")
+    base = plan_slot(inp, kit, "proposed")
+    assert "horizon: IPOPT Maximum_Iterations_Exceeded" in plan.report.reason
+    np.testing.assert_array_equal(plan.uav_xy_m, base.uav_xy_m)
+    np.testing.assert_array_equal(plan.bandwidth_share, base.bandwidth_share)
+    assert plan.horizon is None
+
+
+def test_vehicle_model_horizon_plans_stay_within_a_max_and_v_max() -> None:
+    s = _vehicle(load_scenario("paper"))
+    kit = SolverKit(s)
+    inputs = _inputs(s, seed=8)
+    kept = 0
+    for inp in inputs[1:40:3]:
+        plan = plan_slot(inp, kit, "horizon")
+        if plan.horizon is None:
+            continue
+        kept += 1
+        assert plan.uav_velocity_mps is not None
+        H = plan.horizon
+        assert H.uav_velocity_mps is not None
+        prev_xy = np.concatenate([inp.prev_xy[None], H.uav_xy_m[:-1]])
+        prev_v = np.concatenate([inp.prev_velocity[None], H.uav_velocity_mps[:-1]])
+        for h in range(len(H.uav_xy_m)):
+            assert legs_ok(s, prev_xy[h], prev_v[h], H.uav_xy_m[h], H.uav_velocity_mps[h])
+        # Brute force along the first leg: acceleration and speed sampled densely.
+        from isac_mission.model.vehicle import hermite_position
+
+        t = np.linspace(0.0, 1.0, 201)
+        path = np.array(
+            [
+                hermite_position(
+                    inp.prev_xy, inp.prev_velocity, plan.uav_xy_m, plan.uav_velocity_mps, s.dt, f
+                )
+                for f in t
+            ]
+        )
+        speed = np.linalg.norm(np.diff(path, axis=0), axis=-1) / (s.dt * (t[1] - t[0]))
+        accel = np.linalg.norm(np.diff(path, 2, axis=0), axis=-1) / (s.dt * (t[1] - t[0])) ** 2
+        assert speed.max() <= s.v_max * 1.001
+        assert accel.max() <= s.a_max * 1.01
+    assert kept >= 7
