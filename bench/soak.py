@@ -6,7 +6,11 @@ of the run, the medians of the wall time and the process CPU time per slot and o
 time, the resident memory at the quarter's end, and the last-over-first-quarter ratios (the soak
 test asserts CPU and RSS ratios <= 1.1). --tracemalloc lists the Python allocations that grew
 between the end of the first quarter and the end (slower).
-Run: python bench/soak.py [--slots 3600] [--speed 20] [--target loop|cv] [--tracemalloc]
+It also counts, from the bus (tests/support/soak_safety.py), the telemetry samples closer than
+D_s to the true target and to another UAV, and the infeasible slots (the issue's safety target:
+none, and <= 1 %).
+Run: python bench/soak.py [--slots 3600] [--speed 20] [--method proposed] [--target loop|cv]
+     [--tracemalloc]
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 from isac_mission.cli.mission import summarize_live  # noqa: E402
 from isac_mission.config import load_scenario  # noqa: E402
+from isac_mission.planning.slot import METHODS  # noqa: E402
 from isac_mission.quiet import quiet_highs_banner  # noqa: E402
 from tests.support.soak import SoakSample, quarter_table, run_soak, soak_scenario  # noqa: E402
 
@@ -34,6 +39,7 @@ def main() -> None:
     ap.add_argument("--speed", type=float, default=20.0)
     ap.add_argument("--no-lockstep", action="store_true")
     ap.add_argument("--target", choices=("loop", "cv"), default="loop")
+    ap.add_argument("--method", choices=METHODS, default="proposed", help="Planning method.")
     ap.add_argument("--config", default=str(ROOT / "config" / "paper.yaml"))
     ap.add_argument("--tracemalloc", action="store_true")
     ap.add_argument("--samples", type=Path, help="Write the per-slot samples here (JSON Lines).")
@@ -66,6 +72,7 @@ def main() -> None:
                     speed=args.speed,
                     lockstep=not args.no_lockstep,
                     target=args.target,
+                    method=args.method,
                     trace_malloc=args.tracemalloc,
                     on_sample=progress,
                 )
@@ -81,12 +88,17 @@ def main() -> None:
     summary = summarize_live(result.live)
     lockstep = "lockstep" if not args.no_lockstep else "free-running"
     print(
-        f"\n{len(result.samples)} slots, M = {s.M}, speed {args.speed:g} ({lockstep}), target "
-        f"{args.target}; setup {result.setup_s:.1f} s, total {time.monotonic() - t0:.0f} s wall"
+        f"\n{len(result.samples)} slots, M = {s.M}, method {args.method}, speed {args.speed:g} "
+        f"({lockstep}), target {args.target}; setup {result.setup_s:.1f} s, total {time.monotonic() - t0:.0f} s wall"
     )
     print(
         f"location RMSE {summary.loc_rmse:.2f} m, infeasible slots {summary.infeasible}, "
         f"counters {dict(result.live.report.counters)}"
+    )
+    n_slots = max(len(result.samples), 1)
+    print(
+        f"safety: {result.proximity.render(s.d_safe)}; infeasible slots "
+        f"{result.infeasible_slots} ({100 * result.infeasible_slots / n_slots:.2f} %)"
     )
     print(quarter_table(result.samples).render())
     near = [p for p in result.samples if p.target_distance_m == p.target_distance_m]

@@ -24,7 +24,7 @@ import yaml
 from isac_mission.cli.mission import summarize_live
 from isac_mission.config import load_scenario
 from isac_mission.service.bridge.setpoints import TIMESTAMPS_KEPT
-from isac_mission.wire import TrackMsg, decode_track, encode_track
+from isac_mission.wire import TelemetryMsg, TrackMsg, TruthMsg, decode_track, encode_track
 from tests.support.soak import (
     LOOP_RADIUS_M,
     SoakSample,
@@ -33,6 +33,7 @@ from tests.support.soak import (
     run_soak,
     soak_scenario,
 )
+from tests.support.soak_safety import ProximityCounter
 
 ROOT = Path(__file__).resolve().parents[2]
 SOAK_SPEED = 5.0
@@ -89,8 +90,17 @@ async def test_long_live_mission_keeps_memory_and_slot_time_flat(
             f"\nsoak {attempt}: {soak_slots} slots at speed {SOAK_SPEED:g} (lockstep), loop "
             f"radius {radius:.0f} m, quarters after {WARMUP_SLOTS} slots\n{table.render()}"
         )
+        n_under = result.proximity.target_under_d_safe + result.proximity.uav_under_d_safe
+        print(
+            f"safety: {result.proximity.render(s.d_safe)}; infeasible slots "
+            f"{result.infeasible_slots}"
+        )
         summary = summarize_live(result.live)
         assert summary.slots == soak_slots
+        # Telemetry at 10 Hz of simulation time for each vehicle over the N slots of the mission:
+        # every one of them judged (a few around the mission's ends aside).
+        assert result.proximity.samples >= 0.8 * 10 * s.M * s.N * s.dt
+        assert n_under <= result.proximity.samples
         assert [p.slot for p in result.samples] == list(range(1, soak_slots + 1))
         assert result.live.fleet_counters["vehicles landed"] == s.M
         assert table.rss_ratio <= MAX_RATIO, table.render()
@@ -114,3 +124,56 @@ def test_track_with_the_information_of_a_close_pass_is_published() -> None:
     msg = TrackMsg(1076, 1076.0, np.array([1500.0, 1600.0, 15.0, 0.0]), np.linalg.inv(J), J, 1e-9)
     back = decode_track(encode_track(msg))
     np.testing.assert_array_equal(back.J, J)
+
+
+def _tel(
+    uav: int, t_s: float, xy: tuple[float, float], v: tuple[float, float] = (0, 0)
+) -> TelemetryMsg:
+    return TelemetryMsg(
+        slot=int(t_s),
+        t_s=t_s,
+        uav=uav,
+        position_xy_m=np.array(xy, dtype=float),
+        altitude_m=100.0,
+        velocity_xy_mps=np.array(v, dtype=float),
+        mode="offboard",
+        armed=True,
+        landed=False,
+        link="ok",
+    )
+
+
+def _truth(n: int, xy: tuple[float, float]) -> TruthMsg:
+    return TruthMsg(slot=n, t_s=float(n), target_x=np.array([*xy, 10.0, 0.0]))
+
+
+def test_proximity_counter_judges_each_sample_against_the_target_at_its_own_time() -> None:
+    """The target moves 10 m/s east, truth once per second; a UAV parked at x = 35 m, y = 0 is
+    35 m from the target at t = 0 and 25 m at t = 1: with D_s = 30 m the samples from t = 0.5 on
+    are inside (exactly 30 m at 0.5), whether they arrive before or after the next truth."""
+    c = ProximityCounter(d_safe_m=30.0, last_slot=3)
+    c.on_telemetry(_tel(0, -0.5, (35.0, 0.0)))  # before the mission: not counted
+    c.on_truth(_truth(0, (0.0, 0.0)))
+    for k in range(1, 5):  # t = 0.2, 0.4, 0.6, 0.8: target at 2, 4, 6, 8 m
+        c.on_telemetry(_tel(0, 0.2 * k, (35.0, 0.0)))
+    c.on_truth(_truth(1, (10.0, 0.0)))
+    c.on_truth(_truth(2, (20.0, 0.0)))
+    c.on_telemetry(_tel(0, 1.2, (35.0, 0.0)))  # late, after truth 2: target at 12 m
+    c.on_telemetry(_tel(0, 3.1, (35.0, 0.0)))  # slot 3 = N: after the mission
+    assert c.counts.samples == 5
+    assert c.counts.target_under_d_safe == 3  # 29, 27 and 23 m
+    assert c.counts.nearest_target_m == pytest.approx(23.0)
+    assert c.counts.uav_under_d_safe == 0
+
+
+def test_proximity_counter_moves_the_other_uav_on_with_its_velocity() -> None:
+    """UAV 1 reported at t = 1.0 at x = 0 flying 20 m/s east; UAV 0's sample at t = 1.5 at x = 35 m
+    is 25 m from where UAV 1 is then (x = 10 m), but 35 m from its last report."""
+    c = ProximityCounter(d_safe_m=30.0, last_slot=10)
+    c.on_truth(_truth(0, (1000.0, 1000.0)))
+    c.on_telemetry(_tel(1, 1.0, (0.0, 0.0), (20.0, 0.0)))
+    c.on_telemetry(_tel(0, 1.5, (35.0, 0.0)))
+    assert c.counts.uav_under_d_safe == 1
+    assert c.counts.nearest_uav_m == pytest.approx(25.0)
+    c.on_telemetry(_tel(0, 1.5, (60.0, 0.0)))
+    assert c.counts.uav_under_d_safe == 1  # 50 m: outside

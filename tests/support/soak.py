@@ -22,6 +22,7 @@ allocations still alive at the end are listed by line, largest growth first.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import re
 import resource
@@ -36,13 +37,17 @@ from typing import Literal
 
 import numpy as np
 
-from isac_mission.bus import BusSettings, tcp_loopback
+from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve
 from isac_mission.config import Scenario
+from isac_mission.errors import MessageError
+from isac_mission.planning.slot import Method
 from isac_mission.service.ground.report import SlotEvent
+from isac_mission.wire import Keys, decode_telemetry, decode_truth
 from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.ports import free_port_block, sitl_ports
+from tests.support.soak_safety import ProximityCounter, ProximityCounts
 
 TargetKind = Literal["loop", "cv"]
 
@@ -98,6 +103,13 @@ class SoakResult:
     live: LiveResult
     setup_s: float
     heap_growth: list[tuple[str, int, int]] = field(default_factory=list)
+    proximity: ProximityCounts = field(default_factory=ProximityCounts)
+    """Telemetry samples closer than D_s to the true target or another UAV (soak_safety.py)."""
+
+    @property
+    def infeasible_slots(self) -> int:
+        """Slots whose plan came back infeasible (status "infeasible")."""
+        return self.live.report.counters.get("slots infeasible", 0)
 
 
 def rss_bytes() -> int:
@@ -148,19 +160,26 @@ async def run_soak(
     target: TargetKind = "loop",
     loop_radius_m: float = LOOP_RADIUS_M,
     seed: int = 1,
+    method: Method = "proposed",
     trace_malloc: bool = False,
     on_sample: Callable[[SoakSample], None] | None = None,
 ) -> SoakResult:
-    """Fly `s` (use `soak_scenario`) live for s.N slots and sample every slot (module docstring).
+    """Fly `s` (use `soak_scenario`) live for s.N slots with `method` and sample every slot
+    (module docstring); an observer session counts the telemetry samples closer than D_s to
+    the true target or another UAV (soak_safety.py).
 
     Free loopback ports for Zenoh and MAVLink; `lockstep_timeout` of the world 60 wall s.
     Give `soak_scenario` and `run_soak` the same `loop_radius_m`.
     """
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
+    # The observer listens too, and the world connects to it: Zenoh peers do not forward each
+    # other's samples, so the world's truth must reach the observer directly.
+    observer_endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
     ports = sitl_ports(s.M)
     opts = LiveOptions(
         speed=speed,
         lockstep=lockstep,
+        method=method,
         seed=seed,
         out_dir=out_dir,
         zenoh_endpoint=endpoint,
@@ -171,7 +190,7 @@ async def run_soak(
         lockstep=lockstep,
         lockstep_timeout_s=60.0,
         seed=seed,
-        bus=BusSettings(connect=(endpoint,)),
+        bus=BusSettings(connect=(endpoint, observer_endpoint)),
         **ports.world_kwargs(),
         start="offboard",
         target_waypoints_xy_m=loop_waypoints(s.N, s.dt, loop_radius_m)
@@ -210,6 +229,12 @@ async def run_soak(
         if on_sample is not None:
             on_sample(sample)
 
+    counter = ProximityCounter(s.d_safe, s.N)
+    observer_up = asyncio.Event()
+    observer = asyncio.create_task(
+        _observe(s, BusSettings.hub(observer_endpoint), endpoint, counter, observer_up)
+    )
+    await observer_up.wait()
     world_stop = asyncio.Event()
     world = asyncio.create_task(run_world(s, world_opts, world_stop))
     try:
@@ -217,6 +242,9 @@ async def run_soak(
     finally:
         world_stop.set()
         await asyncio.wait_for(world, timeout=60.0)
+        observer.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await observer
         if tracemalloc.is_tracing():
             tracemalloc.stop()
     growth: list[tuple[str, int, int]] = []
@@ -226,7 +254,32 @@ async def run_soak(
             frame = st.traceback[0]
             growth.append((f"{frame.filename}:{frame.lineno}", st.size, st.count))
     setup_s = samples[0].wall_s - t_start if samples else math.nan
-    return SoakResult(samples, live, setup_s, growth)
+    return SoakResult(samples, live, setup_s, growth, counter.counts)
+
+
+async def _observe(
+    s: Scenario,
+    hub: BusSettings,
+    ground_endpoint: str,
+    counter: ProximityCounter,
+    up: asyncio.Event,
+) -> None:
+    """Feed `counter` the telemetry (from the ground's bridges) and the truth (from the world) of
+    the mission, until cancelled; `up` is set once the subscription is declared."""
+    keys = Keys(s.mission_id)
+    telemetry, truth = f"{keys.prefix}/telemetry/", keys.truth
+    settings = hub.model_copy(update={"connect": (ground_endpoint,)})
+    with ZenohBus.open(settings) as bus:
+        async with bus.subscribe(keys.everything, maxsize=65536) as sub:
+            up.set()
+            async for key, payload in sub:
+                try:
+                    if key.startswith(telemetry):
+                        counter.on_telemetry(decode_telemetry(payload, n_uavs=s.M))
+                    elif key == truth:
+                        counter.on_truth(decode_truth(payload))
+                except MessageError:
+                    continue
 
 
 @dataclass(frozen=True)

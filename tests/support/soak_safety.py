@@ -1,0 +1,132 @@
+"""Safety counts of a live run from the bus: telemetry samples closer than D_s to the true target
+or to another UAV (the issue's "Safety" target), counted online with bounded memory.
+
+Every telemetry sample of the mission (stamped with a slot 0..N-1, at or after slot 0's truth) is
+checked, in the horizontal plane (the constraints 14i and 14j are planar; the UAVs fly at H):
+- against the true target at t, linearly interpolated between the truths of the slots around t
+  (the world publishes the truth once per slot; the scripted loop target is exact on its
+  straight legs, about 1 m off at its 15-degree corners), so a sample waits for the truth of
+  the end of its slot;
+- against every other UAV at t: that UAV's latest sample moved on with its velocity to t.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from isac_mission.types import FloatArray
+from isac_mission.wire import TelemetryMsg, TruthMsg
+
+
+@dataclass
+class ProximityCounts:
+    """Samples checked, those closer than D_s (m) to the true target and to another UAV, and
+    the nearest distances seen (m; inf before any sample)."""
+
+    samples: int = 0
+    target_under_d_safe: int = 0
+    uav_under_d_safe: int = 0
+    nearest_target_m: float = math.inf
+    nearest_uav_m: float = math.inf
+
+    def render(self, d_safe_m: float) -> str:
+        return (
+            f"telemetry samples {self.samples}: {self.target_under_d_safe} closer than "
+            f"D_s = {d_safe_m:g} m to the true target (nearest {self.nearest_target_m:.1f} m), "
+            f"{self.uav_under_d_safe} closer than D_s to another UAV "
+            f"(nearest {self.nearest_uav_m:.1f} m)"
+        )
+
+
+@dataclass
+class ProximityCounter:
+    """Feed it the bus's telemetry and truth messages in arrival order (copies and repeated
+    instants are judged once); read `counts`.
+    d_safe_m: D_s (m), the scenario's true one, not the planner's."""
+
+    d_safe_m: float
+    last_slot: int
+    """N: samples stamped with slot N or later (after the mission's last slot) are not counted."""
+    counts: ProximityCounts = field(default_factory=ProximityCounts)
+    _first: tuple[float, FloatArray] | None = None
+    _truths: list[tuple[float, FloatArray]] = field(default_factory=list)
+    _waiting: list[tuple[float, FloatArray]] = field(default_factory=list)
+    _latest: dict[int, tuple[float, FloatArray, FloatArray]] = field(default_factory=dict)
+
+    def on_telemetry(self, msg: TelemetryMsg) -> None:
+        last = self._latest.get(msg.uav)
+        if last is not None and msg.t_s <= last[0]:
+            return  # a copy (another route), or a sample of a held clock: the same instant
+        if (
+            msg.slot < 0
+            or msg.slot >= self.last_slot
+            or self._first is None
+            or msg.t_s < self._first[0]
+        ):
+            # Before the mission (take-off, the flight to the start points) or after it: not
+            # counted.
+            self._latest[msg.uav] = (
+                msg.t_s,
+                np.asarray(msg.position_xy_m, dtype=float),
+                np.asarray(msg.velocity_xy_mps, dtype=float),
+            )
+            return
+        xy = np.asarray(msg.position_xy_m, dtype=float)
+        others = [
+            float(np.linalg.norm(xy - (xy_o + v_o * (msg.t_s - t_o))))
+            for other, (t_o, xy_o, v_o) in self._latest.items()
+            if other != msg.uav
+        ]
+        if others:
+            self.counts.nearest_uav_m = min(self.counts.nearest_uav_m, *others)
+            if min(others) < self.d_safe_m:
+                self.counts.uav_under_d_safe += 1  # a sample counts once
+        self._latest[msg.uav] = (msg.t_s, xy, np.asarray(msg.velocity_xy_mps, dtype=float))
+        self._waiting.append((msg.t_s, xy))
+        self._judge()
+
+    def on_truth(self, msg: TruthMsg) -> None:
+        if any(t == msg.t_s for t, _ in self._truths):
+            return  # a copy
+        self._truths.append((msg.t_s, np.asarray(msg.target_x[:2], dtype=float)))
+        self._truths.sort(key=lambda tp: tp[0])
+        del self._truths[:-TRUTHS_KEPT]
+        self._judge()
+
+    def _judge(self) -> None:
+        """Check every waiting sample that a truth at or after its time now brackets."""
+        if self._first is None and self._truths:
+            self._first = self._truths[0]
+        if not self._truths:
+            return
+        t_last = self._truths[-1][0]
+        keep: list[tuple[float, FloatArray]] = []
+        for t, xy in self._waiting:
+            if t > t_last:
+                keep.append((t, xy))  # waits for the next truth
+                continue
+            d = float(np.linalg.norm(xy - self._target_at(t)))
+            self.counts.samples += 1
+            self.counts.nearest_target_m = min(self.counts.nearest_target_m, d)
+            if d < self.d_safe_m:
+                self.counts.target_under_d_safe += 1
+        self._waiting = keep
+
+    def _target_at(self, t: float) -> FloatArray:
+        """The true target position at t, linearly between the kept truths around t (the
+        earliest kept one for a sample older than all of them)."""
+        truths = self._truths
+        for (t0, p0), (t1, p1) in itertools.pairwise(truths):
+            if t <= t1:
+                w = 0.0 if t1 <= t0 else min(max((t - t0) / (t1 - t0), 0.0), 1.0)
+                return p0 + w * (p1 - p0)
+        return truths[-1][1] if t >= truths[-1][0] else truths[0][1]
+
+
+TRUTHS_KEPT = 4
+"""Truths kept for the interpolation: a sample that arrives a few slots late is still judged
+against the target at its own time."""
