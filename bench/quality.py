@@ -91,6 +91,12 @@ def with_polish(s: Scenario, on: bool) -> Scenario:
     return s.with_changes(planner=s.planner.model_copy(update={"polish": on}))
 
 
+def paper_problem(s: Scenario) -> Scenario:
+    """The scenario with planner.safety_margin "none": this benchmark's own check and multistart
+    are the paper's per-slot problem (D_s at the slot instant, docs/model.md "Safety")."""
+    return s.with_changes(planner=s.planner.model_copy(update={"safety_margin": "none"}))
+
+
 # --- the exact problem ------------------------------------------------------------------------
 
 
@@ -550,13 +556,13 @@ def note_kind(note: str) -> str:
 def scenarios(ms: Sequence[int], config: str, slots_per_run: int) -> list[tuple[str, Scenario]]:
     """The benchmark's scenarios by M: 3 = `config` (paper.yaml), 6 = the ring scenario with
     the polish setting of `config` (the ring is built from the code defaults)."""
-    paper = load_scenario(config)
+    paper = paper_problem(load_scenario(config))
     out = []
     for m in ms:
         if m == 3:
             out.append((f"M = 3, {Path(config).name}", paper))
         elif m == 6:
-            ring = with_polish(ring_scenario(slots_per_run), paper.planner.polish)
+            ring = paper_problem(with_polish(ring_scenario(slots_per_run), paper.planner.polish))
             out.append(("M = 6, bench/planner.py ring (K = 8, N_a = 2)", ring))
         else:
             raise SystemExit(f"--m {m}: only 3 and 6")

@@ -109,10 +109,13 @@ def run_closed_loop(
     noise: RunNoise,
     kit: SolverKit,
     on_slot: Callable[[SlotOutcome], None] | None = None,
+    truth: FloatArray | None = None,
 ) -> RunResult:
-    """Fly one mission of N slots with the given planning method; returns per-slot results."""
+    """Fly one mission of N slots with the given planning method; returns per-slot results.
+    truth [N + 1, 4]: the target's true states x_0..x_N (a scripted target); None: the
+    constant-velocity model driven by the run's process noise (`true_trajectory`)."""
     model = CycleModel.from_scenario(s)
-    truth = true_trajectory(s, noise)
+    truth = true_trajectory(s, noise) if truth is None else np.asarray(truth, dtype=float)
     state = TrackState(
         belief=Gaussian(x=s.x0 + noise.initial_error, P=s.P0.copy()),
         bound=Bound.from_covariance(s.P0.copy()),

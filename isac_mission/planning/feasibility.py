@@ -2,6 +2,11 @@
 
 The SCA subproblem only approximates 14b, 14i and 14j; every plan the planner returns passes these
 checks. Functions take batches: positions [L, M, 2], shares [L, M] -> [L] booleans.
+
+With the safety rule on (planner.safety_margin, planning/safety.py; docs/model.md, "Safety")
+14j keeps the slot's clearance from the predicted target, 14i keeps D_s + 2 e, 14a and 14b hold
+e farther from the BS, and 14i/14j hold along the legs too (planning/legs.py); with "none" the
+checks are the paper's.
 """
 
 from __future__ import annotations
@@ -13,6 +18,15 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.model.channel import full_band_rate
+from isac_mission.planning.legs import (
+    chord_shortfall,
+    leg_accel_bound_mps2,
+    leg_fractions,
+    sample_clearances_m,
+    target_leg_points,
+    uav_leg_points,
+)
+from isac_mission.planning.safety import SafetyMargins, leg_samples, rule_on
 from isac_mission.types import BoolArray, FloatArray, IntArray
 
 
@@ -25,6 +39,10 @@ class SlotConstraints:
     accel_radius_m: when set, the vehicle-dynamics limit ||q - ballistic|| <= radius;
     keep_out_xy [L, 2]: vehicles outside this plan (e.g. one whose link is lost and that holds
     where it is), from which every planned UAV keeps D_s as from another UAV (14i).
+    target_clearance_m: the distance 14j keeps from the predicted target (safety.
+    target_clearance_m; None: D_s); target_velocity_mps [2]: its predicted velocity, for the
+    legs (None: at rest); start_velocity_mps [M, 2]: the vehicles' velocities at the legs'
+    start, for Hermite legs (used with the end velocities given to `position_violations`).
     """
 
     prev_xy: FloatArray
@@ -35,28 +53,96 @@ class SlotConstraints:
     ballistic_xy: FloatArray | None = None
     accel_radius_m: float = np.inf
     keep_out_xy: FloatArray | None = None
+    target_clearance_m: float | None = None
+    target_velocity_mps: FloatArray | None = None
+    start_velocity_mps: FloatArray | None = None
+
+    @property
+    def margins(self) -> SafetyMargins:
+        """The scenario's fixed margins (planning/safety.py)."""
+        return SafetyMargins.of(self.scenario)
+
+    @property
+    def clearance_m(self) -> float:
+        """The distance 14j keeps from the predicted target, m."""
+        c = self.target_clearance_m
+        return self.scenario.d_safe if c is None else float(c)
+
+    @property
+    def separation_m(self) -> float:
+        """The distance 14i keeps between UAVs and from keep-out points, m."""
+        return self.margins.separation_m
+
+    @property
+    def leg_fractions(self) -> FloatArray:
+        """tau_i [S] of the sampled leg instants ([1.0] with the rule off: the slot instant)."""
+        return leg_fractions(leg_samples(self.scenario))
+
+    @property
+    def checks_legs(self) -> bool:
+        """True when 14i/14j are checked along the legs (the rule on)."""
+        return rule_on(self.scenario)
+
+    def target_points(self) -> FloatArray:
+        """The predicted target [S, 2] at the leg samples (constant velocity)."""
+        v = np.zeros(2) if self.target_velocity_mps is None else self.target_velocity_mps
+        return target_leg_points(self.target_xy, v, self.leg_fractions, self.scenario.dt)
+
+    def target_start(self) -> FloatArray:
+        """The predicted target [2] at the legs' start."""
+        v = np.zeros(2) if self.target_velocity_mps is None else self.target_velocity_mps
+        return np.asarray(self.target_xy - self.scenario.dt * np.asarray(v))
+
+    def sample_clearances_m(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(target [S, M], keep-out [S, M, K], pairs [S, P]): the distances the SCA subproblem
+        and the polish keep at each leg sample (legs.sample_clearances_m, with the longest
+        straight-leg chord between samples; pairs in np.triu_indices order)."""
+        s = self.scenario
+        n = len(self.leg_fractions)
+        h = s.dt / n
+        v_t = self.target_velocity_mps
+        speed_t = 0.0 if v_t is None else float(np.linalg.norm(v_t))
+        prev = self.prev_xy
+        start = np.linalg.norm(prev - self.target_start(), axis=-1)
+        target = sample_clearances_m(self.clearance_m, start, (s.v_max + speed_t) * h, n)
+        k = np.zeros((0, 2)) if self.keep_out_xy is None else np.asarray(self.keep_out_xy)
+        start_k = np.linalg.norm(prev[:, None, :] - k[None], axis=-1)
+        keep = sample_clearances_m(self.separation_m, start_k, s.v_max * h, n)
+        i, j = _pairs(s.M)
+        start_p = np.linalg.norm(prev[i] - prev[j], axis=-1)
+        pairs = sample_clearances_m(self.separation_m, start_p, 2 * s.v_max * h, n)
+        return target, keep, pairs
 
     def area_bounds(self) -> tuple[FloatArray, FloatArray]:
         """operating_area(scenario)."""
         return operating_area(self.scenario)
 
     def full_rates(self, uav_xy: FloatArray) -> FloatArray:
-        """R~ [..., M] of each UAV on its serving BS, bit/s."""
+        """R~ [..., M] of each UAV on its serving BS, bit/s (e = margins.link_m farther away)."""
         s = self.scenario
         dist = np.linalg.norm(uav_xy - self.serving_bs_xy, axis=-1)
-        return np.asarray(full_band_rate(dist, s.dH, s.rho0, s.B))
+        e = self.margins.link_m
+        return np.asarray(full_band_rate(dist + e if e else dist, s.dH, s.rho0, s.B))
 
-    def position_violations(self, uav_xy: FloatArray, tol_m: float = 0.0) -> dict[str, BoolArray]:
-        """Per constraint, [L] True where positions [L, M, 2] violate 14b, 14h, 14i or 14j."""
+    def position_violations(
+        self,
+        uav_xy: FloatArray,
+        tol_m: float = 0.0,
+        end_velocity_mps: FloatArray | None = None,
+    ) -> dict[str, BoolArray]:
+        """Per constraint, [L] True where positions [L, M, 2] violate 14b, 14h, 14i or 14j.
+        end_velocity_mps [L, M, 2] or [M, 2]: the planned end velocities (Hermite legs, with
+        start_velocity_mps); None: straight legs."""
         s = self.scenario
         q = np.asarray(uav_xy).reshape(-1, s.M, 2)
         nearest_bs = np.sqrt(np.min(_sq_norm(q[:, :, None, :] - self.bs_xy[None, None]), axis=2))
         step = np.sqrt(_sq_norm(q - self.prev_xy[None]))
         to_target = np.sqrt(_sq_norm(q - self.target_xy[None, None]))
+        sep, link = self.separation_m, self.margins.link_m
         out = {
-            "14b control range": np.any(nearest_bs > s.d_th + tol_m, axis=1),
+            "14b control range": np.any(nearest_bs + link > s.d_th + tol_m, axis=1),
             "14h max speed": np.any(step > s.v_max * s.dt + tol_m, axis=1),
-            "14j target distance": np.any(to_target < s.d_safe - tol_m, axis=1),
+            "14j target distance": np.any(to_target < self.clearance_m - tol_m, axis=1),
         }
         if s.planner.keep_in_area:
             lo, hi = self.area_bounds()
@@ -68,10 +154,48 @@ class SlotConstraints:
         if s.M > 1:
             i, j = _pairs(s.M)
             gaps = np.sqrt(_sq_norm(q[:, i] - q[:, j]))
-            out["14i UAV separation"] = np.any(gaps < s.d_safe - tol_m, axis=1)
+            out["14i UAV separation"] = np.any(gaps < sep - tol_m, axis=1)
         if self.keep_out_xy is not None and len(self.keep_out_xy):
             gaps = np.sqrt(_sq_norm(q[:, :, None, :] - self.keep_out_xy[None, None]))
-            out["14i separation from unplanned UAVs"] = np.any(gaps < s.d_safe - tol_m, axis=(1, 2))
+            out["14i separation from unplanned UAVs"] = np.any(gaps < sep - tol_m, axis=(1, 2))
+        if self.checks_legs:
+            out.update(self._leg_violations(q, tol_m, end_velocity_mps))
+        return out
+
+    def _leg_violations(
+        self, q: FloatArray, tol_m: float, end_velocity_mps: FloatArray | None
+    ) -> dict[str, BoolArray]:
+        """14j and 14i along the legs prev_xy -> q [L, M, 2] (planning/legs.py)."""
+        s = self.scenario
+        v0 = self.start_velocity_mps if end_velocity_mps is not None else None
+        pts = uav_leg_points(self.prev_xy, q, self.leg_fractions, s.dt, v0, end_velocity_mps)
+        h = s.dt / len(self.leg_fractions)
+        accel = leg_accel_bound_mps2(self.prev_xy, q, s.dt, v0, end_velocity_mps)  # [L, M]
+        rel = pts - self.target_points()[None, :, None, :]  # [L, S, M, 2]
+        rel0 = self.prev_xy - self.target_start()  # [M, 2]
+        short = chord_shortfall(
+            np.broadcast_to(rel0, q.shape),
+            np.moveaxis(rel, 1, 2),
+            self.clearance_m,
+            accel * h**2 / 8,
+        )
+        out = {"14j along the legs": np.any(short > tol_m, axis=1)}
+        sep = self.separation_m
+        if s.M > 1:
+            i, j = _pairs(s.M)
+            rel = np.moveaxis(pts[:, :, i] - pts[:, :, j], 1, 2)  # [L, P, S, 2]
+            rel0 = np.broadcast_to(self.prev_xy[i] - self.prev_xy[j], (*rel.shape[:2], 2))
+            sag = (accel[:, i] + accel[:, j]) * h**2 / 8
+            short = chord_shortfall(rel0, rel, sep, sag)
+            out["14i along the legs"] = np.any(short > tol_m, axis=1)
+        if self.keep_out_xy is not None and len(self.keep_out_xy):
+            k = self.keep_out_xy
+            rel = pts[:, :, :, None, :] - k[None, None, None]  # [L, S, M, K, 2]
+            rel = np.moveaxis(rel, 1, 3)  # [L, M, K, S, 2]
+            rel0 = np.broadcast_to((self.prev_xy[:, None] - k[None])[None], (*rel.shape[:3], 2))
+            sag = (accel * h**2 / 8)[:, :, None]
+            short = chord_shortfall(rel0, rel, sep, sag)
+            out["14i along the legs (unplanned UAVs)"] = np.any(short > tol_m, axis=(1, 2))
         return out
 
     def rate_violations(self, uav_xy: FloatArray, eta: FloatArray) -> BoolArray:
@@ -80,10 +204,17 @@ class SlotConstraints:
         rates = np.asarray(eta) * self.full_rates(np.asarray(uav_xy).reshape(-1, s.M, 2))
         return np.asarray(np.any(rates < s.r_th * (1 - 1e-12), axis=-1))
 
-    def feasible(self, uav_xy: FloatArray, eta: FloatArray, tol_m: float = 0.0) -> BoolArray:
-        """[L] True where (positions, shares) satisfy 14a-14j (14c/14d hold by construction)."""
+    def feasible(
+        self,
+        uav_xy: FloatArray,
+        eta: FloatArray,
+        tol_m: float = 0.0,
+        end_velocity_mps: FloatArray | None = None,
+    ) -> BoolArray:
+        """[L] True where (positions, shares) satisfy 14a-14j (14c/14d hold by construction);
+        end_velocity_mps as in `position_violations`."""
         bad = self.rate_violations(uav_xy, eta)
-        for v in self.position_violations(uav_xy, tol_m).values():
+        for v in self.position_violations(uav_xy, tol_m, end_velocity_mps).values():
             bad = bad | v
         return np.asarray(~bad)
 
@@ -93,33 +224,69 @@ class SlotConstraints:
         """[L] feasibility of the plans `current_xy` [M, 2] with UAV m moved to candidates_m
         [L, 2], shares eta [M], given that `current_xy` itself is feasible: only the constraints
         that involve UAV m can change, so only those are checked (the same answer as `feasible`
-        on the full plans, at 1/M of the cost)."""
+        on the full plans, at 1/M of the cost; straight legs)."""
         s = self.scenario
         q = np.asarray(candidates_m, dtype=float)
+        sep = self.separation_m
         bad = eta[m] * self.full_rates_one(q, m) < s.r_th * (1 - 1e-12)
         nearest_bs = np.sqrt(np.min(_sq_norm(q[:, None, :] - self.bs_xy[None]), axis=1))
-        bad |= nearest_bs > s.d_th
+        bad |= nearest_bs + self.margins.link_m > s.d_th
         bad |= np.sqrt(_sq_norm(q - self.prev_xy[m])) > s.v_max * s.dt
-        bad |= np.sqrt(_sq_norm(q - self.target_xy)) < s.d_safe
+        bad |= np.sqrt(_sq_norm(q - self.target_xy)) < self.clearance_m
         if s.planner.keep_in_area:
             lo, hi = self.area_bounds()
             bad |= np.any((q < lo) | (q > hi), axis=-1)
         if self.ballistic_xy is not None:
             bad |= np.sqrt(_sq_norm(q - self.ballistic_xy[m])) > self.accel_radius_m
+        others = np.delete(current_xy, m, axis=0)
         if s.M > 1:
-            others = np.delete(current_xy, m, axis=0)
             gaps = np.sqrt(_sq_norm(q[:, None, :] - others[None]))
-            bad |= np.any(gaps < s.d_safe, axis=1)
+            bad |= np.any(gaps < sep, axis=1)
         if self.keep_out_xy is not None and len(self.keep_out_xy):
             gaps = np.sqrt(_sq_norm(q[:, None, :] - self.keep_out_xy[None]))
-            bad |= np.any(gaps < s.d_safe, axis=1)
+            bad |= np.any(gaps < sep, axis=1)
+        if self.checks_legs:
+            bad |= self._leg_violations_moving_one(current_xy, m, q)
         return np.asarray(~bad)
 
+    def _leg_violations_moving_one(
+        self, current_xy: FloatArray, m: int, q: FloatArray
+    ) -> BoolArray:
+        """[L] True where UAV m's straight leg prev_m -> q [L, 2] breaks 14j or 14i along the
+        legs (the others on their legs to current_xy)."""
+        s = self.scenario
+        tau = self.leg_fractions
+        prev = self.prev_xy[m]
+        pts = prev + tau[None, :, None] * (q[:, None, :] - prev)  # [L, S, 2]
+        rel = pts - self.target_points()[None]
+        bad = (
+            chord_shortfall(
+                np.broadcast_to(prev - self.target_start(), q.shape), rel, self.clearance_m
+            )
+            > 0
+        )
+        sep = self.separation_m
+        idx = [j for j in range(s.M) if j != m]
+        if idx:
+            o_prev = self.prev_xy[idx]  # [O, 2]
+            o_pts = o_prev + tau[:, None, None] * (current_xy[idx] - o_prev)  # [S, O, 2]
+            rel = np.moveaxis(pts[:, :, None, :] - o_pts[None], 1, 2)  # [L, O, S, 2]
+            rel0 = np.broadcast_to(prev - o_prev, (*rel.shape[:2], 2))
+            bad |= np.any(chord_shortfall(rel0, rel, sep) > 0, axis=1)
+        if self.keep_out_xy is not None and len(self.keep_out_xy):
+            k = self.keep_out_xy
+            rel = np.moveaxis(pts[:, :, None, :] - k[None, None], 1, 2)  # [L, K, S, 2]
+            rel0 = np.broadcast_to(prev - k, (*rel.shape[:2], 2))
+            bad |= np.any(chord_shortfall(rel0, rel, sep) > 0, axis=1)
+        return np.asarray(bad)
+
     def full_rates_one(self, uav_xy_m: FloatArray, m: int) -> FloatArray:
-        """R~ [L] of UAV m at positions uav_xy_m [L, 2] on its serving BS, bit/s."""
+        """R~ [L] of UAV m at positions uav_xy_m [L, 2] on its serving BS, bit/s (as
+        `full_rates`)."""
         s = self.scenario
         dist = np.linalg.norm(uav_xy_m - self.serving_bs_xy[m], axis=-1)
-        return np.asarray(full_band_rate(dist, s.dH, s.rho0, s.B))
+        e = self.margins.link_m
+        return np.asarray(full_band_rate(dist + e if e else dist, s.dH, s.rho0, s.B))
 
     def describe_violations(self, uav_xy: FloatArray, eta: FloatArray) -> list[str]:
         """Names of the constraints one plan (uav_xy [M, 2], eta [M]) violates."""

@@ -186,7 +186,14 @@ def plan_horizon(
         return fall_back(f"IPOPT {sol.status} after {sol.iterations} it")
     xy1, eta1 = sol.uav_xy_m[0], sol.bandwidth_share[0]
     cons = SlotConstraints(
-        data.prev_xy, serving, s.bs_xy, data.x_pred[:2], s, keep_out_xy=inp_keep_out
+        data.prev_xy,
+        serving,
+        s.bs_xy,
+        data.x_pred[:2],
+        s,
+        keep_out_xy=inp_keep_out,
+        target_clearance_m=float(data.clearance_m[0]),
+        target_velocity_mps=data.x_pred[2:4],
     )
     if not bool(cons.feasible(xy1[None], eta1[None])[0]):
         bad = ", ".join(cons.describe_violations(xy1, eta1))

@@ -11,6 +11,9 @@ with the bandwidth shares jointly, i.e. (P1) for the chosen association):
           ||q_m - q_{m,n-1}|| <= V_max dt         (14h)
           ||q_i - q_j|| >= D_s, ||q_m - k_l|| >= D_s (14i, and the keep-out points)
           ||q_m - p_pred|| >= D_s                 (14j)
+          (safety rule on: 14j at the slot's clearance and 14i at D_s + 2 e, both at every leg
+          sample of the straight legs with the chord margin; 14a/14b e farther from the BS;
+          planning/safety.py, planning/legs.py)
           ||q_m - ballistic_m|| <= r_a            (planner.accel_limit_mps2, when set)
           0 <= q <= area                          (planner.keep_in_area, as variable bounds)
 
@@ -37,6 +40,7 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.planning.feasibility import SlotConstraints
 from isac_mission.planning.positions import SOLVER_MARGIN_M
+from isac_mission.planning.safety import SafetyMargins, leg_samples, rule_on
 from isac_mission.tracking.pcrb import PlanningObjective
 from isac_mission.types import FloatArray
 
@@ -104,8 +108,15 @@ class PolishNLP:
         j_pred = ca.SX.sym("j_pred", 4, 4)
         scale = ca.SX.sym("scale", 4)  # Jacobi scaling 1 / sqrt(diag J) at the SCA point
         f_scale = ca.SX.sym("f_scale")  # f at the SCA point
+        # The distances kept at the leg samples (SlotConstraints.sample_clearances_m), squared,
+        # in units of L^2: per sample, the target's [M], the keep-out points' [M K], the pairs'.
+        S = leg_samples(s)
+        clear2 = ca.SX.sym("clear2", S * (M * (1 + n_keep_out) + M * (M - 1) // 2))
         params = [prev, serving, control, ballistic, accel_r2, keep_out, x_pred, j_pred, scale]
         params.append(f_scale)
+        self.safety = rule_on(s)
+        if self.safety:
+            params.append(clear2)
         self._param_shapes = [(p.size1(), p.size2()) for p in params]
 
         q = prev + L * z
@@ -125,36 +136,43 @@ class PolishNLP:
         lbg: list[float] = []
         ubg: list[float] = []
         big = ca.inf
-        d_safe2 = ((s.d_safe + SOLVER_MARGIN_M) / L) ** 2 if s.d_safe > 0 else 0.0
-        for m in range(M):
-            qm = q[m, :]
-            rate = (eta[m] * s.B * ca.log1p(s.rho0 / (ca.sumsqr(qm - serving[m, :]) + s.dH**2))) / (
-                np.log(2.0) * s.r_th
-            ) - 1.0
-            g += [rate]
-            lbg += [RATE_MARGIN]
-            ubg += [big]
-            g += [sq(qm - control[m, :])]
-            lbg += [-big]
-            ubg += [(max(s.d_th - SOLVER_MARGIN_M, 0.0) / L) ** 2]
-            g += [ca.sumsqr(z[m, :])]
-            lbg += [-big]
-            ubg += [((L - SOLVER_MARGIN_M) / L) ** 2]
-            g += [sq(qm - x_pred[:2].T)]
-            lbg += [d_safe2]
-            ubg += [big]
-            g += [sq(qm - ballistic[m, :]) - accel_r2]
-            lbg += [-big]
-            ubg += [0.0]
-            for k in range(n_keep_out):
-                g += [sq(qm - keep_out[k, :])]
+        self.n_samples = leg_samples(s)
+        if self.safety:
+            g, lbg, ubg = self._safety_constraints(
+                q, z, eta, prev, serving, control, ballistic, accel_r2, keep_out, x_pred, clear2
+            )
+        else:
+            d_safe2 = ((s.d_safe + SOLVER_MARGIN_M) / L) ** 2 if s.d_safe > 0 else 0.0
+            for m in range(M):
+                qm = q[m, :]
+                rate = (
+                    eta[m] * s.B * ca.log1p(s.rho0 / (ca.sumsqr(qm - serving[m, :]) + s.dH**2))
+                ) / (np.log(2.0) * s.r_th) - 1.0
+                g += [rate]
+                lbg += [RATE_MARGIN]
+                ubg += [big]
+                g += [sq(qm - control[m, :])]
+                lbg += [-big]
+                ubg += [(max(s.d_th - SOLVER_MARGIN_M, 0.0) / L) ** 2]
+                g += [ca.sumsqr(z[m, :])]
+                lbg += [-big]
+                ubg += [((L - SOLVER_MARGIN_M) / L) ** 2]
+                g += [sq(qm - x_pred[:2].T)]
                 lbg += [d_safe2]
                 ubg += [big]
-        for i in range(M):
-            for j in range(i + 1, M):
-                g += [sq(q[i, :] - q[j, :])]
-                lbg += [d_safe2]
-                ubg += [big]
+                g += [sq(qm - ballistic[m, :]) - accel_r2]
+                lbg += [-big]
+                ubg += [0.0]
+                for k in range(n_keep_out):
+                    g += [sq(qm - keep_out[k, :])]
+                    lbg += [d_safe2]
+                    ubg += [big]
+            for i in range(M):
+                for j in range(i + 1, M):
+                    g += [sq(q[i, :] - q[j, :])]
+                    lbg += [d_safe2]
+                    ubg += [big]
+
         g += [ca.sum1(eta)]
         lbg += [1.0]
         ubg += [1.0]
@@ -175,6 +193,71 @@ class PolishNLP:
         self.gradient = ca.Function("df", [x, p], [ca.gradient(f_true, x)])
         self.hessian = ca.Function("d2f", [x, p], [ca.hessian(f_true, x)[0]])
         self.constraints = ca.Function("g", [x, p], [ca.vertcat(*g)])
+
+    def _safety_constraints(
+        self,
+        q: ca.SX,
+        z: ca.SX,
+        eta: ca.SX,
+        prev: ca.SX,
+        serving: ca.SX,
+        control: ca.SX,
+        ballistic: ca.SX,
+        accel_r2: ca.SX,
+        keep_out: ca.SX,
+        x_pred: ca.SX,
+        clear2: ca.SX,
+    ) -> tuple[list[ca.SX], list[float], list[float]]:
+        """The constraints (g, lbg, ubg) with the safety rule: 14a and 14b at e = link margin
+        farther from the BS, 14j and 14i at every leg sample tau of the straight legs against
+        the constant-velocity target (planning/legs.py), at the distances clear2 (`pack`)."""
+        s = self.scenario
+        M, L = s.M, self.step_m
+        e = SafetyMargins.of(s).link_m
+        big = ca.inf
+        fractions = [(i + 1) / self.n_samples for i in range(self.n_samples)]
+
+        def sq(v: ca.SX) -> ca.SX:
+            return ca.sumsqr(v) / L**2
+
+        def at(m: int, tau: float) -> ca.SX:
+            return tau * q[m, :] + (1.0 - tau) * prev[m, :]
+
+        g: list[ca.SX] = []
+        lbg: list[float] = []
+        ubg: list[float] = []
+
+        def add(expr: ca.SX, lo: float, hi: float) -> None:
+            g.append(expr)
+            lbg.append(lo)
+            ubg.append(hi)
+
+        K = self.n_keep_out
+        per_sample = M * (1 + K) + M * (M - 1) // 2
+
+        def bound(f: int, row: int) -> ca.SX:
+            return clear2[f * per_sample + row]
+
+        for m in range(M):
+            qm = q[m, :]
+            dist = ca.sqrt(ca.sumsqr(qm - serving[m, :]) + 1e-12) + e
+            rate = eta[m] * s.B * ca.log1p(s.rho0 / (dist**2 + s.dH**2)) / (np.log(2.0) * s.r_th)
+            add(rate - 1.0, RATE_MARGIN, big)
+            add(sq(qm - control[m, :]), -big, (max(s.d_th - e - SOLVER_MARGIN_M, 0.0) / L) ** 2)
+            add(ca.sumsqr(z[m, :]), -big, ((L - SOLVER_MARGIN_M) / L) ** 2)
+            add(sq(qm - ballistic[m, :]) - accel_r2, -big, 0.0)
+            for f, tau in enumerate(fractions):
+                target = x_pred[:2].T - (1.0 - tau) * s.dt * x_pred[2:].T
+                add(sq(at(m, tau) - target) - bound(f, m), 0.0, big)
+                for k in range(K):
+                    add(sq(at(m, tau) - keep_out[k, :]) - bound(f, M + m * K + k), 0.0, big)
+        pair = 0
+        for i in range(M):
+            for j in range(i + 1, M):
+                for f, tau in enumerate(fractions):
+                    add(sq(at(i, tau) - at(j, tau)) - bound(f, M * (1 + K) + pair), 0.0, big)
+                pair += 1
+        return g, lbg, ubg
 
     def pack(
         self, xy: FloatArray, eta: FloatArray, objective: PlanningObjective, cons: SlotConstraints
@@ -210,6 +293,10 @@ class PolishNLP:
             scale,
             np.array([f0 if np.isfinite(f0) and f0 > 0 else 1.0]),
         ]
+        if self.safety:
+            c_target, c_keep, c_pairs = cons.sample_clearances_m()
+            rows = np.hstack([c_target, c_keep.reshape(len(c_target), -1), c_pairs])  # [S, .]
+            values.append(((rows.ravel() + SOLVER_MARGIN_M) / L) ** 2)
         p = np.concatenate([np.asarray(v, dtype=float).reshape(-1, order="F") for v in values])
         assert M * 2 + M == len(x)
         return x, p

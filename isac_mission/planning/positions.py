@@ -2,7 +2,8 @@
 
 Each iteration linearises f at Q^(l), solves the convex subproblem (P1.1.2) — linear objective under
 19a (rate radius of the current share), the control-range approximation (eq. 21), 14h, and the
-first-order inner approximations of 14i and 14j (eq. 22-23) — then line-searches
+first-order inner approximations of 14i and 14j (eq. 22-23; with the safety rule on, at every
+sampled instant of the straight legs, planning/legs.py) — then line-searches
 Q^(l) + omega (Q* - Q^(l)) over omega in {0, d_omega, ..., 1} keeping only points that satisfy the
 original constraints. The cvxpy problem is built once per M with Parameters (DPP) and re-solved.
 """
@@ -21,6 +22,8 @@ from scipy import sparse
 from isac_mission.config import Scenario
 from isac_mission.model.channel import rate_radius
 from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.leg_rows import leg_rows
+from isac_mission.planning.safety import SafetyMargins, leg_samples
 from isac_mission.types import BoolArray, FloatArray, IntArray
 
 # f of a plan [M, 2] with one UAV m moved to candidates [L, 2]: (current, eta, m, cands) -> [L].
@@ -41,12 +44,17 @@ class PositionSubproblem:
         the same problem written in its conic form (`_solve_clarabel`), skipping cvxpy's
         per-solve parameter mapping (several ms); other solvers always go through cvxpy.
         n_keep_out: fixed points (vehicles outside this plan) every UAV keeps D_s from, as it
-        keeps D_s from the target (eq. 23 per point)."""
+        keeps D_s from the target (eq. 23 per point). With the safety rule on, eq. 22 and 23 hold
+        at each of the S leg samples (rows repeated per sample) and the control range is
+        kept e closer (planning/safety.py)."""
         s = scenario
         M = s.M
         self.scenario = s
         self.n_keep_out = n_keep_out
-        n_points = 1 + n_keep_out  # the target, then the keep-out points
+        self.n_samples = leg_samples(s)
+        self.control_radius_m = max(s.d_th - SOLVER_MARGIN_M - SafetyMargins.of(s).link_m, 0.0)
+        # The target, then the keep-out points, per leg sample.
+        n_points = (1 + n_keep_out) * self.n_samples
         self.solver = solver
         self.direct = direct and solver.upper() == "CLARABEL"
         self.Q = cp.Variable((M, 2))
@@ -64,7 +72,7 @@ class PositionSubproblem:
         # Coordinates are centred on the UAVs' previous positions for solver conditioning.
         cons = [
             cp.norm(self.Q - self.serving, 2, axis=1) <= self.radius,
-            cp.norm(self.Q - self.control_bs, 2, axis=1) <= max(s.d_th - SOLVER_MARGIN_M, 0.0),
+            cp.norm(self.Q - self.control_bs, 2, axis=1) <= self.control_radius_m,
             cp.norm(self.Q - self.prev, 2, axis=1) <= s.v_max * s.dt - SOLVER_MARGIN_M,
             cp.sum(cp.multiply(self.target_normal, select @ self.Q), axis=1) >= self.target_rhs,
             cp.norm(self.Q - self.ballistic, 2, axis=1) <= self.accel_radius,
@@ -79,8 +87,9 @@ class PositionSubproblem:
             D = np.zeros((P, M))
             D[np.arange(P), self.pairs[:, 0]] = 1.0
             D[np.arange(P), self.pairs[:, 1]] = -1.0
-            self.pair_normal = cp.Parameter((P, 2))
-            self.pair_rhs = cp.Parameter(P)
+            D = np.tile(D, (self.n_samples, 1))  # row f P + p: pair p at leg sample f
+            self.pair_normal = cp.Parameter((P * self.n_samples, 2))
+            self.pair_rhs = cp.Parameter(P * self.n_samples)
             cons.append(cp.sum(cp.multiply(self.pair_normal, D @ self.Q), axis=1) >= self.pair_rhs)
         objective = cp.Minimize(cp.sum(cp.multiply(self.direction, self.Q)))
         self.problem = cp.Problem(objective, cons)
@@ -92,20 +101,24 @@ class PositionSubproblem:
 
         Entries are listed in a fixed order (rows, cols); `_perm` maps that order to the CSC
         order, so a solve only fills A.data. Rows: 14j (eq. 23) 0..M-1 and the keep-out points
-        (the same form) M..(1+L)M-1, 14i (eq. 22) the next P, the area box (4 per UAV), then
+        (the same form) M..(1+L)M-1, repeated per leg sample, 14i (eq. 22) the next P per leg
+        sample, the area box (4 per UAV), then
         four 3-d cones per UAV (19a serving disk, eq. 21 control disk, 14h, dynamics disk).
         """
         M = self.scenario.M
-        P = len(self.pairs)
+        P = len(self.pairs) * self.n_samples
         uav = np.arange(M)
-        point_rows = np.arange((1 + self.n_keep_out) * M)
-        point_uav = np.tile(uav, 1 + self.n_keep_out)
+        point_rows = np.arange((1 + self.n_keep_out) * self.n_samples * M)
+        point_uav = np.tile(uav, (1 + self.n_keep_out) * self.n_samples)
         rows: list[IntArray] = [point_rows, point_rows]
         cols: list[IntArray] = [2 * point_uav, 2 * point_uav + 1]
         n_lin = len(point_rows)
         if P:
             pr = n_lin + np.arange(P)
-            i, j = self.pairs[:, 0], self.pairs[:, 1]
+            i, j = (
+                np.tile(self.pairs[:, 0], self.n_samples),
+                np.tile(self.pairs[:, 1], self.n_samples),
+            )
             rows += [pr, pr, pr, pr]
             cols += [2 * i, 2 * i + 1, 2 * j, 2 * j + 1]
             n_lin += P
@@ -151,7 +164,9 @@ class PositionSubproblem:
         v["direction"] = grad / scale if scale > 0 else grad
         v["prev"] = origin.prev_xy - c
         v["serving"] = origin.serving_bs_xy - c
-        v["radius"] = np.maximum(rate_radius(eta, s.r_th, s.dH, s.rho0, s.B) - SOLVER_MARGIN_M, 0.0)
+        link = origin.margins.link_m
+        radius = rate_radius(eta, s.r_th, s.dH, s.rho0, s.B) - SOLVER_MARGIN_M
+        v["radius"] = np.maximum(radius - link if link else radius, 0.0)
         nearest = np.argmin(
             np.linalg.norm(origin.prev_xy[:, None, :] - origin.bs_xy[None], axis=-1), axis=1
         )
@@ -166,24 +181,30 @@ class PositionSubproblem:
         v["area_lo"] = np.tile(lo - c, (s.M, 1))
         v["area_hi"] = np.tile(hi - c, (s.M, 1))
         lin = lin_xy - c
-        points = origin.target_xy[None]
         if self.n_keep_out:
             keep_out = origin.keep_out_xy
             if keep_out is None or len(keep_out) != self.n_keep_out:
                 raise ValueError(f"expected {self.n_keep_out} keep-out points, got {keep_out}")
-            points = np.vstack([points, keep_out])
-        ds2 = (s.d_safe + SOLVER_MARGIN_M) ** 2
-        # Row p M + m: lin_m - point_p.
-        diff_t = np.tile(lin, (len(points), 1)) - np.repeat(points - c, s.M, axis=0)
-        lin_rows = np.tile(lin, (len(points), 1))
-        # ||q^r - u||^2 + 2 (q^r - u)^T (q - q^r) >= D_s^2  (eq. 23)
-        v["target_normal"] = 2.0 * diff_t
-        v["target_rhs"] = ds2 - np.sum(diff_t**2, axis=1) + 2.0 * np.sum(diff_t * lin_rows, axis=1)
-        if len(self.pairs):
-            diff_p = lin[self.pairs[:, 0]] - lin[self.pairs[:, 1]]
-            # 2 (q_i^r - q_j^r)^T (q_i - q_j) - ||q_i^r - q_j^r||^2 >= D_s^2  (eq. 22)
-            v["pair_normal"] = 2.0 * diff_p
-            v["pair_rhs"] = ds2 + np.sum(diff_p**2, axis=1)
+        if origin.checks_legs:  # the safety rule (the same rows as below when S = 1, e = 0)
+            v.update(leg_rows(origin, self.pairs, self.n_keep_out, lin, c, SOLVER_MARGIN_M))
+        else:  # the paper's D_s at the slot instant
+            points = origin.target_xy[None]
+            if self.n_keep_out:
+                points = np.vstack([points, np.asarray(origin.keep_out_xy)])
+            ds2 = (s.d_safe + SOLVER_MARGIN_M) ** 2
+            # Row p M + m: lin_m - point_p.
+            diff_t = np.tile(lin, (len(points), 1)) - np.repeat(points - c, s.M, axis=0)
+            lin_rows = np.tile(lin, (len(points), 1))
+            # ||q^r - u||^2 + 2 (q^r - u)^T (q - q^r) >= D_s^2  (eq. 23)
+            v["target_normal"] = 2.0 * diff_t
+            v["target_rhs"] = (
+                ds2 - np.sum(diff_t**2, axis=1) + 2.0 * np.sum(diff_t * lin_rows, axis=1)
+            )
+            if len(self.pairs):
+                diff_p = lin[self.pairs[:, 0]] - lin[self.pairs[:, 1]]
+                # 2 (q_i^r - q_j^r)^T (q_i - q_j) - ||q_i^r - q_j^r||^2 >= D_s^2  (eq. 22)
+                v["pair_normal"] = 2.0 * diff_p
+                v["pair_rhs"] = ds2 + np.sum(diff_p**2, axis=1)
         if self.direct:
             return self._solve_clarabel(v, c)
         for name, value in v.items():
@@ -220,7 +241,7 @@ class PositionSubproblem:
         b_parts.append(np.column_stack([-v["area_lo"], v["area_hi"]]).ravel())
         disks = [
             (v["serving"], v["radius"]),
-            (v["control_bs"], np.full(M, max(s.d_th - SOLVER_MARGIN_M, 0.0))),
+            (v["control_bs"], np.full(M, self.control_radius_m)),
             (v["prev"], np.full(M, s.v_max * s.dt - SOLVER_MARGIN_M)),
             (v["ballistic"], v["accel_radius"]),
         ]

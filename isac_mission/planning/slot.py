@@ -37,6 +37,7 @@ from isac_mission.planning.horizon import plan_horizon
 from isac_mission.planning.horizon_nlp import HorizonNLP
 from isac_mission.planning.polish import PolishNLP
 from isac_mission.planning.positions import PositionSubproblem, optimise_positions
+from isac_mission.planning.safety import target_clearance_m
 from isac_mission.tracking.pcrb import PlanningObjective, SensingParams, scaled_inverse
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 
@@ -158,6 +159,15 @@ def evade_target(
     return out
 
 
+def slot_clearance_m(inp: SlotInput, s: Scenario) -> float:
+    """The slot's 14j clearance (planning/safety.py) from the tracker's predicted covariance,
+    or J_pred^-1 when the input has none."""
+    cov = inp.target_cov_pred
+    if cov is None and s.planner.safety_margin != "none":
+        cov = np.asarray(np.linalg.inv(inp.J_pred), dtype=float)
+    return target_clearance_m(s, cov)
+
+
 def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> SlotPlan:
     """Plan one slot with the given strategy. An infeasible slot returns a best-effort plan (the
     communication-optimal one, or staying put for sd) with report.status == "infeasible".
@@ -223,6 +233,9 @@ def _plan_slot(inp: SlotInput, kit: SolverKit, method: Method) -> SlotPlan:
         ballistic_xy=ballistic,
         accel_radius_m=reach_m if ballistic is not None else np.inf,
         keep_out_xy=inp.keep_out_xy if n_keep_out else None,
+        target_clearance_m=slot_clearance_m(inp, s),
+        target_velocity_mps=inp.x_pred[2:4],
+        start_velocity_mps=inp.prev_velocity,
     )
     moves = method not in ("sd",)
     step = s.v_max * s.dt if moves else 0.0
@@ -238,7 +251,7 @@ def _plan_slot(inp: SlotInput, kit: SolverKit, method: Method) -> SlotPlan:
         # Best effort: the link-optimal waypoints, or where the vehicles coast to when the
         # planner respects their dynamics; either way away from the target first.
         best = comm.uav_xy if ballistic is None else ballistic
-        xy = evade_target(best, inp.prev_xy, inp.x_pred[:2], s.d_safe, step)
+        xy = evade_target(best, inp.prev_xy, inp.x_pred[:2], cons.clearance_m, step)
         xy = np.clip(xy, *cons.area_bounds())  # the vehicles' geofence would clamp it anyway
         report = SolveReport("infeasible", reason, solve_s=elapsed())
         return _plan(xy, assoc, comm.eta, objective, report)

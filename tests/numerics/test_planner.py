@@ -82,7 +82,10 @@ def test_bandwidth_lp_equals_closed_form_vertex() -> None:
 def test_single_uav_plan_reaches_grid_optimum() -> None:
     """M = 1: eta = 1, so f depends on q only; the feasible set is the 25 m disk minus the
     D_s disk around the predicted target. A fine polar grid finds its best point."""
-    s = parse_scenario({"uavs": {"start_xy_m": [[1000.0, 1700.0]]}})
+    # The paper's problem (D_s at the slot instant): the grid below is its feasible set.
+    s = parse_scenario(
+        {"uavs": {"start_xy_m": [[1000.0, 1700.0]]}, "planner": {"safety_margin": "none"}}
+    )
     kit = SolverKit(s)
     for x_pred in (np.array([700.0, 1600.0, 30.0, 0.0]), np.array([1030.0, 1650.0, 10.0, 20.0])):
         inp = SlotInput(s.uav_start_xy, np.ones(1), None, x_pred, _prior(s))

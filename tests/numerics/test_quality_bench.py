@@ -32,8 +32,8 @@ def qb() -> ModuleType:
 
 
 @pytest.fixture(scope="module")
-def recorded(paper: Scenario) -> tuple[Scenario, SolverKit, list[SlotInput]]:
-    s = paper.with_changes(N=12)
+def recorded(paper: Scenario, qb: ModuleType) -> tuple[Scenario, SolverKit, list[SlotInput]]:
+    s = qb.paper_problem(paper.with_changes(N=12))
     kit = SolverKit(s)
     return s, kit, record_slot_inputs(s, "proposed", draw_run_noise(s, 7), kit)[1]
 

@@ -74,6 +74,58 @@ def _dist(a: Array, b: Array) -> float:
 
 
 @dataclass(frozen=True)
+class _Safety:
+    """The safety rule's distances (docs/model.md, "Safety"), re-derived from the config alone:
+    k, e, the leg samples S, and the target's motion model (dt, kappa, P0)."""
+
+    k: float
+    e: float
+    samples: int
+    dt: float
+    kappa: float
+    P0: Array
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> _Safety | None:
+        planner = cfg.get("planner") or {}
+        if planner.get("safety_margin", "none") != "covariance":
+            return None
+        return cls(
+            k=float(planner["safety_confidence_sigma"]),
+            e=float(planner["tracking_margin_m"]),
+            samples=int(planner["horizon"]["leg_samples"]),
+            dt=float(config_value(cfg, "dt")),
+            kappa=float(config_value(cfg, "kappa")),
+            P0=np.asarray(config_value(cfg, "P0"), dtype=float).reshape(4, 4),
+        )
+
+    def clearance_m(self, d_safe: float, P_prev: Array) -> float:
+        """D_s + k sigma + e, sigma^2 the largest eigenvalue of the predicted position covariance
+        at the leg samples t = i dt / S (i = 1..S), predicted forward from P_prev [4, 4] (the
+        previous slot's posterior) with the constant-velocity model."""
+        worst = 0.0
+        for i in range(1, self.samples + 1):
+            t = i * self.dt / self.samples
+            F = np.eye(4)
+            F[0, 2] = F[1, 3] = t
+            q = self.kappa * np.array([[t**3 / 3, t**2 / 2], [t**2 / 2, t]])
+            W = np.kron(q, np.eye(2))
+            P = F @ P_prev @ F.T + W
+            worst = max(worst, float(np.max(np.linalg.eigvalsh(P[:2, :2]))))
+        return d_safe + self.k * math.sqrt(worst) + self.e
+
+
+LEG_POINTS = 400
+"""Points per leg of the brute-force leg check (the planner samples S and adds chord margins)."""
+
+
+def _closest_on_leg(rel0: Array, rel1: Array) -> float:
+    """The smallest |r(t)| over LEG_POINTS + 1 points of the straight relative motion r0 -> r1."""
+    t = np.linspace(0.0, 1.0, LEG_POINTS + 1)[:, None]
+    return float(np.min(np.linalg.norm(rel0 + t * (rel1 - rel0), axis=1)))
+
+
+@dataclass(frozen=True)
 class _Limits:
     """The constants the constraints need, read once from the config."""
 
@@ -84,9 +136,10 @@ class _Limits:
     step_m: float
     d_safe: float
     d_th: float
+    safety: _Safety | None = None
 
     @classmethod
-    def from_config(cls, cfg: Mapping[str, Any]) -> _Limits:
+    def from_config(cls, cfg: Mapping[str, Any], safety: bool = False) -> _Limits:
         return cls(
             bs_xy=np.asarray(config_value(cfg, "bs_xy"), dtype=float).reshape(-1, 2),
             start_xy=np.asarray(config_value(cfg, "uav_start_xy"), dtype=float).reshape(-1, 2),
@@ -95,6 +148,7 @@ class _Limits:
             step_m=float(config_value(cfg, "v_max")) * float(config_value(cfg, "dt")),
             d_safe=float(config_value(cfg, "d_safe")),
             d_th=control_range_m(cfg),
+            safety=_Safety.from_config(cfg) if safety else None,
         )
 
 
@@ -114,6 +168,7 @@ def _check_slot(
     tol_m: float,
     rate_rtol: float,
     share_tol: float,
+    P_prev: Array | None = None,
 ) -> list[Violation]:
     n, status = int(rec.slot), str(rec.status)
     q = np.asarray(rec.uav_xy, dtype=float).reshape(-1, 2)
@@ -129,6 +184,13 @@ def _check_slot(
 
     def flag(c: str, uavs: tuple[int, ...], value: float, limit: float, detail: str) -> None:
         out.append(Violation(n, c, uavs, float(value), float(limit), status, detail))
+
+    rule = lim.safety
+    e_track = 0.0 if rule is None else rule.e  # the vehicles' tracking margin
+    d_sep = lim.d_safe + 2 * e_track
+    d_target = lim.d_safe
+    if rule is not None and P_prev is not None:
+        d_target = rule.clearance_m(lim.d_safe, P_prev)
 
     # 14c, 14d: shares
     total = float(np.sum(eta))
@@ -158,12 +220,13 @@ def _check_slot(
         if k_m is None or not share_ok[m] or not seen[m]:
             continue
         # The position tolerance applies here too: the rate tol_m metres closer to the BS.
-        rate = uplink_rate_bps(float(eta[m]), max(_dist(q[m], lim.bs_xy[k_m]) - tol_m, 0.0), cfg)
+        dist_bs = _dist(q[m], lim.bs_xy[k_m]) + e_track
+        rate = uplink_rate_bps(float(eta[m]), max(dist_bs - tol_m, 0.0), cfg)
         if not rate >= lim.r_th * (1.0 - rate_rtol):
             flag("14a", (m,), rate, lim.r_th, f"rate to BS {k_m} below R_th (bit/s)")
     # 14b: control range of the nearest BS
     for m in (m for m in range(n_uav) if seen[m]):
-        nearest = min(_dist(q[m], w) for w in lim.bs_xy)
+        nearest = min(_dist(q[m], w) for w in lim.bs_xy) + e_track
         if not nearest <= lim.d_th + tol_m:
             flag("14b", (m,), nearest, lim.d_th, "nearest BS beyond control range d_th (m)")
     # 14h: speed limit since the previous record (or the start positions)
@@ -181,14 +244,29 @@ def _check_slot(
             if not (seen[i] and seen[j]):
                 continue
             gap = _dist(q[i], q[j])
-            if not gap >= lim.d_safe - tol_m:
-                flag("14i", (i, j), gap, lim.d_safe, "UAVs closer than D_s (m)")
+            if not gap >= d_sep - tol_m:
+                flag("14i", (i, j), gap, d_sep, "UAVs closer than D_s (+ 2 e) (m)")
+            if rule is not None and prev_xy.shape == q.shape:
+                start = prev_xy[i] - prev_xy[j]
+                need = min(d_sep, float(np.linalg.norm(start)))
+                gap = _closest_on_leg(start, q[i] - q[j])
+                if not gap >= need - tol_m:
+                    flag("14i", (i, j), gap, need, "UAVs closer than D_s + 2 e along the legs (m)")
     # 14j: UAV-predicted target separation
     target = np.asarray(rec.target_pred, dtype=float).reshape(-1)[:2]
     for m in (m for m in range(n_uav) if seen[m]):
         gap = _dist(q[m], target)
-        if not gap >= lim.d_safe - tol_m:
-            flag("14j", (m,), gap, lim.d_safe, "UAV closer than D_s to the predicted target (m)")
+        if not gap >= d_target - tol_m:
+            flag(
+                "14j", (m,), gap, d_target, "UAV closer than the clearance to the predicted target"
+            )
+        if rule is not None and prev_xy.shape == q.shape:
+            velocity = np.asarray(rec.target_pred, dtype=float).reshape(-1)[2:4]
+            start = prev_xy[m] - (target - rule.dt * velocity)
+            need = min(d_target, float(np.linalg.norm(start)))
+            gap = _closest_on_leg(start, q[m] - target)
+            if not gap >= need - tol_m:
+                flag("14j", (m,), gap, need, "UAV closer than the clearance along its leg (m)")
     return out
 
 
@@ -198,6 +276,7 @@ def check_constraints(
     *,
     rate_rtol: float = 1e-9,
     share_tol: float = 1e-9,
+    safety: bool = False,
 ) -> list[Violation]:
     """Re-check every slot of a trace (or trace path) against (14a)-(14j) of the paper.
 
@@ -219,18 +298,28 @@ def check_constraints(
     with a null position was not observed: 14a, 14b and 14h-14j skip it there.
     Otherwise non-finite values count as violations. Every slot is checked whatever its status; each
     Violation carries the status so the caller decides what a non-"ok" slot may break.
+    safety=True, with the trace's planner.safety_margin "covariance": the safety rule's
+    distances instead (docs/model.md, "Safety"): 14j at D_s + k sigma + e with sigma from the
+    covariance predicted from the previous record's P (P0 at the first), 14i at D_s + 2 e,
+    14a/14b e farther from the BS, and 14i/14j along the straight legs from the previous
+    positions against the target's constant-velocity prediction, checked on LEG_POINTS points
+    (at least min(distance, the leg's starting distance)). Consecutive slots only.
     """
     tr = as_trace(trace)
-    lim = _Limits.from_config(tr.config)
+    lim = _Limits.from_config(tr.config, safety)
     out: list[Violation] = []
     prev_xy = lim.start_xy.copy()
     prev_slot = np.zeros(prev_xy.shape[0])
     first = True
+    P_prev = None if lim.safety is None else lim.safety.P0
     for rec in tr.slots:
         n = int(rec.slot)
         q = np.asarray(rec.uav_xy, dtype=float).reshape(-1, 2)
         elapsed = np.maximum(1.0, n - prev_slot) if first else n - prev_slot
-        out += _check_slot(rec, tr.config, lim, prev_xy, elapsed, tol_m, rate_rtol, share_tol)
+        out += _check_slot(
+            rec, tr.config, lim, prev_xy, elapsed, tol_m, rate_rtol, share_tol, P_prev
+        )
+        P_prev = np.asarray(rec.P, dtype=float).reshape(4, 4)
         if q.shape != prev_xy.shape:  # reported as 14h by _check_slot; start afresh
             prev_xy, prev_slot = q.copy(), np.full(q.shape[0], float(n))
         else:
