@@ -24,7 +24,9 @@ flying the UAVs) over RUNS runs and every slot n = 1..N-L:
    own k; allowance 3 sqrt(p (1 - p) / R) above p = 1 - Phi(k) (runs independent, the same
    variance argument as above).
 
-RUNS = 8 by default, 60 with --full (tests/conftest.py); `pytest -s` prints the table.
+The posteriors come from the proposed method's runs (RUNS = 8 by default, 60 with --full,
+tests/conftest.py) and, with --full only, from 20 runs of the `horizon` method (its own geometry,
+the one whose assumption this is); `pytest -s` prints the table.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ from isac_mission.experiment.closed_loop import (
 )
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.safety import target_clearance_m
-from isac_mission.planning.slot import SolverKit
+from isac_mission.planning.slot import METHODS, SolverKit
 from isac_mission.types import FloatArray
 
 HORIZON = 5
@@ -51,7 +53,12 @@ LEVEL = 0.95
 K_CHECKED = (1.0, 2.0, 3.0)
 
 
-def _runs(full_size: bool) -> int:
+FLOWN_BY = ("proposed", "horizon")
+
+
+def _runs(method: str, full_size: bool) -> int:
+    if method == "horizon":
+        return 20 if full_size else 0
     return 60 if full_size else 8
 
 
@@ -65,14 +72,19 @@ def predict_ahead(
     return x, P
 
 
-@pytest.fixture(scope="module")
-def posteriors(paper: Scenario, full_size: bool) -> list[list[SlotOutcome]]:
-    """The slots of RUNS closed-loop runs of the proposed method on paper.yaml (seeds 1..)."""
+@pytest.fixture(scope="module", params=FLOWN_BY)
+def posteriors(
+    request: pytest.FixtureRequest, paper: Scenario, full_size: bool
+) -> list[list[SlotOutcome]]:
+    """The slots of the closed-loop runs of one method on paper.yaml (seeds 1..)."""
+    method = request.param
+    if method not in METHODS or _runs(method, full_size) == 0:
+        pytest.skip(f"{method}: runs with --full only (or not registered)")
     kit = SolverKit(paper)
     runs: list[list[SlotOutcome]] = []
-    for r in range(_runs(full_size)):
+    for r in range(_runs(method, full_size)):
         slots: list[SlotOutcome] = []
-        run_closed_loop(paper, "proposed", draw_run_noise(paper, paper.seed + r), kit, slots.append)
+        run_closed_loop(paper, method, draw_run_noise(paper, paper.seed + r), kit, slots.append)
         runs.append(slots)
     return runs
 
@@ -124,7 +136,7 @@ def test_mean_nees_of_the_l_step_prediction_is_chi_square_4(
     per_slot = nees.mean(axis=0)
     inside = float(np.mean((per_slot >= lo) & (per_slot <= hi)))
     print(
-        f"\nL={steps}: mean NEES {nees.mean():.3f} (95 % interval {lo:.3f}-{hi:.3f}, {runs} runs "
+        f"\n{posteriors[0][0].method} L={steps}: mean NEES {nees.mean():.3f} (95 % interval {lo:.3f}-{hi:.3f}, {runs} runs "
         f"x {nees.shape[1]} slots); median {np.median(nees):.3f} (chi2(4) median "
         f"{stats.chi2.median(4):.3f}); slots with the run-mean inside: {inside:.0%}"
     )
@@ -148,5 +160,9 @@ def test_a_distance_kept_on_the_prediction_holds_at_the_rules_level(
         assert rate <= p + 3 * math.sqrt(p * (1 - p) / runs), (k, rate, p)
     # the rule as the planner applies it (tracking margin included): no breaks at all here
     with_margin = break_rate(paper, offsets, own_k, paper.planner.tracking_margin_m)
-    print(f"\nL={steps}, {2 * len(offsets)} points: " + "; ".join(line) + f"; rule {with_margin}")
+    print(
+        f"\n{posteriors[0][0].method} L={steps}, {2 * len(offsets)} points: "
+        + "; ".join(line)
+        + f"; rule {with_margin}"
+    )
     assert with_margin <= float(stats.norm.sf(own_k)) + 3 * math.sqrt(stats.norm.sf(own_k) / runs)
