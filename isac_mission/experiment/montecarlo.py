@@ -127,6 +127,7 @@ def outcome_record(o: SlotOutcome) -> SlotRecord:
         J=o.bound.J,
         plan_xy=o.plan.uav_xy_m,
         plan_pcrb_trace=o.plan.pcrb_trace,
+        plan_velocity=o.plan.uav_velocity_mps,
         reason=rep.reason,
         extra={
             "pcrb_pos": o.bound.position_trace,

@@ -199,6 +199,11 @@ def encode_plan(msg: PlanMsg) -> bytes:
         reason=p.report.reason,
         solve_s=float(p.report.solve_s),
     )
+    if p.uav_velocity_mps is not None:
+        obj["end_velocity_mps"] = [
+            finite_floats(row, f"plan.end_velocity_mps[{i}]")
+            for i, row in enumerate(np.asarray(p.uav_velocity_mps))
+        ]
     data = dumps(obj)
     decode_plan(data)
     return data
@@ -211,6 +216,9 @@ def _plan(w: PlanWire) -> PlanMsg:
         bandwidth_share=np.array(w.bandwidth_share, dtype=float),
         pcrb_trace=_nan(w.objective),
         report=SolveReport(status=w.status, reason=w.reason, solve_s=w.solve_s),
+        uav_velocity_mps=None
+        if w.end_velocity_mps is None
+        else np.array(w.end_velocity_mps, dtype=float).reshape(len(w.assoc), 2),
     )
     return PlanMsg(slot=w.slot, t_s=w.t, plan=plan)
 
@@ -221,7 +229,8 @@ def decode_plan(payload: Payload, *, n_uavs: int | None = None, n_bs: int | None
     Checks: assoc, bandwidth_share and waypoints_xy_m have the same length M (= n_uavs when
     given, 1 <= M <= MAX_UAVS); assoc entries are BS indices in [0, n_bs), or -1 for a vehicle
     outside the plan (link lost; its share must then be 0); shares lie in [0, 1]
-    and sum to 1 within SHARE_SUM_TOL; waypoints are finite [M, 2]; objective is >= 0 or null;
+    and sum to 1 within SHARE_SUM_TOL; waypoints are finite [M, 2]; end_velocity_mps, when
+    present (optional: older plans have none), finite [M, 2]; objective is >= 0 or null;
     status is a non-empty string; solve_s >= 0. reason is optional ("" when absent).
     """
     obj = loads(payload)

@@ -61,8 +61,10 @@ class TruthMsg:
 @dataclass(frozen=True)
 class PlanMsg:
     """A slot plan (`isac/<mission>/plan`): plan.uav_xy_m [M, 2] waypoints, plan.bs_of_uav [M],
-    plan.bandwidth_share [M] (sums to 1), plan.pcrb_trace (objective, NaN if unknown) and
-    plan.report (status, reason, solve_s). slot: the slot the plan is for; t_s: when it was made."""
+    plan.bandwidth_share [M] (sums to 1), plan.pcrb_trace (objective, NaN if unknown),
+    plan.report (status, reason, solve_s) and plan.uav_velocity_mps [M, 2] (the planned end
+    velocities, m/s; None when not planned). slot: the slot the plan is for; t_s: when it was
+    made."""
 
     slot: int
     t_s: float

@@ -148,6 +148,11 @@ class PlanWire(Envelope):
     )
     bandwidth_share: list[Share] = Field(description="eta per UAV; sums to 1.")
     waypoints_xy_m: list[PlaneXY] = Field(description="Next waypoint per UAV (m).")
+    end_velocity_mps: list[PlaneXY] | None = Field(
+        default=None,
+        description="Planned velocity per UAV at its waypoint (m/s, planner.vehicle_model); "
+        "absent or null: not planned (the bridge ends the leg at its mean velocity).",
+    )
     objective: NonNegative | None = Field(description="tr(PCRB) of the plan; null if unknown.")
     status: Status = Field(min_length=1, description="Solver status: ok, infeasible, ...")
     reason: str = Field(default="", max_length=MAX_REASON_CHARS, description="Why, if not ok.")
@@ -174,7 +179,7 @@ class PlanWire(Envelope):
             raise refuse(f"plan.assoc[{i}]: {int_problem(assoc[i], -1, hi)}")
         return assoc
 
-    @field_validator("bandwidth_share", "waypoints_xy_m", mode="before")
+    @field_validator("bandwidth_share", "waypoints_xy_m", "end_velocity_mps", mode="before")
     @classmethod
     def _one_per_uav(cls, value: Any, info: ValidationInfo) -> Any:
         assoc = info.data.get("assoc")

@@ -236,13 +236,22 @@ class BridgeFleet:
 
     def on_plan(self, plan: PlanMsg, arrive_by_s: float | None = None) -> bool:
         """Send each vehicle toward its waypoint of `plan` (plan.plan.uav_xy_m [M, 2]) by
-        `arrive_by_s` (default `deadline_s(plan.slot)`). Plans not newer than the last one are
-        dropped (counted). True if applied."""
+        `arrive_by_s` (default `deadline_s(plan.slot)`), at its planned end velocity
+        (plan.plan.uav_velocity_mps [M, 2]) when the plan has one. Plans not newer than the
+        last one are dropped (counted). True if applied."""
         st = self._plans
         waypoints = np.asarray(plan.plan.uav_xy_m, dtype=float)
-        if waypoints.shape != (len(self.bridges), 2):
+        v = plan.plan.uav_velocity_mps
+        velocities = None if v is None else np.asarray(v, dtype=float)
+        shape = (len(self.bridges), 2)
+        if waypoints.shape != shape or (velocities is not None and velocities.shape != shape):
             st.counters.plans_invalid += 1
-            st.counters.last_error = f"plan {plan.slot}: waypoints of shape {waypoints.shape}"
+            got = (
+                waypoints.shape
+                if velocities is None or waypoints.shape != shape
+                else velocities.shape
+            )
+            st.counters.last_error = f"plan {plan.slot}: waypoints or velocities of shape {got}"
             log.warning("%s", st.counters.last_error)
             return False
         if plan.slot <= st.last_slot:
@@ -258,7 +267,8 @@ class BridgeFleet:
         deadline = self.deadline_s(plan.slot) if arrive_by_s is None else arrive_by_s
         for bridge in self.bridges:
             bridge.plan_slot = plan.slot
-            bridge.set_waypoint(waypoints[bridge.index], deadline)
+            planned_v = None if velocities is None else velocities[bridge.index]
+            bridge.set_waypoint(waypoints[bridge.index], deadline, planned_v)
         st.counters.plans_applied += 1
         return True
 

@@ -3,7 +3,8 @@
 A *carrot* (`CarrotLeg`, `plan_leg`) moves in a straight line from where it is toward the
 waypoint at the constant speed needed to arrive at `arrive_by_s`, never above V_max, with that
 velocity as feed-forward, and stops at the waypoint. A smooth leg (`HermiteLeg`, `hermite_leg`)
-runs on the cubic that keeps position and velocity continuous across legs. Legs chain: the next
+runs on the cubic that keeps position and velocity continuous across legs (the vehicle model's
+leg, isac_mission/model/vehicle.py), ending at the plan's velocity when the plan gives one. Legs chain: the next
 leg starts where the setpoint is.
 """
 
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from isac_mission.model.vehicle import hermite_position, hermite_velocity, mean_velocity
 from isac_mission.types import FloatArray
 
 
@@ -60,11 +62,15 @@ class CarrotLeg:
 @dataclass(frozen=True)
 class HermiteLeg:
     """A setpoint on the cubic from (start_xy_m, start_v_mps) at `start_s` to (goal_xy_m,
-    goal_v_mps) at `end_s`, then resting at the goal (scenario plane, m, m/s, s).
+    goal_v_mps) at `end_s` (model/vehicle.py's Hermite leg), then coasting at goal_v_mps for
+    `coast_s`, then resting where the coast ended (scenario plane, m, m/s, s).
 
     Position and velocity are continuous across legs, so a vehicle with finite acceleration can
     follow it; a constant-speed carrot jumps in velocity at every slot boundary, and a vehicle
-    limited to a few m/s^2 then trails the plan by metres.
+    limited to a few m/s^2 then trails the plan by metres. The coast bridges the time between
+    the slot boundary and the next plan (in lockstep the world holds at the boundary while the
+    setpoint is sampled `setpoint_lead_s` ahead of it; in real time the plan comes a planning
+    latency later): the next leg then starts at the planned velocity, not at rest.
     """
 
     start_xy_m: FloatArray
@@ -73,30 +79,21 @@ class HermiteLeg:
     goal_v_mps: FloatArray
     start_s: float
     end_s: float
+    coast_s: float = 0.0
 
     def sample(self, t_s: float) -> tuple[FloatArray, FloatArray]:
         """Setpoint position [2], m, and velocity [2], m/s, at time `t_s`."""
         T = self.end_s - self.start_s
-        if T <= 0.0 or t_s >= self.end_s:
+        if T <= 0.0:
             return self.goal_xy_m.copy(), np.zeros(2)
+        if t_s >= self.end_s:
+            past = t_s - self.end_s
+            if past < self.coast_s:
+                return self.goal_xy_m + self.goal_v_mps * past, self.goal_v_mps.copy()
+            return self.goal_xy_m + self.goal_v_mps * self.coast_s, np.zeros(2)
         s = max(0.0, t_s - self.start_s) / T
-        p0, p1 = self.start_xy_m, self.goal_xy_m
-        m0, m1 = self.start_v_mps * T, self.goal_v_mps * T
-        h00, h10, h01, h11 = (
-            2 * s**3 - 3 * s**2 + 1,
-            s**3 - 2 * s**2 + s,
-            -2 * s**3 + 3 * s**2,
-            s**3 - s**2,
-        )
-        d00, d10, d01, d11 = (
-            6 * s**2 - 6 * s,
-            3 * s**2 - 4 * s + 1,
-            -6 * s**2 + 6 * s,
-            3 * s**2 - 2 * s,
-        )
-        xy = h00 * p0 + h10 * m0 + h01 * p1 + h11 * m1
-        v = (d00 * p0 + d10 * m0 + d01 * p1 + d11 * m1) / T
-        return np.asarray(xy), np.asarray(v)
+        legs = (self.start_xy_m, self.start_v_mps, self.goal_xy_m, self.goal_v_mps, T, s)
+        return np.asarray(hermite_position(*legs)), np.asarray(hermite_velocity(*legs))
 
 
 def hermite_leg(
@@ -106,21 +103,29 @@ def hermite_leg(
     now_s: float,
     arrive_by_s: float,
     max_speed_mps: float,
+    goal_v_mps: FloatArray | None = None,
+    coast_s: float = 0.0,
 ) -> HermiteLeg:
-    """The smooth leg to `goal_xy_m` by `arrive_by_s`, ending at the leg's mean velocity (the
-    best guess of the next leg's), capped at `max_speed_mps`."""
+    """The smooth leg to `goal_xy_m` by `arrive_by_s`, ending at the planned velocity
+    `goal_v_mps` [2] when given, else at the leg's mean velocity (the mean-velocity leg of
+    model/vehicle.py, the best guess of the next leg's); either capped at `max_speed_mps`.
+    `coast_s`: how long the setpoint goes on at that velocity past `arrive_by_s` (HermiteLeg)."""
     T = arrive_by_s - now_s
-    mean_v = (np.asarray(goal_xy_m) - np.asarray(from_xy_m)) / T
-    speed = float(np.hypot(*mean_v))
+    if goal_v_mps is None:
+        end_v = np.asarray(mean_velocity(np.asarray(from_xy_m), np.asarray(goal_xy_m), T))
+    else:
+        end_v = as_xy(goal_v_mps, "goal_v_mps")
+    speed = float(np.hypot(*end_v))
     if speed > max_speed_mps:
-        mean_v = mean_v * (max_speed_mps / speed)
+        end_v = end_v * (max_speed_mps / speed)
     return HermiteLeg(
         start_xy_m=np.asarray(from_xy_m, dtype=float),
         start_v_mps=np.asarray(from_v_mps, dtype=float),
         goal_xy_m=np.asarray(goal_xy_m, dtype=float),
-        goal_v_mps=mean_v,
+        goal_v_mps=np.asarray(end_v, dtype=float),
         start_s=float(now_s),
         end_s=float(arrive_by_s),
+        coast_s=float(coast_s),
     )
 
 

@@ -38,11 +38,13 @@ timing figures: the latest ones, so that a long mission's memory does not grow w
 
 @dataclass
 class Goal:
-    """Where the setpoint is heading (scenario plane, m), by when (simulation s), how fast."""
+    """Where the setpoint is heading (scenario plane, m), by when (simulation s), how fast, and
+    the plan's velocity there (m/s; None: not planned)."""
 
     xy_m: FloatArray
     arrive_by_s: float | None
     max_speed_mps: float
+    v_mps: FloatArray | None = None
 
 
 class SetpointStream:
@@ -100,9 +102,17 @@ class SetpointStream:
         self.leg = plan_leg(xy_m, xy_m, self.carrot_time_s(), None, self.settings.v_max_mps)
         self.goal = Goal(xy_m.copy(), None, self.settings.v_max_mps)
 
-    def set_goal(self, xy_m: FloatArray, arrive_by_s: float | None, max_speed_mps: float) -> None:
+    def set_goal(
+        self,
+        xy_m: FloatArray,
+        arrive_by_s: float | None,
+        max_speed_mps: float,
+        v_mps: FloatArray | None = None,
+    ) -> None:
         """A new leg to `xy_m` [2] by `arrive_by_s` from where the setpoint is (or the vehicle,
-        before any leg): smooth when planned (`smooth_legs`), else a carrot."""
+        before any leg): smooth when planned (`smooth_legs`), ending at the plan's velocity
+        `v_mps` [2] when given (else at the leg's mean velocity) and coasting at it for
+        `leg_coast_s` past the deadline; else a carrot."""
         now = self.carrot_time_s()
         here_v = np.zeros(2)
         here: FloatArray | None = None
@@ -113,10 +123,19 @@ class SetpointStream:
         if here is None:
             here = xy_m
         if self.settings.smooth_legs and arrive_by_s is not None and arrive_by_s - now > 0.05:
-            self.leg = hermite_leg(here, here_v, xy_m, now, arrive_by_s, max_speed_mps)
+            self.leg = hermite_leg(
+                here,
+                here_v,
+                xy_m,
+                now,
+                arrive_by_s,
+                max_speed_mps,
+                goal_v_mps=v_mps,
+                coast_s=self.settings.leg_coast_s,
+            )
         else:
             self.leg = plan_leg(here, xy_m, now, arrive_by_s, max_speed_mps)
-        self.goal = Goal(xy_m.copy(), arrive_by_s, max_speed_mps)
+        self.goal = Goal(xy_m.copy(), arrive_by_s, max_speed_mps, v_mps)
 
     def reanchor(self, status: VehicleStatus) -> None:
         """Restart the carrot at the vehicle, toward the current goal; hover there instead when

@@ -28,7 +28,7 @@ _POSITIVE = (
 )
 """Fields that must be finite and > 0."""
 
-_NON_NEGATIVE = ("offboard_stream_s", "disarm_wait_s", "setpoint_lead_s")
+_NON_NEGATIVE = ("offboard_stream_s", "disarm_wait_s", "setpoint_lead_s", "leg_coast_s")
 """Fields that must be finite and >= 0."""
 
 
@@ -56,6 +56,11 @@ class BridgeSettings(Settings):
         velocity_feed_forward: Send the carrot's velocity (type_mask 0xDC0) or position only.
         smooth_legs: Fly planned legs (with an arrival time) on a cubic that keeps position and
             velocity continuous (HermiteLeg) instead of a constant-speed carrot.
+        leg_coast_s: A smooth leg's setpoint goes on at the leg's end velocity for this long
+            past the deadline, then rests (HermiteLeg): the next plan comes after the slot
+            boundary (in lockstep while the world holds there and the setpoint is sampled
+            setpoint_lead_s ahead; in real time a planning latency later), and its leg then
+            starts at the planned velocity instead of at rest (docs/model.md, "Vehicle model").
         yaw_rad: Heading to hold (0 = north); None = yaw ignored (the vehicle keeps its own).
         telemetry_rate_hz: Telemetry publication rate (simulation Hz).
         heartbeat_rate_hz: GCS HEARTBEAT rate (simulation Hz).
@@ -91,6 +96,7 @@ class BridgeSettings(Settings):
     setpoint_lead_s: float = 0.05
     velocity_feed_forward: bool = True
     smooth_legs: bool = True
+    leg_coast_s: float = 0.5
     yaw_rad: float | None = None
     telemetry_rate_hz: float = 10.0
     heartbeat_rate_hz: float = 1.0

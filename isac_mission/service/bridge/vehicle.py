@@ -273,13 +273,20 @@ class VehicleBridge:
         self.phase = "ready"
         log.info("vehicle %d: ready at (%.1f, %.1f) m", self.index, *start)
 
-    def set_waypoint(self, xy_m: FloatArray | Sequence[float], arrive_by_s: float | None) -> None:
+    def set_waypoint(
+        self,
+        xy_m: FloatArray | Sequence[float],
+        arrive_by_s: float | None,
+        v_mps: FloatArray | Sequence[float] | None = None,
+    ) -> None:
         """Fly the carrot to `xy_m` [2] (scenario plane, m) to arrive at simulation time
-        `arrive_by_s` (None: at V_max), from where the carrot is now. Does not start the
-        stream: before prepare() or after hold() the waypoint is only remembered. A waypoint
-        set while prepare() runs ends its flight to the start point (the mission has begun)."""
+        `arrive_by_s` (None: at V_max) at velocity `v_mps` [2] (m/s; None: the leg's mean
+        velocity), from where the carrot is now. Does not start the stream: before prepare()
+        or after hold() the waypoint is only remembered. A waypoint set while prepare() runs
+        ends its flight to the start point (the mission has begun)."""
         self._waypoints_set += 1
-        self._stream.set_goal(as_xy(xy_m), arrive_by_s, self.settings.v_max_mps)
+        v = None if v_mps is None else as_xy(v_mps, "v_mps")
+        self._stream.set_goal(as_xy(xy_m), arrive_by_s, self.settings.v_max_mps, v)
         # The new leg goes out at once, not at the next tick of the stream (up to a period later).
         self._stream.send(periodic=False)
 

@@ -213,6 +213,7 @@ class MissionState:
             J=self.bound.J,
             plan_xy=plan.uav_xy_m,
             plan_pcrb_trace=plan.pcrb_trace,
+            plan_velocity=plan.uav_velocity_mps,
             reason=rep.reason or None,
             extra={
                 "pcrb_pos": self.bound.position_trace,
