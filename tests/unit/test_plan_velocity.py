@@ -102,13 +102,19 @@ def test_past_its_deadline_the_leg_coasts_at_its_end_velocity_then_rests() -> No
     np.testing.assert_allclose(no_coast.sample(1.01)[0], [10.0, 0.0])
 
 
-def test_a_chain_of_planned_legs_is_flown_at_the_planned_velocities_across_late_plans() -> None:
-    """Setpoint stream: each plan arrives after its slot boundary (as in lockstep, sampled
-    setpoint_lead_s ahead); the setpoint's velocity at each new leg's start is the plan's, not 0,
-    and its end state is the planned waypoint and velocity."""
+@pytest.mark.parametrize("late_s", [0.0, 0.2, 0.4])
+def test_a_chain_of_planned_legs_is_flown_on_the_plans_timeline_across_late_plans(
+    late_s: float,
+) -> None:
+    """Setpoint stream: each plan arrives `late_s` after its slot boundary (in lockstep the
+    bridge's clock runs on up to 0.2 s while the world holds there), and the setpoint is
+    sampled setpoint_lead_s ahead. Until the plan comes the setpoint coasts at the planned
+    velocity; from then on it is the planned leg (q_n, v_n) -> (q_n+1, v_n+1) of the slot, on
+    the slot's own timeline, ending at the planned waypoint and velocity."""
     model = VehicleModel(22.5, 10.0, 1.0)
     now = [0.0]
     settings = BridgeSettings()  # setpoint_lead_s 0.05, leg_coast_s 0.5
+    lead = settings.setpoint_lead_s
     stream = SetpointStream(settings, FuncTime(lambda: now[0]), None, BridgeCounters())  # type: ignore[arg-type]
     xy, v = np.array([0.0, 0.0]), np.array([20.0, 0.0])
     stream.hover(xy)
@@ -116,16 +122,22 @@ def test_a_chain_of_planned_legs_is_flown_at_the_planned_velocities_across_late_
     rng = np.random.default_rng(3)
     q, qv = xy + v, v
     for n in range(2, 8):
-        now[0] = n - 1.0  # the world holds at the boundary; the plan comes now
+        now[0] = n - 1.0 + late_s - lead  # the plan comes now (carrot time n - 1 + late_s)
         sp_xy, sp_v = stream.setpoint()  # type: ignore[misc]
         np.testing.assert_allclose(sp_v, qv, atol=1e-9)  # coasting at the planned velocity
-        np.testing.assert_allclose(sp_xy, q + qv * settings.setpoint_lead_s, atol=1e-9)
+        np.testing.assert_allclose(sp_xy, q + qv * late_s, atol=1e-9)
         d = rng.normal(size=2)
         d *= 0.9 * model.reach_radius_m / np.linalg.norm(d)
         q_next = model.coasting_point(q, qv) + d
         v_next = model.end_velocity(q, q_next)
-        stream.set_goal(q_next, float(n), 1e3, v_next)  # the cap: tested above
-        now[0] = n - 1e-9 - settings.setpoint_lead_s
+        stream.set_goal(q_next, float(n), 1e3, v_next)  # the cap is tested above
+        for s in (late_s, 0.5, 0.9):
+            now[0] = n - 1.0 + s - lead
+            sp_xy, sp_v = stream.setpoint()  # type: ignore[misc]
+            want = (q, qv, q_next, v_next, 1.0, s)
+            np.testing.assert_allclose(sp_xy, hermite_position(*want), atol=1e-9)
+            np.testing.assert_allclose(sp_v, hermite_velocity(*want), atol=1e-9)
+        now[0] = n - 1e-9 - lead
         end_xy, end_v = stream.setpoint()  # type: ignore[misc]
         np.testing.assert_allclose(end_xy, q_next, atol=1e-6)
         np.testing.assert_allclose(end_v, v_next, atol=1e-6)

@@ -112,22 +112,39 @@ class SetpointStream:
         """A new leg to `xy_m` [2] by `arrive_by_s` from where the setpoint is (or the vehicle,
         before any leg): smooth when planned (`smooth_legs`), ending at the plan's velocity
         `v_mps` [2] when given (else at the leg's mean velocity) and coasting at it for
-        `leg_coast_s` past the deadline; else a carrot."""
+        `leg_coast_s` past the deadline; else a carrot.
+
+        A smooth leg that follows one still coasting past its deadline starts at that deadline,
+        from its goal and end velocity: the planned leg of the next slot, flown on the plan's
+        own timeline however late in the coast the plan came (in lockstep the bridge's clock
+        runs on up to ClockSimTime.max_extrapolation_s while the world holds at the boundary;
+        starting the leg where the setpoint had coasted to, as earlier, put it metres ahead of
+        the frozen vehicle and compressed the leg)."""
         now = self.carrot_time_s()
-        here_v = np.zeros(2)
+        start_s, here_v = now, np.zeros(2)
         here: FloatArray | None = None
-        if self.leg is not None:
-            here, here_v = self.leg.sample(now)
+        prev = self.leg
+        smooth = self.settings.smooth_legs and arrive_by_s is not None
+        if (
+            smooth
+            and isinstance(prev, HermiteLeg)
+            and prev.end_s <= now <= prev.end_s + prev.coast_s
+            and arrive_by_s is not None
+            and arrive_by_s - prev.end_s > 0.05
+        ):
+            start_s, here, here_v = prev.end_s, prev.goal_xy_m, prev.goal_v_mps
+        elif prev is not None:
+            here, here_v = prev.sample(now)
         else:
             here = vehicle_xy(self.link.status(), self._origin)
         if here is None:
             here = xy_m
-        if self.settings.smooth_legs and arrive_by_s is not None and arrive_by_s - now > 0.05:
+        if smooth and arrive_by_s is not None and arrive_by_s - start_s > 0.05:
             self.leg = hermite_leg(
                 here,
                 here_v,
                 xy_m,
-                now,
+                start_s,
                 arrive_by_s,
                 max_speed_mps,
                 goal_v_mps=v_mps,
