@@ -258,8 +258,12 @@ class PlannerConfig(Section):
     tracking_margin_m: float = Field(
         1.0,
         ge=0,
-        description="The vehicles' tracking error of a planned leg (docs/model.md, 'Safety'), "
-        "kept on 14i (twice), 14j and the rate and control ranges when safety_margin is on.",
+        description="The vehicles' tracking error of a planned leg, kept on 14i (twice), 14j "
+        "and the rate and control ranges when safety_margin is on (docs/model.md, 'Safety'). "
+        "Default: the measured worst deviation of the simulated vehicle from plans at the "
+        "limits and from a live-settings simulate run, flown through the bridge's setpoints "
+        "(0.69 m, lockstep; tests/numerics/test_tracking_error.py), rounded up (docs/model.md, "
+        "'Vehicle model').",
     )
     horizon: HorizonConfig = HorizonConfig()
     feasibility_tol_m: float = Field(

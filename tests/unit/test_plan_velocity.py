@@ -14,14 +14,13 @@ import pytest
 from isac_mission.errors import MessageError
 from isac_mission.model.vehicle import VehicleModel, hermite_position, hermite_velocity
 from isac_mission.records.slot import SlotRecord
-from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.legs import HermiteLeg, hermite_leg
 from isac_mission.service.bridge.setpoints import SetpointStream
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.timebase import FuncTime
 from isac_mission.types import SlotPlan, SolveReport
-from isac_mission.wire import ClockMsg, PlanMsg, decode_plan, encode_plan
+from isac_mission.wire import PlanMsg, decode_plan, encode_plan
 
 V = np.array([[12.5, -3.0], [0.0, 0.0], [-20.0, 7.25]])
 
@@ -114,7 +113,7 @@ def test_a_chain_of_planned_legs_is_flown_on_the_plans_timeline_across_late_plan
     the slot's own timeline, ending at the planned waypoint and velocity."""
     model = VehicleModel(22.5, 10.0, 1.0)
     now = [0.0]
-    settings = BridgeSettings()  # setpoint_lead_s 0.05, leg_coast_s 0.5
+    settings = BridgeSettings()  # setpoint_lead_s 0.025, leg_coast_s 0.5
     lead = settings.setpoint_lead_s
     stream = SetpointStream(settings, FuncTime(lambda: now[0]), None, BridgeCounters())  # type: ignore[arg-type]
     xy, v = np.array([0.0, 0.0]), np.array([20.0, 0.0])
@@ -172,26 +171,3 @@ def test_the_trace_records_the_planned_velocity_per_slot() -> None:
     assert "plan_velocity" not in SlotRecord(**base).to_dict()  # type: ignore[arg-type]
     with pytest.raises(MessageError, match="plan_velocity"):
         SlotRecord(**base, plan_velocity=np.zeros((2, 2)))  # type: ignore[arg-type]
-
-
-def test_the_bridges_clock_waits_at_a_slot_boundary_for_the_worlds_clock() -> None:
-    """In lockstep the world holds at the boundary until the plan comes: the bridge's clock
-    must not run on past it (it used to, by up to max_extrapolation_s), and goes on once the
-    world's boundary message has come; between boundaries it extrapolates as before."""
-    wall = [0.0]
-    t = ClockSimTime(max_extrapolation_s=0.2, wall=lambda: wall[0])
-    msg = ClockMsg(slot=3, t_s=3.9, slot_s=1.0, speed=10.0, mission_t0_s=0.0)
-    t.update(msg)
-    wall[0] = 0.005
-    assert t.now_s() == pytest.approx(3.95)  # between boundaries: extrapolated
-    wall[0] = 0.1
-    assert t.now_s() == pytest.approx(4.0)  # not past the boundary at t0 + 4 dt
-    t.update(ClockMsg(slot=4, t_s=4.0, slot_s=1.0, speed=10.0, mission_t0_s=0.0))
-    wall[0] = 0.105
-    assert t.now_s() == pytest.approx(4.05)  # the boundary's own message: on into slot 5
-    wall[0] = 1.0
-    assert t.now_s() == pytest.approx(4.2)  # and the extrapolation cap as before
-    before = ClockSimTime(max_extrapolation_s=0.2, wall=lambda: wall[0])
-    before.update(ClockMsg(slot=-1, t_s=3.9, slot_s=1.0, speed=10.0, mission_t0_s=None))
-    wall[0] = 2.0
-    assert before.now_s() == pytest.approx(4.1)  # before the mission: no boundaries

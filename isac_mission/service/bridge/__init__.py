@@ -12,7 +12,7 @@ port) and:
 - follows waypoints (`set_waypoint(xy, arrive_by_s)`, `BridgeFleet.on_plan`) on legs (legs.py)
   that arrive at `arrive_by_s`, never above V_max; the setpoint is streamed as
   SET_POSITION_TARGET_LOCAL_NED at `setpoint_rate_hz` (default 20 Hz of simulation time),
-  sampled `setpoint_lead_s` (0.05 s) ahead of now (setpoints.py);
+  sampled `setpoint_lead_s` (0.025 s) ahead of now (setpoints.py);
 - `hold()` (PX4 HOLD) and `land()` (PX4 LAND, then waits for touchdown and the disarm, and
   disarms itself if the vehicle does not);
 - supervises the link (supervision.py): lost after `link_lost_after_s` without a HEARTBEAT, and

@@ -11,7 +11,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import math
 import time
 from collections.abc import Callable
 
@@ -27,12 +26,8 @@ class ClockSimTime:
     """Simulation time from the world's `clock` messages, extrapolated in between.
 
     now_s() = t of the last clock message + (wall time since it arrived) x its speed, at most
-    `max_extrapolation_s` beyond it (so time stops with the world's clock) and never past the
-    next slot boundary of the mission before the world's clock message of that boundary has
-    arrived (the world sends one at every boundary; in lockstep it holds there until the plan
-    comes, and a bridge clock running on past it would start the next planned leg, and stamp
-    telemetry, up to max_extrapolation_s late; docs/model.md, "Vehicle model"), and never
-    decreasing. A clock more than
+    `max_extrapolation_s` beyond it (so time stops with the world's clock, e.g. while the world
+    holds a slot boundary in lockstep), and never decreasing. A clock more than
     `restart_jump_s` behind is taken as a restarted world and followed.
     Before the first message now_s() is 0 and speed 1; `wait_ready()` waits for it.
 
@@ -83,10 +78,6 @@ class ClockSimTime:
         if msg is None:
             return self._last_now_s
         ahead = min((self._wall() - self._msg_wall_s) * msg.speed, self.max_extrapolation_s)
-        if msg.mission_t0_s is not None and msg.slot_s > 0:
-            # The next boundary after the message (a message at a boundary: the one after it).
-            k = math.floor((msg.t_s - msg.mission_t0_s) / msg.slot_s + 1e-9) + 1
-            ahead = min(ahead, msg.mission_t0_s + k * msg.slot_s - msg.t_s)
         now = max(self._last_now_s, msg.t_s + max(ahead, 0.0))
         self._last_now_s = now
         return now

@@ -53,6 +53,10 @@ class BridgeSettings(Settings):
         setpoint_lead_s: Each setpoint is the carrot this far ahead of now: a setpoint is
             held for one period (half a period late on average) and reaches the vehicle after
             the link's latency, so the vehicle would otherwise trail the plan by v x delay.
+            Default: half a period at 20 Hz, for a link of negligible latency (loopback, the
+            simulated vehicles); add the link's latency for a radio. Measured with the
+            simulated vehicle (tests/numerics/test_tracking_error.py): 0.05 s put it 0.6 m
+            ahead of the plan at 22.5 m/s (docs/model.md, "Vehicle model").
         velocity_feed_forward: Send the carrot's velocity (type_mask 0xDC0) or position only.
         smooth_legs: Fly planned legs (with an arrival time) on a cubic that keeps position and
             velocity continuous (HermiteLeg) instead of a constant-speed carrot.
@@ -93,7 +97,7 @@ class BridgeSettings(Settings):
     v_max_mps: float = 25.0
     transit_speed_mps: float | None = None
     setpoint_rate_hz: float = 20.0
-    setpoint_lead_s: float = 0.05
+    setpoint_lead_s: float = 0.025
     velocity_feed_forward: bool = True
     smooth_legs: bool = True
     leg_coast_s: float = 0.5
