@@ -23,8 +23,9 @@ class LiveSettings:
 
     speed_fraction: V_max multiplier (0, 1]; rate_factor: R_th multiplier >= 1; safety_margin_m:
     added to D_s (m); accel_fraction: the planner keeps each waypoint reachable with this
-    fraction of a_max (0: off, the paper's kinematics); vehicle_model: plan on the vehicles'
-    dynamics (`planner.vehicle_model`; on when either the scenario or these settings say so).
+    fraction of a_max (0: off, the paper's kinematics), and with the vehicle model plans with
+    a_max x accel_fraction; vehicle_model: plan on the vehicles' dynamics
+    (`planner.vehicle_model`; on when either the scenario or these settings say so).
     """
 
     speed_fraction: float = 0.9
@@ -45,10 +46,18 @@ class LiveSettings:
 
     def apply(self, s: Scenario) -> Scenario:
         """The scenario the live planner plans with (docs/model.md, "Live service")."""
-        update: dict[str, object] = {"vehicle_model": s.planner.vehicle_model or self.vehicle_model}
+        vehicle_model = s.planner.vehicle_model or self.vehicle_model
+        update: dict[str, object] = {"vehicle_model": vehicle_model}
+        a_max = s.a_max
         if self.accel_fraction > 0:
             update["accel_limit_mps2"] = s.a_max * self.accel_fraction
+            if vehicle_model:
+                # The vehicle model plans with accel_fraction x a_max: the vehicles' controller
+                # needs the rest to correct its error (a turn held at a_max is not flown: the
+                # vehicle drifts off it; docs/model.md, "Vehicle model").
+                a_max = s.a_max * self.accel_fraction
         return s.with_changes(
+            a_max=a_max,
             v_max=s.v_max * self.speed_fraction,
             r_th=s.r_th * self.rate_factor,
             d_safe=s.d_safe + self.safety_margin_m,
@@ -63,6 +72,7 @@ class LiveSettings:
             ("V_max", f"{s.v_max:g} m/s", f"{live.v_max:g} m/s"),
             ("R_th", f"{s.r_th / 1e6:g} Mbit/s", f"{live.r_th / 1e6:g} Mbit/s"),
             ("D_s", f"{s.d_safe:g} m", f"{live.d_safe:g} m"),
+            ("a_max (vehicle model)", f"{s.a_max:g} m/s^2", f"{live.a_max:g} m/s^2"),
             (
                 "planner.accel_limit_mps2",
                 _opt(s.planner.accel_limit_mps2),

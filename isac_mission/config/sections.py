@@ -261,9 +261,9 @@ class PlannerConfig(Section):
         description="The vehicles' tracking error of a planned leg, kept on 14i (twice), 14j "
         "and the rate and control ranges when safety_margin is on (docs/model.md, 'Safety'). "
         "Default: the measured worst deviation of the simulated vehicle from plans at the "
-        "limits and from a live-settings simulate run, flown through the bridge's setpoints "
-        "(0.69 m, lockstep; tests/numerics/test_tracking_error.py), rounded up (docs/model.md, "
-        "'Vehicle model').",
+        "limits and from live-settings simulate runs (proposed, horizon), flown through the "
+        "bridge's setpoints (0.72 m, lockstep; tests/numerics/test_tracking_error.py), rounded "
+        "up (docs/model.md, 'Vehicle model').",
     )
     horizon: HorizonConfig = HorizonConfig()
     feasibility_tol_m: float = Field(

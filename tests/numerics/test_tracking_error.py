@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 from isac_mission.config import Scenario
-from isac_mission.config.live_settings import LIVE_SETTINGS
+from isac_mission.config.live_settings import LIVE_SETTINGS, LiveSettings
 from isac_mission.config.sections import PlannerConfig
 from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run_closed_loop
 from isac_mission.model.vehicle import VehicleModel
-from isac_mission.planning.slot import SolverKit
+from isac_mission.planning.slot import Method, SolverKit
 from tests.support.flight import Flight, fly
 
 TOLERANCE_M = PlannerConfig().tracking_margin_m
@@ -89,23 +89,46 @@ def test_a_plan_at_the_limits_is_flown_within_the_tolerance(
     assert f.worst_m <= TOLERANCE_M
 
 
+@pytest.mark.parametrize("method", ["proposed", "horizon"])
 def test_the_plans_of_a_live_settings_simulate_run_are_flown_within_the_tolerance(
-    paper: Scenario,
+    paper: Scenario, method: Method
 ) -> None:
-    live = LIVE_SETTINGS.apply(paper)
-    s = live.with_changes(planner=live.planner.model_copy(update={"vehicle_model": True}))
+    """`simulate` with the live settings and the vehicle model (a_max x 0.8 for the planner),
+    flown in lockstep by vehicles with the full a_max."""
+    s = LiveSettings(vehicle_model=True).apply(paper)
     outcomes: list[SlotOutcome] = []
-    run_closed_loop(s, "proposed", draw_run_noise(s, 7), SolverKit(s), outcomes.append)
+    run_closed_loop(s, method, draw_run_noise(s, 7), SolverKit(s), outcomes.append)
     q = np.array([s.uav_start_xy] + [o.plan.uav_xy_m for o in outcomes])
     v = np.array([np.zeros((s.M, 2))] + [o.plan.uav_velocity_mps for o in outcomes])
+    legs = VehicleModel.of(s).check_leg(q[:-1], v[:-1], q[1:], v[1:])
+    assert legs.accel_mps2.max() <= s.a_max * (1 + 1e-6) and legs.accel_mps2.max() > 0.5 * s.a_max
     worst = []
     for m in range(s.M):
         f = fly(q[:, m], v[:, m], s.dt, paper.v_max, paper.a_max, clock_ahead_s=0.2)
-        print(_report(f"simulate (live settings, vehicle model) UAV {m}, lockstep", f))
+        print(_report(f"simulate {method} (live settings, vehicle model) UAV {m}, lockstep", f))
         worst.append(f.worst_m)
     assert max(worst) <= TOLERANCE_M
-    # The same missions planned with the paper's kinematics are not flyable: metres off.
-    outcomes.clear()
+
+
+def test_the_controller_needs_headroom_and_the_paper_kinematics_are_not_flyable(
+    paper: Scenario,
+) -> None:
+    """Why the planner keeps a_max x 0.8 (LiveSettings.accel_fraction): a turn held at the
+    vehicle's a_max (22.5 m/s on a circle, sampled once a slot) is lost, at 0.8 a_max it is
+    flown within the tolerance; and the paper's kinematics flown the same way are metres off."""
+    worst = {}
+    for fraction in (1.0, 0.8):
+        a = fraction * paper.a_max
+        speed = 22.5
+        w, t = a / speed, np.arange(31.0)
+        q = 1500 + speed**2 / a * np.stack([np.cos(w * t), np.sin(w * t)], 1)
+        v = speed * np.stack([-np.sin(w * t), np.cos(w * t)], 1)
+        f = fly(q, v, paper.dt, paper.v_max, paper.a_max, clock_ahead_s=0.2)
+        print(_report(f"turn at {fraction:g} a_max, lockstep", f))
+        worst[fraction] = f.worst_m
+    assert worst[1.0] > 5 * TOLERANCE_M
+    assert worst[0.8] <= TOLERANCE_M
+    outcomes: list[SlotOutcome] = []
     run_closed_loop(paper, "proposed", draw_run_noise(paper, 7), SolverKit(paper), outcomes.append)
     q = np.array([paper.uav_start_xy] + [o.plan.uav_xy_m for o in outcomes])
     v = np.concatenate([np.zeros((1, paper.M, 2)), np.diff(q, axis=0) / paper.dt])

@@ -48,6 +48,15 @@ def test_vehicle_model_of_the_scenario_is_kept(paper: Scenario) -> None:
     assert LiveSettings(vehicle_model=True).apply(paper).planner.vehicle_model
 
 
+def test_the_vehicle_model_plans_with_the_acceleration_fraction(paper: Scenario) -> None:
+    """The simulated vehicle flies plans at 0.8 a_max within the tracking margin, not turns held
+    at a_max (tests/numerics/test_tracking_error.py); without the vehicle model a_max is kept."""
+    live = LiveSettings(vehicle_model=True).apply(paper)
+    assert live.a_max == pytest.approx(0.8 * paper.a_max)
+    assert LiveSettings(vehicle_model=True, accel_fraction=0).apply(paper).a_max == paper.a_max
+    assert LiveSettings(vehicle_model=False).apply(paper).a_max == paper.a_max
+
+
 @pytest.mark.parametrize(
     "bad",
     [
