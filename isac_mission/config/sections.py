@@ -187,12 +187,17 @@ class HorizonConfig(Section):
     """The receding-horizon planner (method `horizon`, planning/horizon.py; docs/model.md,
     "Receding horizon")."""
 
-    length: int = Field(3, ge=1, le=10, description="L, slots planned ahead (slot n..n+L-1).")
+    length: int = Field(
+        5, ge=1, le=10, description="L, slots planned ahead (slot n..n+L-1; docs/model.md)."
+    )
     discount: float = Field(
         1.0, gt=0, le=1, description="gamma: horizon slot l's tr(PCRB) weighs gamma^l."
     )
     terminal_weight: float = Field(
-        1.0, ge=0, description="Extra weight of the last horizon slot's tr(PCRB) (1 = none)."
+        6.0,
+        ge=0,
+        description="Weight of the last horizon slot's tr(PCRB), a stand-in for the slots "
+        "beyond the horizon (1 = none; docs/model.md).",
     )
     max_iterations: int = Field(
         60, ge=1, description="IPOPT's iteration cap (no wall-clock limit): at the cap, fallback."
