@@ -108,6 +108,34 @@ def _shifted(
     return xy_new, v_new, eta_new
 
 
+def horizon_slot_data(
+    s: Scenario,
+    prev_xy: FloatArray,
+    prev_velocity: FloatArray,
+    keep_out_xy: FloatArray | None,
+    x_pred: FloatArray,
+    J_pred: FloatArray,
+    target_cov_pred: FloatArray,
+    base: SlotPlan,
+    length: int,
+) -> HorizonSlotData:
+    """The horizon NLP's data for this slot: the per-slot plan's association kept (serving BS),
+    the BS nearest its waypoints as the control BS (14b), the clearances along the horizon."""
+    nearest = np.argmin(np.linalg.norm(base.uav_xy_m[:, None, :] - s.bs_xy[None], axis=-1), axis=1)
+    return HorizonSlotData(
+        prev_xy=np.asarray(prev_xy, dtype=float),
+        prev_velocity=np.asarray(prev_velocity, dtype=float)
+        if s.planner.vehicle_model
+        else np.zeros((s.M, 2)),
+        serving_xy=s.bs_xy[base.bs_of_uav],
+        control_xy=s.bs_xy[nearest],
+        keep_out_xy=np.zeros((0, 2)) if keep_out_xy is None else np.asarray(keep_out_xy),
+        x_pred=np.asarray(x_pred, dtype=float),
+        J_pred=np.asarray(J_pred, dtype=float),
+        clearance_m=predicted_clearances(s, target_cov_pred, length),
+    )
+
+
 def legs_ok(
     s: Scenario, prev_xy: FloatArray, prev_v: FloatArray, xy: FloatArray, v: FloatArray
 ) -> bool:
@@ -153,18 +181,10 @@ def plan_horizon(
 
     if base.report.status != "ok":
         return fall_back("the per-slot plan is infeasible")
-    serving = s.bs_xy[base.bs_of_uav]
-    nearest = np.argmin(np.linalg.norm(base.uav_xy_m[:, None, :] - s.bs_xy[None], axis=-1), axis=1)
-    data = HorizonSlotData(
-        prev_xy=np.asarray(inp_prev_xy, dtype=float),
-        prev_velocity=prev_v if nlp.vehicle_model else np.zeros((M, 2)),
-        serving_xy=serving,
-        control_xy=s.bs_xy[nearest],
-        keep_out_xy=np.zeros((0, 2)) if inp_keep_out is None else np.asarray(inp_keep_out),
-        x_pred=np.asarray(x_pred, dtype=float),
-        J_pred=np.asarray(J_pred, dtype=float),
-        clearance_m=predicted_clearances(s, target_cov_pred, L),
+    data = horizon_slot_data(
+        s, inp_prev_xy, prev_v, inp_keep_out, x_pred, J_pred, target_cov_pred, base, L
     )
+    serving = data.serving_xy
     v1 = (
         base.uav_velocity_mps
         if base.uav_velocity_mps is not None
@@ -180,10 +200,31 @@ def plan_horizon(
     def value(xy: FloatArray, eta: FloatArray) -> float:
         return float(weights @ horizon_bound_traces(s, J_pred, x_pred, xy, eta, sensing))
 
-    start = min(starts, key=lambda st: value(st[0], st[2]))
-    sol = nlp.solve(start[0], start[1] if nlp.vehicle_model else None, start[2], data)
+    def velocities(v: FloatArray | None) -> FloatArray | None:
+        return v if nlp.vehicle_model else None
+
+    # Feasible starts first, then the lower objective.
+    scored = sorted(
+        (
+            (not nlp.satisfies(st[0], velocities(st[1]), st[2], data), value(st[0], st[2]), i)
+            for i, st in enumerate(starts)
+        )
+    )
+    start_infeasible, start_value, first = scored[0]
+    start = starts[first]
+    sol = nlp.solve(start[0], velocities(start[1]), start[2], data)
     if not sol.success:
         return fall_back(f"IPOPT {sol.status} after {sol.iterations} it")
+    note = f"IPOPT {sol.status} in {sol.iterations} it"
+    if not start_infeasible and value(sol.uav_xy_m, sol.bandwidth_share) > start_value:
+        # A local solver may end above a feasible start: the start is a valid horizon then.
+        sol = replace(
+            sol,
+            uav_xy_m=start[0],
+            uav_velocity_mps=velocities(start[1]),
+            bandwidth_share=start[2],
+        )
+        note += ", its start kept (lower)"
     xy1, eta1 = sol.uav_xy_m[0], sol.bandwidth_share[0]
     cons = SlotConstraints(
         data.prev_xy,
@@ -208,8 +249,7 @@ def plan_horizon(
         base.report,
         reason="",
         solve_s=time.perf_counter() - t0,
-        polish=f"horizon: IPOPT {sol.status} in {sol.iterations} it, "
-        f"objective {value(start[0], start[2]):.6g} -> {float(weights @ traces):.6g}",
+        polish=f"horizon: {note}, objective {start_value:.6g} -> {float(weights @ traces):.6g}",
         objective_history=(*base.report.objective_history, float(traces[0])),
     )
     return SlotPlan(

@@ -293,6 +293,26 @@ class HorizonNLP:
         ubx = np.concatenate([ubz, np.full(n_u, big), np.ones(L * M)])
         return lbx, ubx
 
+    def satisfies(
+        self,
+        xy: FloatArray,
+        velocity: FloatArray | None,
+        eta: FloatArray,
+        data: HorizonSlotData,
+        tol: float = 1e-9,
+    ) -> bool:
+        """True if the horizon plan (xy [L, M, 2], velocity, eta [L, M]) meets every constraint
+        and bound of the NLP (scaled units, slack tol)."""
+        x, p = self.pack(xy, velocity, eta, data)
+        g = np.asarray(self.constraints(x, p), dtype=float).ravel()
+        lbx, ubx = self.bounds(data)
+        return bool(
+            np.all(g >= self._lbg - tol)
+            and np.all(g <= self._ubg + tol)
+            and np.all(x >= lbx - tol)
+            and np.all(x <= ubx + tol)
+        )
+
     def solve(
         self,
         xy0: FloatArray,
