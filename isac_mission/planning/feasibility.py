@@ -96,10 +96,15 @@ class SlotConstraints:
     def sample_clearances_m(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(target [S, M], keep-out [S, M, K], pairs [S, P]): the distances the SCA subproblem
         and the polish keep at each leg sample (legs.sample_clearances_m, with the longest
-        straight-leg chord between samples; pairs in np.triu_indices order)."""
+        straight-leg chord between samples; pairs in np.triu_indices order). With the vehicle
+        model's Hermite legs (`_legs`) each vehicle's distance grows by its bulge off the straight
+        leg, at most (4/27) a_max dt^2 / 4, and the sagitta a_max h^2 / 8 (docs/model.md)."""
         s = self.scenario
         n = len(self.leg_fractions)
         h = s.dt / n
+        bulge = 0.0
+        if s.planner.vehicle_model and self.start_velocity_mps is not None:
+            bulge = s.a_max * (s.dt**2 / 27 + h**2 / 8)
         v_t = self.target_velocity_mps
         speed_t = 0.0 if v_t is None else float(np.linalg.norm(v_t))
         prev = self.prev_xy
@@ -111,7 +116,7 @@ class SlotConstraints:
         i, j = _pairs(s.M)
         start_p = np.linalg.norm(prev[i] - prev[j], axis=-1)
         pairs = sample_clearances_m(self.separation_m, start_p, 2 * s.v_max * h, n)
-        return target, keep, pairs
+        return target + bulge, keep + bulge, pairs + 2 * bulge
 
     def area_bounds(self) -> tuple[FloatArray, FloatArray]:
         """operating_area(scenario)."""
@@ -162,15 +167,29 @@ class SlotConstraints:
             out.update(self._leg_violations(q, tol_m, end_velocity_mps))
         return out
 
+    def _legs(
+        self, prev: FloatArray, end: FloatArray, idx: list[int] | slice, v1: FloatArray | None
+    ) -> tuple[FloatArray, FloatArray]:
+        """(positions [..., S, M', 2], largest acceleration [..., M']) of the legs prev [M', 2]
+        -> end [..., M', 2] of the UAVs idx: Hermite legs from start_velocity_mps to v1 when v1
+        is given, or to the mean velocity (end - prev) / dt with planner.vehicle_model (the leg
+        the bridge flies, model/vehicle.py); straight legs otherwise."""
+        s = self.scenario
+        v0 = None if self.start_velocity_mps is None else np.asarray(self.start_velocity_mps)[idx]
+        if v1 is None and v0 is not None and s.planner.vehicle_model:
+            v1 = (np.asarray(end) - prev) / s.dt
+        if v1 is None or v0 is None:
+            v0 = v1 = None
+        pts = uav_leg_points(prev, end, self.leg_fractions, s.dt, v0, v1)
+        return pts, leg_accel_bound_mps2(prev, end, s.dt, v0, v1)
+
     def _leg_violations(
         self, q: FloatArray, tol_m: float, end_velocity_mps: FloatArray | None
     ) -> dict[str, BoolArray]:
         """14j and 14i along the legs prev_xy -> q [L, M, 2] (planning/legs.py)."""
         s = self.scenario
-        v0 = self.start_velocity_mps if end_velocity_mps is not None else None
-        pts = uav_leg_points(self.prev_xy, q, self.leg_fractions, s.dt, v0, end_velocity_mps)
+        pts, accel = self._legs(self.prev_xy, q, slice(None), end_velocity_mps)  # accel [L, M]
         h = s.dt / len(self.leg_fractions)
-        accel = leg_accel_bound_mps2(self.prev_xy, q, s.dt, v0, end_velocity_mps)  # [L, M]
         rel = pts - self.target_points()[None, :, None, :]  # [L, S, M, 2]
         rel0 = self.prev_xy - self.target_start()  # [M, 2]
         short = chord_shortfall(
@@ -224,7 +243,7 @@ class SlotConstraints:
         """[L] feasibility of the plans `current_xy` [M, 2] with UAV m moved to candidates_m
         [L, 2], shares eta [M], given that `current_xy` itself is feasible: only the constraints
         that involve UAV m can change, so only those are checked (the same answer as `feasible`
-        on the full plans, at 1/M of the cost; straight legs)."""
+        on the full plans, at 1/M of the cost)."""
         s = self.scenario
         q = np.asarray(candidates_m, dtype=float)
         sep = self.separation_m
@@ -252,32 +271,29 @@ class SlotConstraints:
     def _leg_violations_moving_one(
         self, current_xy: FloatArray, m: int, q: FloatArray
     ) -> BoolArray:
-        """[L] True where UAV m's straight leg prev_m -> q [L, 2] breaks 14j or 14i along the
-        legs (the others on their legs to current_xy)."""
+        """[L] True where UAV m's leg prev_m -> q [L, 2] breaks 14j or 14i along the legs (the
+        others on their legs to current_xy; the legs as `_legs`)."""
         s = self.scenario
-        tau = self.leg_fractions
+        h = s.dt / len(self.leg_fractions)
         prev = self.prev_xy[m]
-        pts = prev + tau[None, :, None] * (q[:, None, :] - prev)  # [L, S, 2]
+        pts_m, acc_m = self._legs(self.prev_xy[[m]], q[:, None, :], [m], None)
+        pts, sag = pts_m[:, :, 0], acc_m[:, 0] * h**2 / 8  # [L, S, 2], [L]
         rel = pts - self.target_points()[None]
-        bad = (
-            chord_shortfall(
-                np.broadcast_to(prev - self.target_start(), q.shape), rel, self.clearance_m
-            )
-            > 0
-        )
+        rel0 = np.broadcast_to(prev - self.target_start(), q.shape)
+        bad = chord_shortfall(rel0, rel, self.clearance_m, sag) > 0
         sep = self.separation_m
         idx = [j for j in range(s.M) if j != m]
         if idx:
-            o_prev = self.prev_xy[idx]  # [O, 2]
-            o_pts = o_prev + tau[:, None, None] * (current_xy[idx] - o_prev)  # [S, O, 2]
+            o_pts, o_acc = self._legs(self.prev_xy[idx], current_xy[idx], idx, None)  # [S, O, 2]
             rel = np.moveaxis(pts[:, :, None, :] - o_pts[None], 1, 2)  # [L, O, S, 2]
-            rel0 = np.broadcast_to(prev - o_prev, (*rel.shape[:2], 2))
-            bad |= np.any(chord_shortfall(rel0, rel, sep) > 0, axis=1)
+            rel0 = np.broadcast_to(prev - self.prev_xy[idx], (*rel.shape[:2], 2))
+            o_sag = sag[:, None] + o_acc[None] * h**2 / 8
+            bad |= np.any(chord_shortfall(rel0, rel, sep, o_sag) > 0, axis=1)
         if self.keep_out_xy is not None and len(self.keep_out_xy):
             k = self.keep_out_xy
             rel = np.moveaxis(pts[:, :, None, :] - k[None, None], 1, 2)  # [L, K, S, 2]
             rel0 = np.broadcast_to(prev - k, (*rel.shape[:2], 2))
-            bad |= np.any(chord_shortfall(rel0, rel, sep) > 0, axis=1)
+            bad |= np.any(chord_shortfall(rel0, rel, sep, sag[:, None]) > 0, axis=1)
         return np.asarray(bad)
 
     def full_rates_one(self, uav_xy_m: FloatArray, m: int) -> FloatArray:

@@ -306,3 +306,41 @@ def test_every_plan_of_a_simulate_trace_passes_the_independent_check_with_the_cl
 
 def _replace_xy(rec: SlotRecord, xy: np.ndarray) -> SlotRecord:
     return replace(rec, uav_xy=xy)
+
+
+@pytest.mark.parametrize("vehicle_model", [False, True])
+def test_the_one_uav_check_agrees_with_the_full_check_along_the_legs(
+    paper: Scenario, vehicle_model: bool
+) -> None:
+    # UAVs 40-60 m apart and near the target, so that the leg constraints decide; with the
+    # vehicle model the legs are Hermite legs from the current velocities to the mean velocity.
+    s = _with(paper, vehicle_model=vehicle_model)
+    rng = np.random.default_rng(21)
+    o = np.array([1500.0, 1500.0])
+    prev = o + np.array([[0.0, 0.0], [45.0, 5.0], [10.0, 50.0]])
+    velocity = rng.uniform(-20, 20, (3, 2))
+    target, v_t = o + np.array([-20.0, -38.0]), np.array([25.0, 10.0])
+    cons = SlotConstraints(
+        prev,
+        prev,
+        prev,
+        target,
+        s,
+        target_clearance_m=33.0,
+        target_velocity_mps=v_t,
+        start_velocity_mps=velocity,
+    )
+    eta = np.full(3, 1 / 3)
+    current = prev + np.array([[-5.0, 20.0], [20.0, 0.0], [0.0, 20.0]])
+    assert bool(cons.feasible(current[None], eta[None])[0]), cons.describe_violations(current, eta)
+    agree = {True: 0, False: 0}
+    for m in range(3):
+        cands = current[m] + rng.uniform(-25, 25, (300, 2))
+        plans = np.repeat(current[None], len(cands), axis=0)
+        plans[:, m] = cands
+        full = cons.feasible(plans, np.broadcast_to(eta, (len(cands), 3)))
+        one = cons.feasible_moving_one(current, eta, m, cands)
+        assert list(one) == list(full)
+        for ok in full:
+            agree[bool(ok)] += 1
+    assert agree[True] > 50 and agree[False] > 50
