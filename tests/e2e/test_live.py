@@ -21,6 +21,7 @@ from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions, planning_scenario, summarize_live
 from isac_mission.config import Scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo
+from isac_mission.planning.slot import METHODS
 from isac_mission.records import read_trace
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import compare_pcrb
@@ -37,7 +38,20 @@ def _ports(m: int) -> tuple[str, SitlPorts]:
     return tcp_loopback(free_port_block(1, socket.SOCK_STREAM)), sitl_ports(m)
 
 
-def test_run_cli_flies_all_60_slots_within_the_constraints(tmp_path: Path) -> None:
+LIVE_METHODS = [
+    "proposed",
+    pytest.param(
+        "horizon",
+        marks=pytest.mark.skipif(
+            "horizon" not in METHODS, reason="method horizon not in planning.slot.METHODS yet"
+        ),
+    ),
+]
+"""The methods the live end-to-end mission flies (the per-slot planner and the horizon)."""
+
+
+@pytest.mark.parametrize("method", LIVE_METHODS)
+def test_run_cli_flies_all_60_slots_within_the_constraints(tmp_path: Path, method: str) -> None:
     endpoint, ports = _ports(3)
     out = tmp_path / "run"
     proc = subprocess.run(
@@ -46,6 +60,8 @@ def test_run_cli_flies_all_60_slots_within_the_constraints(tmp_path: Path) -> No
             "config/paper.yaml",
             "--speed",
             "10",
+            "--method",
+            method,
             "--out",
             str(out),
             "--zenoh-listen",
@@ -60,9 +76,10 @@ def test_run_cli_flies_all_60_slots_within_the_constraints(tmp_path: Path) -> No
         env=os.environ | {"COLUMNS": "160"},
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert "live mission summary" in proc.stdout and "60/60" in proc.stdout
-    trace = read_trace(out / "trace_proposed.jsonl")
+    assert f"live mission summary ({method})" in proc.stdout and "60/60" in proc.stdout
+    trace = read_trace(out / f"trace_{method}.jsonl")
     assert [r.slot for r in trace.slots] == list(range(1, 61))
+    assert {r.method for r in trace.slots} == {method}
     assert check_constraints(trace, tol_m=LIVE_TOL_M) == []
     assert compare_pcrb(trace) == []
     for png in ("fig2a_trajectories.png", "fig2b_bandwidth.png", "fig3_performance.png"):
