@@ -11,6 +11,7 @@ import pytest
 
 from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.planning.association import associate
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.service.ground.fleet_plan import NO_BS, active_part
 from isac_mission.service.ground.mission import MissionState
@@ -144,3 +145,24 @@ def test_active_part_inverts_the_widening_on_any_active_set(
     assert part.uav_xy_m.shape == (len(active), 2)
     assert part.bs_of_uav.min() >= 0  # no held vehicle left in it
     np.testing.assert_allclose(part.bandwidth_share.sum(), 1.0)
+
+
+@pytest.mark.parametrize("excluded", [(), (2,)])
+def test_a_hold_at_the_first_slot_serves_every_planned_vehicle(
+    paper: Scenario, excluded: tuple[int, ...]
+) -> None:
+    """A plan timed out at slot 1 (no last association): each vehicle that measures (share > 0)
+    has a BS (14f/g), as the planner's own association would give from the same positions."""
+    s = paper
+    state = MissionState(s, SolverKit(s), "proposed", Gaussian(s.x0.copy(), s.P0.copy()))
+    job = state.next_job(s.uav_start_xy, None, excluded)
+    plan = job.hold("timeout: test", "timeout")
+    kit = SolverKit(s)
+    want = associate(
+        s.uav_start_xy, s.bs_xy, capacity=s.n_a, dH=s.dH, rho0=s.rho0, B=s.B, lp=kit.association
+    )
+    for m in range(s.M):
+        if m in excluded:
+            assert plan.bs_of_uav[m] == NO_BS and plan.bandwidth_share[m] == 0.0
+        else:
+            assert plan.bandwidth_share[m] > 0 and plan.bs_of_uav[m] == want[m]

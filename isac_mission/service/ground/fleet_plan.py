@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.planning.association import association_costs, optimal_assignment
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import PlanningObjective
 from isac_mission.types import FloatArray, Gaussian, HorizonPlan, IntArray, SlotPlan, SolveReport
@@ -145,16 +146,20 @@ class PlanningJob:
 
     def hold(self, reason: str, status: str, solve_s: float = 0.0) -> SlotPlan:
         """Every vehicle holds where it is, with last slot's shares and association (a plan that
-        needs no solver; its bound is evaluated for the record)."""
-        M = self.kits.scenario.M
+        needs no solver; its bound is evaluated for the record). Without a last association (a
+        hold at the first slot) each vehicle gets the communication-optimal BS for where it is
+        (the exact assignment, no LP), and a vehicle outside the plan none."""
+        s = self.kits.scenario
+        M = s.M
         eta = np.array(self.prev_eta, dtype=float)
         eta[list(self.excluded)] = 0.0
         eta = eta / eta.sum() if eta.sum() > 0 else np.full(M, 1.0 / M)
-        assoc = (
-            np.array(self.prev_assoc, dtype=np.int64)
-            if self.prev_assoc is not None
-            else np.full(M, NO_BS, dtype=np.int64)
-        )
+        if self.prev_assoc is not None:
+            assoc = np.array(self.prev_assoc, dtype=np.int64)
+        else:
+            costs = association_costs(self.uav_xy, s.bs_xy, dH=s.dH, rho0=s.rho0, B=s.B)
+            assoc = optimal_assignment(costs, s.n_a)
+            assoc[list(self.excluded)] = NO_BS
         objective = PlanningObjective(self.J_pred, self.prediction.x, self.kits.full.sensing)
         with np.errstate(divide="ignore"):
             pcrb = float(objective.value(self.uav_xy, np.maximum(eta, 1e-12)))
