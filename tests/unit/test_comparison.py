@@ -4,12 +4,16 @@ against `proposed` with paired intervals, and the tables printed whole."""
 from __future__ import annotations
 
 import io
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from rich.console import Console
 
+from isac_mission.config import parse_scenario
+from isac_mission.experiment.bootstrap import paired_bootstrap, reduction_of_rms
 from isac_mission.experiment.closed_loop import RunResult
 from isac_mission.experiment.comparison import (
     FIGURES,
@@ -23,6 +27,7 @@ from isac_mission.experiment.report import (
     figures_table,
     interval_cell,
     print_table,
+    simulate_report,
 )
 
 
@@ -131,3 +136,31 @@ def test_figure_tables_print_whole_to_a_non_terminal() -> None:
         for iv in row.values():
             assert interval_cell(iv) in text
     assert "Horizon" in text and "paired bootstrap 95% interval over 6 runs" in text
+
+
+def test_simulate_report_writes_the_intervals_and_per_run_figures(tmp_path: Path) -> None:
+    """summary.json of a short Monte Carlo: every method's per-run figures, and the intervals
+    against proposed equal to a bootstrap recomputed from those figures."""
+    s = parse_scenario({"timing": {"duration_s": 12, "slot_s": 1.0}}, "short")
+    out = io.StringIO()
+    simulate_report(
+        s,
+        ["proposed", "sd"],
+        runs=3,
+        seed=4,
+        out_dir=tmp_path,
+        workers=1,
+        plots=False,
+        console=Console(file=out),
+    )
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    per_run = summary["per_run"]
+    assert set(per_run) == {"proposed", "sd"} and all(len(v) == 3 for v in per_run["sd"].values())
+    got = summary["against_proposed"]["sd"]["loc_mse"]
+    want = paired_bootstrap(
+        per_run["proposed"]["loc_mse"], per_run["sd"]["loc_mse"], reduction_of_rms, seed=4
+    )
+    assert got == pytest.approx(
+        {"estimate": want.estimate, "low": want.low, "high": want.high, "level": 0.95}
+    )
+    assert interval_cell(want) in out.getvalue()
