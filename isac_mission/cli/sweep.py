@@ -40,6 +40,14 @@ def sweep(
         int | None, typer.Option(help="Base seed (default: the grid's, else the config's).")
     ] = None,
     plots: Annotated[bool, typer.Option(help="Write RMSE-vs-parameter PNGs.")] = True,
+    live_settings: Annotated[
+        bool,
+        typer.Option(
+            "--live-settings",
+            help="Plan every point with what `run` and `serve` plan with (docs/model.md, "
+            "'Live service').",
+        ),
+    ] = False,
 ) -> None:
     """Monte Carlo over a parameter grid, on Dask (grid point x method x run, seed = seed + run)."""
     from isac_mission.experiment.report import mission_progress, print_table
@@ -52,7 +60,9 @@ def sweep(
     )
 
     try:
-        plan = sw.plan_sweep(config, grid, seed)
+        from isac_mission.config.live_settings import LIVE_SETTINGS
+
+        plan = sw.plan_sweep(config, grid, seed, LIVE_SETTINGS if live_settings else None)
     except ConfigError as err:
         err_console.print(f"[bold red]invalid sweep[/]\n{err}", highlight=False)
         raise typer.Exit(2) from None

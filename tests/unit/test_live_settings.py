@@ -93,3 +93,17 @@ def test_simulate_live_settings_plans_as_the_live_service(paper: Scenario, tmp_p
     want = planning_scenario(paper, LiveOptions()).trace_config()
     for key in ("v_max", "r_th", "d_safe", "planner"):
         assert trace.config[key] == want[key], key
+
+
+def test_sweep_live_settings_plans_every_point_as_the_live_service(tmp_path: Path) -> None:
+    from isac_mission.experiment.sweep.runs import plan_sweep
+
+    root = Path(__file__).resolve().parents[2]
+    g = tmp_path / "grid.yaml"
+    g.write_text("uavs.max_speed_mps: [15, 25]\nruns: 1\nslots: 5\n")
+    plain = plan_sweep(root / "config" / "paper.yaml", g)
+    live = plan_sweep(root / "config" / "paper.yaml", g, live=LIVE_SETTINGS)
+    for p, q in zip(plain.points, live.points, strict=True):
+        assert q.scenario.trace_config() == LIVE_SETTINGS.apply(p.scenario).trace_config()
+        assert q.key != p.key  # a worker's kit cache never mixes the two
+    assert all(t.scenario is live.points[t.point].scenario for t in live.tasks)

@@ -8,12 +8,13 @@ Dask workers run (`cluster.run_dask`); this module never imports Dask.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.config.live_settings import LiveSettings
 from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
 from isac_mission.experiment.sweep.grid import (
     GridPoint,
@@ -65,11 +66,20 @@ class SweepPlan:
     mission_id: str
 
 
-def plan_sweep(config: str | Path, grid_file: str | Path, seed: int | None = None) -> SweepPlan:
-    """Load both files and validate every grid point (raises ConfigError before any work)."""
+def plan_sweep(
+    config: str | Path,
+    grid_file: str | Path,
+    seed: int | None = None,
+    live: LiveSettings | None = None,
+) -> SweepPlan:
+    """Load both files and validate every grid point (raises ConfigError before any work);
+    with `live`, every point plans with the live settings (config/live_settings.py) applied to
+    its scenario, as `simulate --live-settings` does."""
     base = load_config_mapping(config)
     grid = load_grid(grid_file)
     points = expand_grid(base, grid, str(config))
+    if live is not None:
+        points = [replace(p, scenario=live.apply(p.scenario), key=f"live:{p.key}") for p in points]
     if seed is None:
         seed = grid.seed if grid.seed is not None else points[0].scenario.seed
     tasks = make_tasks(points, grid, seed)
