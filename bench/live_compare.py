@@ -15,9 +15,12 @@ Prints (and writes to --out/live_compare.json):
    bootstrap 95 % intervals over seeds (experiment/bootstrap.py).
 
 Run: nice -n 10 python bench/live_compare.py [--seeds 1..10] [--methods proposed,sd,aba,horizon]
-     [--config config/paper.yaml] [--speed 10] [--out out/live-compare] [--reuse]
+     [--config config/paper.yaml] [--speed 10] [--plan-budget 1] [--out out/live-compare]
+     [--reuse]
 (default methods: proposed, sd, aba, and horizon when planning.slot.METHODS has it). A live
-mission takes about a minute here (take-off and the flight to the start points included).
+mission takes 30-60 s here (take-off and the flight to the start points included). --plan-budget
+is `run`'s (default 1 s): on a loaded machine a plan that takes longer is a hold, which the live
+figures then include (the run's trace says how many: status "timeout").
 --reuse keeps traces already in --out (a re-run only flies what is missing).
 """
 
@@ -31,6 +34,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -76,14 +80,17 @@ def _env() -> dict[str, str]:
     return os.environ | {"COLUMNS": "160", "MAVLINK20": "1", "MAVLINK_DIALECT": "common"}
 
 
-def fly_live(config: str, method: str, seed: int, speed: float, out: Path) -> Path | None:
+def fly_live(
+    config: str, method: str, seed: int, speed: float, out: Path, budget_s: float
+) -> Path | None:
     """One live mission; its trace, or None (the error is printed)."""
     trace = out / f"trace_{method}.jsonl"
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
     ports = sitl_ports(3)
     argv = _cli(
         "run", config, "--lockstep", "--speed", f"{speed:g}", "--method", method,
-        "--seed", str(seed), "--out", str(out), "--zenoh-listen", endpoint,
+        "--seed", str(seed), "--plan-budget", f"{budget_s:g}", "--out", str(out),
+        "--zenoh-listen", endpoint,
         *ports.cli_args(), "--no-console",
     )  # fmt: skip
     proc = subprocess.run(
@@ -137,6 +144,9 @@ def main() -> None:
     ap.add_argument("--seeds", default="1..10")
     ap.add_argument("--methods", default=",".join(default_methods()))
     ap.add_argument("--speed", type=float, default=10.0)
+    ap.add_argument(
+        "--plan-budget", type=float, default=1.0, help="`run --plan-budget` (0: no budget)."
+    )
     ap.add_argument("--out", type=Path, default=Path("out/live-compare"))
     ap.add_argument("--reuse", action="store_true", help="Keep traces already in --out.")
     args = ap.parse_args()
@@ -160,7 +170,7 @@ def main() -> None:
                 if not (args.reuse and done.is_file()):
                     t1 = time.monotonic()
                     got = (
-                        fly_live(args.config, method, seed, args.speed, where)
+                        fly_live(args.config, method, seed, args.speed, where, args.plan_budget)
                         if kind == "live"
                         else run_simulate(args.config, method, seed, where)
                     )
@@ -186,10 +196,8 @@ def report(
     common = [s for s in seeds if all(s in traces[k].get(m, {}) for k in traces for m in methods)]
     if len(common) < len(seeds):
         print(f"\nseeds with every run complete: {common} (of {seeds})")
-    figs = {
-        k: {m: trace_figures([read_trace(traces[k][m][s]) for s in common]) for m in methods}
-        for k in traces
-    }
+    read = {k: {m: [read_trace(traces[k][m][s]) for s in common] for m in methods} for k in traces}
+    figs = {k: {m: trace_figures(read[k][m]) for m in methods} for k in traces}
     result: dict[str, object] = {"seeds": common, "methods": methods, "wall_s": wall_s}
     print(f"\n{len(common)} seeds {common}; live `run --lockstep` vs `simulate --live-settings`")
     print(
@@ -219,11 +227,16 @@ def report(
         missing = int(live["truth_missing"].sum())
         if missing:
             print(f"{'':9s} (live: {missing} slots without truth left out of the errors)")
+        statuses = Counter(r.status for tr in read["live"][m] for r in tr.slots)
+        not_ok = {k: n for k, n in statuses.items() if k != "ok"}
+        if not_ok:
+            print(f"{'':9s} (live slots not ok: {not_ok})")
         rows[m] = {
             "live": pl,
             "simulate": ps,
             "simulate_vs_live_pct": dev,
             "within": ok,
+            "live_statuses": dict(statuses),
             "per_seed": {
                 k: {f: v.tolist() for f, v in figs[k][m].items()} for k in ("live", "simulate")
             },

@@ -11,7 +11,7 @@ rule of the scenario instead of the + 10 m, and the vehicle model), rule-kin (th
 the planner's 0.8 a_max reach instead of the vehicle model), rule+5 (the rule, the vehicle model
 and D_s + 5 m).
 Run: nice -n 10 python bench/live_settings.py [--variants today,rule] [--methods proposed]
-     [--seeds 1..3] [--speed 10]
+     [--seeds 1..3] [--speed 10] [--plan-budget 1]
 """
 
 from __future__ import annotations
@@ -58,9 +58,12 @@ def parse_seeds(text: str) -> list[int]:
     return [int(x) for x in text.split(",") if x.strip()]
 
 
-def options(v: LiveSettings, method: str, seed: int, speed: float, out: Path) -> LiveOptions:
+def options(
+    v: LiveSettings, method: str, seed: int, speed: float, out: Path, budget_s: float | None
+) -> LiveOptions:
     return LiveOptions(
         speed=speed,
+        plan_budget_s=budget_s,
         lockstep=True,
         method=method,  # type: ignore[arg-type]
         seed=seed,
@@ -82,7 +85,11 @@ def main() -> None:
     ap.add_argument("--methods", default="proposed")
     ap.add_argument("--seeds", default="1..3")
     ap.add_argument("--speed", type=float, default=10.0)
+    ap.add_argument(
+        "--plan-budget", type=float, default=1.0, help="Wall s per plan (0: none), as `run`'s."
+    )
     args = ap.parse_args()
+    budget_s = args.plan_budget if args.plan_budget > 0 else None
     quiet_highs_banner()
     s = load_scenario(args.config)
     seeds = parse_seeds(args.seeds)
@@ -97,7 +104,7 @@ def main() -> None:
             t0 = time.monotonic()
             for seed in seeds:
                 with tempfile.TemporaryDirectory() as tmp:
-                    opts = options(v, method, seed, args.speed, Path(tmp))
+                    opts = options(v, method, seed, args.speed, Path(tmp), budget_s)
                     asyncio.run(run_embedded(s, opts, asyncio.Event()))
                     trace = read_trace(opts.trace_path)
                 traces.append(trace)
@@ -121,7 +128,10 @@ def main() -> None:
             )
             rows.append(row)
             print(f"{name} {method}: {time.monotonic() - t0:.0f} s", flush=True)
-    print(f"\n{s.mission_id}, seeds {seeds}, lockstep at speed {args.speed:g}")
+    print(
+        f"\n{s.mission_id}, seeds {seeds}, lockstep at speed {args.speed:g}, plan budget "
+        f"{'none' if budget_s is None else f'{budget_s:g} s'}"
+    )
     print(
         f"{'variant':9s} {'method':9s} {'tr(PCRB)':>9s} {'RMSE loc':>9s} {'RMSE vel':>9s} "
         f"{'infeasible':>11s} {'nearest m':>9s}  violations (1 m)"
