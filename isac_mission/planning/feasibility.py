@@ -83,10 +83,12 @@ class SlotConstraints:
         """True when 14i/14j are checked along the legs (the rule on)."""
         return rule_on(self.scenario)
 
-    def target_points(self) -> FloatArray:
-        """The predicted target [S, 2] at the leg samples (constant velocity)."""
+    def target_points(self, fractions: FloatArray | None = None) -> FloatArray:
+        """The predicted target [S, 2] at the leg samples (or at `fractions` [S]), constant
+        velocity."""
         v = np.zeros(2) if self.target_velocity_mps is None else self.target_velocity_mps
-        return target_leg_points(self.target_xy, v, self.leg_fractions, self.scenario.dt)
+        f = self.leg_fractions if fractions is None else fractions
+        return target_leg_points(self.target_xy, v, f, self.scenario.dt)
 
     def target_start(self) -> FloatArray:
         """The predicted target [2] at the legs' start."""
@@ -169,28 +171,31 @@ class SlotConstraints:
 
     def _legs(
         self, prev: FloatArray, end: FloatArray, idx: list[int] | slice, v1: FloatArray | None
-    ) -> tuple[FloatArray, FloatArray]:
-        """(positions [..., S, M', 2], largest acceleration [..., M']) of the legs prev [M', 2]
-        -> end [..., M', 2] of the UAVs idx: Hermite legs from start_velocity_mps to v1 when v1
-        is given, or to the mean velocity (end - prev) / dt with planner.vehicle_model (the leg
-        the bridge flies, model/vehicle.py); straight legs otherwise."""
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(positions [..., S, M', 2], largest acceleration [..., M'], fractions [S]) of the legs
+        prev [M', 2] -> end [..., M', 2] of the UAVs idx: Hermite legs from start_velocity_mps
+        to v1 when v1 is given, or to the mean velocity (end - prev) / dt with
+        planner.vehicle_model (the leg the bridge flies, model/vehicle.py), at the leg samples;
+        straight legs otherwise, at their end only: against the constant-velocity target and
+        each other they move linearly, so the one chord r(0) -> r(dt) is the exact check."""
         s = self.scenario
         v0 = None if self.start_velocity_mps is None else np.asarray(self.start_velocity_mps)[idx]
         if v1 is None and v0 is not None and s.planner.vehicle_model:
             v1 = (np.asarray(end) - prev) / s.dt
         if v1 is None or v0 is None:
             v0 = v1 = None
-        pts = uav_leg_points(prev, end, self.leg_fractions, s.dt, v0, v1)
-        return pts, leg_accel_bound_mps2(prev, end, s.dt, v0, v1)
+        fractions = self.leg_fractions if v0 is not None else np.ones(1)
+        pts = uav_leg_points(prev, end, fractions, s.dt, v0, v1)
+        return pts, leg_accel_bound_mps2(prev, end, s.dt, v0, v1), fractions
 
     def _leg_violations(
         self, q: FloatArray, tol_m: float, end_velocity_mps: FloatArray | None
     ) -> dict[str, BoolArray]:
         """14j and 14i along the legs prev_xy -> q [L, M, 2] (planning/legs.py)."""
         s = self.scenario
-        pts, accel = self._legs(self.prev_xy, q, slice(None), end_velocity_mps)  # accel [L, M]
-        h = s.dt / len(self.leg_fractions)
-        rel = pts - self.target_points()[None, :, None, :]  # [L, S, M, 2]
+        pts, accel, fractions = self._legs(self.prev_xy, q, slice(None), end_velocity_mps)
+        h = s.dt / len(fractions)  # accel [L, M]
+        rel = pts - self.target_points(fractions)[None, :, None, :]  # [L, S, M, 2]
         rel0 = self.prev_xy - self.target_start()  # [M, 2]
         short = chord_shortfall(
             np.broadcast_to(rel0, q.shape),
@@ -274,17 +279,17 @@ class SlotConstraints:
         """[L] True where UAV m's leg prev_m -> q [L, 2] breaks 14j or 14i along the legs (the
         others on their legs to current_xy; the legs as `_legs`)."""
         s = self.scenario
-        h = s.dt / len(self.leg_fractions)
         prev = self.prev_xy[m]
-        pts_m, acc_m = self._legs(self.prev_xy[[m]], q[:, None, :], [m], None)
+        pts_m, acc_m, fractions = self._legs(self.prev_xy[[m]], q[:, None, :], [m], None)
+        h = s.dt / len(fractions)
         pts, sag = pts_m[:, :, 0], acc_m[:, 0] * h**2 / 8  # [L, S, 2], [L]
-        rel = pts - self.target_points()[None]
+        rel = pts - self.target_points(fractions)[None]
         rel0 = np.broadcast_to(prev - self.target_start(), q.shape)
         bad = chord_shortfall(rel0, rel, self.clearance_m, sag) > 0
         sep = self.separation_m
         idx = [j for j in range(s.M) if j != m]
         if idx:
-            o_pts, o_acc = self._legs(self.prev_xy[idx], current_xy[idx], idx, None)  # [S, O, 2]
+            o_pts, o_acc, _ = self._legs(self.prev_xy[idx], current_xy[idx], idx, None)
             rel = np.moveaxis(pts[:, :, None, :] - o_pts[None], 1, 2)  # [L, O, S, 2]
             rel0 = np.broadcast_to(prev - self.prev_xy[idx], (*rel.shape[:2], 2))
             o_sag = sag[:, None] + o_acc[None] * h**2 / 8
