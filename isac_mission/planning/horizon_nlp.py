@@ -37,6 +37,7 @@ from isac_mission.model.vehicle import end_accelerations, hermite_position, velo
 from isac_mission.planning.polish import MIN_SHARE, RATE_MARGIN, _information_terms
 from isac_mission.planning.positions import SOLVER_MARGIN_M
 from isac_mission.planning.safety import SafetyMargins
+from isac_mission.tracking.pcrb import SensingParams, measurement_information, scaled_inverse
 from isac_mission.types import FloatArray
 
 IPOPT_OPTIONS: dict[str, Any] = {
@@ -111,6 +112,7 @@ class HorizonNLP:
         self.step_m = S = s.v_max * s.dt
         margins = SafetyMargins.of(s)
         self.margins = margins
+        self._sensing = SensingParams.from_scenario(s)
         dt = s.dt
         F = transition_matrix(dt)
         W = process_noise(dt, s.kappa)
@@ -126,9 +128,13 @@ class HorizonNLP:
         x_pred = ca.SX.sym("x_pred", 4)
         j_pred = ca.SX.sym("j_pred", 4, 4)
         clearance = ca.SX.sym("clearance", L)
+        # Jacobi scalings (numbers taken at the start point, so no derivative runs through
+        # them): 1 / sqrt(diag J_l) and 1 / sqrt(diag P_l+1) of the bound's recursion.
+        scale_j = ca.SX.sym("scale_j", 4 * L)
+        scale_p = ca.SX.sym("scale_p", 4 * L)
         f_scale = ca.SX.sym("f_scale")
         params = [prev, v0, serving, control, keep_out, x_pred, ca.reshape(j_pred, 16, 1)]
-        params += [clearance, f_scale]
+        params += [clearance, scale_j, scale_p, f_scale]
         self._param_sizes = [int(p.numel()) for p in params]
 
         def q(h: int, m: int) -> ca.SX:  # position [2] at the end of horizon slot h (0-based)
@@ -199,11 +205,11 @@ class HorizonNLP:
                     for frac in fracs:
                         add(sq(along(h, i, frac) - along(h, j, frac)), sep2, inf)
             add(ca.sum1(eta[h * M : (h + 1) * M]), 1.0, 1.0)
-            C = _jacobi_inverse(0.5 * (J + J.T))
+            C = _scaled_inverse(0.5 * (J + J.T), scale_j[4 * h : 4 * h + 4])
             objective = objective + weights[h] * ca.trace(C)
             if h + 1 < L:
                 P = ca.mtimes(ca.mtimes(ca.DM(F), C), ca.DM(F.T)) + ca.DM(W)
-                J_prior = _jacobi_inverse(0.5 * (P + P.T))
+                J_prior = _scaled_inverse(0.5 * (P + P.T), scale_p[4 * h : 4 * h + 4])
 
         x = ca.vertcat(z, u, eta)
         p = ca.vertcat(*params)
@@ -256,12 +262,36 @@ class HorizonNLP:
             data.x_pred,
             np.asarray(data.J_pred, dtype=float).reshape(-1, order="F"),
             data.clearance_m,
+            *self._scales(np.asarray(xy, dtype=float), np.asarray(eta, dtype=float), data),
             np.array([f_scale]),
         ]
         p = np.concatenate([np.asarray(val, dtype=float).reshape(-1) for val in values])
         if len(p) != sum(self._param_sizes):
             raise ValueError(f"{len(p)} parameters, the NLP has {sum(self._param_sizes)}")
         return x, p
+
+    def _scales(
+        self, xy: FloatArray, eta: FloatArray, data: HorizonSlotData
+    ) -> tuple[FloatArray, FloatArray]:
+        """(scale_j [4 L], scale_p [4 L]): 1 / sqrt of the diagonals of J_l and of the next
+        slot's predicted covariance along the plan (xy [L, M, 2], eta [L, M]); the last scale_p
+        is unused (ones)."""
+        s = self.scenario
+        F = transition_matrix(s.dt)
+        W = process_noise(s.dt, s.kappa)
+        x = np.asarray(data.x_pred, dtype=float)
+        prior = np.asarray(data.J_pred, dtype=float)
+        scale_j, scale_p = np.ones((self.length, 4)), np.ones((self.length, 4))
+        for h in range(self.length):
+            d = np.linalg.norm(x[None, :2] - xy[h], axis=1)
+            J = prior + measurement_information(x, xy[h], self._sensing.variances(d, eta[h]))
+            scale_j[h] = 1.0 / np.sqrt(np.maximum(np.diag(J), 1e-300))
+            if h + 1 < self.length:
+                P = F @ scaled_inverse(0.5 * (J + J.T)) @ F.T + W
+                scale_p[h] = 1.0 / np.sqrt(np.diag(P))
+                prior = scaled_inverse(0.5 * (P + P.T))
+            x = F @ x
+        return scale_j.reshape(-1), scale_p.reshape(-1)
 
     def unpack(
         self, x: FloatArray, data: HorizonSlotData
@@ -341,11 +371,12 @@ class HorizonNLP:
         )
 
 
-def _jacobi_inverse(A: ca.SX) -> ca.SX:
-    """A^-1 [4, 4] of a symmetric positive-definite SX matrix, Jacobi-scaled first, by 2 x 2
-    blocks (Schur complement; a far smaller expression, and Hessian, than a symbolic solve)."""
-    d = 1.0 / ca.sqrt(ca.diag(A))
-    D = ca.diag(d)
+def _scaled_inverse(A: ca.SX, scale: ca.SX) -> ca.SX:
+    """A^-1 [4, 4] of a symmetric positive-definite SX matrix, scaled by D = diag(scale [4])
+    first (A^-1 = D (D A D)^-1 D), by 2 x 2 blocks (Schur complement: a far smaller expression,
+    and Hessian, than a symbolic solve; a symbolic scaling 1 / sqrt(diag A) made the Hessian ten
+    times dearer)."""
+    D = ca.diag(scale)
     S = ca.mtimes(ca.mtimes(D, A), D)
     P, Q, R = S[:2, :2], S[:2, 2:], S[2:, 2:]
     P_inv = _inverse_2x2(P)
