@@ -65,19 +65,31 @@ def slot_sigma_max_m(s: Scenario, target_cov_pred: FloatArray) -> float:
     P = np.asarray(target_cov_pred, dtype=float)
     P = 0.5 * (P + P.T)
     if P.shape == (2, 2):
-        return float(np.sqrt(max(np.linalg.eigvalsh(P)[-1], 0.0)))
-    var = [float(np.linalg.eigvalsh(P[:2, :2])[-1])]
+        return float(np.sqrt(max(_largest_eigenvalue(P[None])[0], 0.0)))
+    var = _largest_eigenvalue(P[None, :2, :2])
     fractions = leg_fractions(leg_samples(s))[:-1]
     if len(fractions):
-        F_inv = np.linalg.inv(transition_matrix(s.dt))
-        P0 = F_inv @ (P - process_noise(s.dt, s.kappa)) @ F_inv.T
+        back = transition_matrix(-s.dt)  # F(dt)^-1
+        P0 = back @ (P - process_noise(s.dt, s.kappa)) @ back.T
         w, V = np.linalg.eigh(0.5 * (P0 + P0.T))
         P0 = (V * np.maximum(w, 0.0)) @ V.T
-        for tau in fractions:
-            F = transition_matrix(tau * s.dt)
-            Pt = F @ P0 @ F.T + process_noise(tau * s.dt, s.kappa)
-            var.append(float(np.linalg.eigvalsh(0.5 * (Pt[:2, :2] + Pt[:2, :2].T))[-1]))
-    return float(np.sqrt(max(max(var), 0.0)))
+        t = fractions * s.dt
+        pp, pv, vv = P0[:2, :2], P0[:2, 2:], P0[2:, 2:]
+        # F(t) P0 F(t)^T + W(t), position block: pp + t (pv + pv^T) + t^2 vv + kappa t^3 / 3.
+        Pt = (
+            pp[None]
+            + t[:, None, None] * (pv + pv.T)[None]
+            + (t**2)[:, None, None] * vv[None]
+            + (s.kappa * t**3 / 3)[:, None, None] * np.eye(2)[None]
+        )
+        var = np.concatenate([var, _largest_eigenvalue(Pt)])
+    return float(np.sqrt(max(float(np.max(var)), 0.0)))
+
+
+def _largest_eigenvalue(P: FloatArray) -> FloatArray:
+    """[L] the largest eigenvalue of each symmetric 2 x 2 matrix of P [L, 2, 2] (closed form)."""
+    a, b, c = P[:, 0, 0], 0.5 * (P[:, 0, 1] + P[:, 1, 0]), P[:, 1, 1]
+    return np.asarray(0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b))
 
 
 def target_clearance_m(s: Scenario, target_cov_pred: FloatArray | None) -> float:
