@@ -55,7 +55,7 @@ def simulate(
     methods: Annotated[
         str,
         typer.Option(help="Comma-separated: proposed, proposed-sca, sd, aba, crb, comm, horizon."),
-    ] = "proposed,sd,aba,crb",
+    ] = "proposed,sd,aba,crb,horizon",
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 2,
     plots: Annotated[bool, typer.Option(help="Write the Fig. 2 / Fig. 3 style PNGs.")] = True,
     live_settings: Annotated[
