@@ -25,6 +25,7 @@ from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, velocity_control_points
 from isac_mission.planning.feasibility import SlotConstraints, operating_area
 from isac_mission.planning.horizon_nlp import HorizonNLP, HorizonSlotData, horizon_weights
+from isac_mission.planning.legs import chord_point_clearance_m
 from isac_mission.planning.safety import target_clearance_m
 from isac_mission.tracking.pcrb import (
     Bound,
@@ -132,8 +133,18 @@ def horizon_slot_data(
         keep_out_xy=np.zeros((0, 2)) if keep_out_xy is None else np.asarray(keep_out_xy),
         x_pred=np.asarray(x_pred, dtype=float),
         J_pred=np.asarray(J_pred, dtype=float),
-        clearance_m=predicted_clearances(s, target_cov_pred, length),
+        clearance_m=sample_clearances(s, predicted_clearances(s, target_cov_pred, length), x_pred),
     )
+
+
+def sample_clearances(s: Scenario, clearance_m: FloatArray, x_pred: FloatArray) -> FloatArray:
+    """[L] the distance the horizon's leg samples keep from the predicted target so that the
+    whole leg keeps clearance_m [L]: the chord between samples (relative speed at most
+    V_max + |v_target|) and, on the vehicle model's curved legs, their sag a_max h^2 / 8."""
+    gap_s = s.dt / s.planner.horizon.leg_samples
+    chord = (s.v_max + float(np.linalg.norm(np.asarray(x_pred)[2:4]))) * gap_s
+    sag = s.a_max * gap_s**2 / 8 if s.planner.vehicle_model else 0.0
+    return np.asarray(chord_point_clearance_m(clearance_m, chord) + sag)
 
 
 def legs_ok(

@@ -34,6 +34,7 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
+from isac_mission.planning.legs import chord_point_clearance_m
 from isac_mission.planning.polish import MIN_SHARE, RATE_MARGIN, _information_terms
 from isac_mission.planning.positions import SOLVER_MARGIN_M
 from isac_mission.planning.safety import SafetyMargins
@@ -170,7 +171,13 @@ class HorizonNLP:
         inf = float("inf")
         e = margins.link_m
         d_ctrl2 = (max(s.d_th - e - SOLVER_MARGIN_M, 0.0) / S) ** 2
-        sep2 = ((margins.separation_m + SOLVER_MARGIN_M) / S) ** 2 if s.d_safe > 0 else 0.0
+        # Between two samples a leg may come closer than at either (docs/model.md, "Safety"):
+        # the samples keep the chord's distance, plus the curve's sag off its chord.
+        gap_s = dt / K
+        sag = s.a_max * gap_s**2 / 8 if self.vehicle_model else 0.0
+        sep = margins.separation_m if s.d_safe > 0 else 0.0
+        keep2 = ((float(chord_point_clearance_m(sep, s.v_max * gap_s)) + sag) / S) ** 2
+        pair2 = ((float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag) / S) ** 2
         fracs = [(k + 1) / K for k in range(K)]
         weights = horizon_weights(L, cfg.discount, cfg.terminal_weight)
         objective = ca.SX(0.0)
@@ -199,11 +206,11 @@ class HorizonNLP:
                     p = x_pred[:2] + (h - 1 + frac) * dt * x_pred[2:]
                     add(sq(along(h, m, frac) - p) - (clearance[h] / S) ** 2, 0.0, inf)
                     for k in range(n_keep_out):
-                        add(sq(along(h, m, frac) - keep_out[2 * k : 2 * k + 2]), sep2, inf)
+                        add(sq(along(h, m, frac) - keep_out[2 * k : 2 * k + 2]), keep2, inf)
             for i in range(M):
                 for j in range(i + 1, M):
                     for frac in fracs:
-                        add(sq(along(h, i, frac) - along(h, j, frac)), sep2, inf)
+                        add(sq(along(h, i, frac) - along(h, j, frac)), pair2, inf)
             add(ca.sum1(eta[h * M : (h + 1) * M]), 1.0, 1.0)
             C = _scaled_inverse(0.5 * (J + J.T), scale_j[4 * h : 4 * h + 4])
             objective = objective + weights[h] * ca.trace(C)
