@@ -1,11 +1,13 @@
 """The live settings: what the live service (`run`, `serve`) plans with, in one place.
 
-The vehicles of the live service have momentum and fly each planned leg a few metres off: the
-live planner therefore plans on a scenario with margins (docs/model.md, "Live service"):
-V_max x speed_fraction (headroom to catch up), R_th x rate_factor, D_s + safety_margin_m (a
-vehicle a few metres off its waypoint still meets 14a, 14i and 14j) and each waypoint reachable
-with accel_fraction x a_max (`planner.accel_limit_mps2`; 0: off). `simulate --live-settings`
-plans on exactly this scenario, so that an offline study holds for the service.
+The vehicles of the live service have momentum: the live planner plans on their dynamics
+(`planner.vehicle_model`, model/vehicle.py) and on a scenario with margins (docs/model.md, "Live
+service"): V_max x speed_fraction (headroom to catch up), R_th x rate_factor, D_s +
+safety_margin_m on top of the scenario's safety rule (`planner.safety_margin`; 0 by default: the
+rule's margins, the same offline and live) and, without the vehicle model, each waypoint
+reachable with accel_fraction x a_max (`planner.accel_limit_mps2`; 0: off).
+`simulate --live-settings` plans on exactly this scenario, so that an offline study holds for the
+service. The defaults were chosen by live missions (docs/performance.md, Table 12).
 
 Pure: plain numbers in, a Scenario out (no CLI options, no I/O).
 """
@@ -30,9 +32,9 @@ class LiveSettings:
 
     speed_fraction: float = 0.9
     rate_factor: float = 1.05
-    safety_margin_m: float = 10.0
+    safety_margin_m: float = 0.0
     accel_fraction: float = 0.8
-    vehicle_model: bool = False
+    vehicle_model: bool = True
 
     def __post_init__(self) -> None:
         if not 0 < self.speed_fraction <= 1:

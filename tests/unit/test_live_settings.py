@@ -27,7 +27,7 @@ def test_live_settings_plan_with_the_live_margins(paper: Scenario) -> None:
         paper.planner.vehicle_model or LIVE_SETTINGS.vehicle_model
     )
     # Nothing else moves: the truth the vehicles fly in is the scenario's.
-    assert live.a_max == paper.a_max and live.planner.safety_margin == paper.planner.safety_margin
+    assert live.planner.safety_margin == paper.planner.safety_margin
     assert (live.bs_xy == paper.bs_xy).all() and live.N == paper.N and live.M == paper.M
 
 
@@ -77,8 +77,20 @@ def test_invalid_live_settings_name_the_bad_value(bad: dict[str, float]) -> None
 def test_changes_list_every_changed_setting(paper: Scenario) -> None:
     rows = {q: (a, b) for q, a, b in LIVE_SETTINGS.changes(paper)}
     assert rows["V_max"] == (f"{paper.v_max:g} m/s", f"{0.9 * paper.v_max:g} m/s")
-    assert rows["D_s"][1] == f"{paper.d_safe + 10:g} m"
-    assert rows["planner.accel_limit_mps2"] == ("null", f"{0.8 * paper.a_max:g}")
+    assert rows["D_s"][1] == f"{paper.d_safe + LIVE_SETTINGS.safety_margin_m:g} m"
+    assert rows["planner.accel_limit_mps2"] == (
+        "null",
+        f"{LIVE_SETTINGS.accel_fraction * paper.a_max:g}",
+    )
+    assert rows["planner.vehicle_model"] == ("false", "true")
+
+
+def test_the_live_defaults_are_the_vehicle_model_and_the_safety_rule(paper: Scenario) -> None:
+    """Chosen by live missions (docs/performance.md, Table 12): the scenario's safety rule, no
+    fixed margin on D_s, and the vehicle model."""
+    live = LIVE_SETTINGS.apply(paper)
+    assert live.planner.vehicle_model and live.planner.safety_margin == "covariance"
+    assert live.d_safe == paper.d_safe
 
 
 def test_simulate_live_settings_plans_as_the_live_service(paper: Scenario, tmp_path: Path) -> None:
