@@ -35,6 +35,7 @@ from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
 from isac_mission.planning.legs import chord_point_clearance_m
+from isac_mission.planning.nlp_rows import NlpRows, relative_rate
 from isac_mission.planning.polish import MIN_SHARE, RATE_MARGIN, _information_terms
 from isac_mission.planning.positions import SOLVER_MARGIN_M
 from isac_mission.planning.safety import SafetyMargins
@@ -159,14 +160,8 @@ class HorizonNLP:
         def sq(d: ca.SX) -> ca.SX:
             return ca.sumsqr(d) / S**2
 
-        g: list[ca.SX] = []
-        lbg: list[float] = []
-        ubg: list[float] = []
-
-        def add(expr: ca.SX, lo: float, hi: float) -> None:
-            g.append(expr)
-            lbg.append(lo)
-            ubg.append(hi)
+        rows = NlpRows()
+        add = rows.add
 
         inf = float("inf")
         e = margins.link_m
@@ -189,10 +184,8 @@ class HorizonNLP:
                 qm = q(h, m)
                 em = eta[h * M + m]
                 J = J + _information_terms(qm, em, x_l, s)
-                d2 = ca.sumsqr(qm - serving[2 * m : 2 * m + 2])
-                dist2 = d2 if e == 0 else (ca.sqrt(d2 + 1e-12) + e) ** 2
-                rate = em * s.B * ca.log1p(s.rho0 / (dist2 + s.dH**2)) / (np.log(2.0) * s.r_th)
-                add(rate - 1.0, RATE_MARGIN, inf)
+                rate = relative_rate(qm, serving[2 * m : 2 * m + 2], em, s, e)
+                add(rate, RATE_MARGIN, inf)
                 add(sq(qm - control[2 * m : 2 * m + 2]), -inf, d_ctrl2)
                 if self.vehicle_model:
                     legs = (q(h - 1, m), v(h - 1, m), q(h, m), v(h, m), dt)
@@ -221,9 +214,9 @@ class HorizonNLP:
         x = ca.vertcat(z, u, eta)
         p = ca.vertcat(*params)
         self.n_x = int(x.numel())
-        self._lbg = np.array(lbg, dtype=float)
-        self._ubg = np.array(ubg, dtype=float)
-        nlp = {"x": x, "p": p, "f": objective / f_scale, "g": ca.vertcat(*g)}
+        self._lbg, self._ubg = rows.bounds()
+        g = ca.vertcat(*rows.rows)
+        nlp = {"x": x, "p": p, "f": objective / f_scale, "g": g}
         opts: dict[str, Any] = {
             "print_time": False,
             "ipopt": {**IPOPT_OPTIONS, "max_iter": cfg.max_iterations},
@@ -232,7 +225,7 @@ class HorizonNLP:
         # For tests and the start point's scale: the weighted objective itself and its gradient.
         self.objective = ca.Function("f", [x, p], [objective])
         self.gradient = ca.Function("df", [x, p], [ca.gradient(objective, x)])
-        self.constraints = ca.Function("g", [x, p], [ca.vertcat(*g)])
+        self.constraints = ca.Function("g", [x, p], [g])
 
     @property
     def lbg(self) -> FloatArray:

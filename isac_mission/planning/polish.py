@@ -39,6 +39,7 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.nlp_rows import NlpRows, relative_rate
 from isac_mission.planning.positions import SOLVER_MARGIN_M
 from isac_mission.planning.safety import SafetyMargins, leg_samples, rule_on
 from isac_mission.tracking.pcrb import PlanningObjective
@@ -223,15 +224,8 @@ class PolishNLP:
         def at(m: int, tau: float) -> ca.SX:
             return tau * q[m, :] + (1.0 - tau) * prev[m, :]
 
-        g: list[ca.SX] = []
-        lbg: list[float] = []
-        ubg: list[float] = []
-
-        def add(expr: ca.SX, lo: float, hi: float) -> None:
-            g.append(expr)
-            lbg.append(lo)
-            ubg.append(hi)
-
+        rows = NlpRows()
+        add = rows.add
         K = self.n_keep_out
         per_sample = M * (1 + K) + M * (M - 1) // 2
 
@@ -240,9 +234,7 @@ class PolishNLP:
 
         for m in range(M):
             qm = q[m, :]
-            dist = ca.sqrt(ca.sumsqr(qm - serving[m, :]) + 1e-12) + e
-            rate = eta[m] * s.B * ca.log1p(s.rho0 / (dist**2 + s.dH**2)) / (np.log(2.0) * s.r_th)
-            add(rate - 1.0, RATE_MARGIN, big)
+            add(relative_rate(qm, serving[m, :], eta[m], s, e), RATE_MARGIN, big)
             add(sq(qm - control[m, :]), -big, (max(s.d_th - e - SOLVER_MARGIN_M, 0.0) / L) ** 2)
             add(ca.sumsqr(z[m, :]), -big, ((L - SOLVER_MARGIN_M) / L) ** 2)
             add(sq(qm - ballistic[m, :]) - accel_r2, -big, 0.0)
@@ -257,7 +249,7 @@ class PolishNLP:
                 for f, tau in enumerate(fractions):
                     add(sq(at(i, tau) - at(j, tau)) - bound(f, M * (1 + K) + pair), 0.0, big)
                 pair += 1
-        return g, lbg, ubg
+        return rows.rows, rows.lower, rows.upper
 
     def pack(
         self, xy: FloatArray, eta: FloatArray, objective: PlanningObjective, cons: SlotConstraints
