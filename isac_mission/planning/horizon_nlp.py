@@ -7,8 +7,8 @@
          eta_lm R~(|q_lm - w_k(m)| + e) >= R_th                       (14a, with the link margin)
          |q_lm - w_c(m)| + e <= d_th                                   (14b)
          sum_m eta_lm = 1, eta_lm >= 0                                 (14c, 14d)
-         paper kinematics: |q_lm - q_l-1,m| <= V_max dt                (14h)
-         vehicle model: the Hermite leg (q, v)_l-1 -> (q, v)_l within a_max and V_max
+         |q_lm - q_l-1,m| <= V_max dt                                  (14h)
+         vehicle model: also the Hermite leg (q, v)_l-1 -> (q, v)_l within a_max and V_max
          at leg_samples points s of each leg: |q_m(s) - p(s)| >= c_l   (14j, c_l the clearance)
                                               |q_i(s) - q_j(s)| >= D_s + 2e, |q_m(s) - k| >= D_s + 2e
          0 <= q_lm <= area                                             (operating area, bounds)
@@ -193,8 +193,10 @@ class HorizonNLP:
                         add(ca.sumsqr(acc) / s.a_max**2, -inf, 1.0)
                     for vc in velocity_control_points(*legs)[1:]:
                         add(ca.sumsqr(vc) / s.v_max**2, -inf, 1.0)
-                else:
-                    add(sq(qm - q(h - 1, m)), -inf, ((S - SOLVER_MARGIN_M) / S) ** 2)
+                # 14h also on the vehicle model: a vehicle faster than V_max now (the live
+                # planner's V_max is 0.9 of the vehicles') would otherwise cover more than
+                # V_max dt in its first slot.
+                add(sq(qm - q(h - 1, m)), -inf, ((S - SOLVER_MARGIN_M) / S) ** 2)
                 for frac in fracs:
                     p = x_pred[:2] + (h - 1 + frac) * dt * x_pred[2:]
                     add(sq(along(h, m, frac) - p) - (clearance[h] / S) ** 2, 0.0, inf)
