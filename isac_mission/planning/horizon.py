@@ -147,6 +147,26 @@ def sample_clearances(s: Scenario, clearance_m: FloatArray, x_pred: FloatArray) 
     return np.asarray(chord_point_clearance_m(clearance_m, chord) + sag)
 
 
+def planned_start_velocity(
+    s: Scenario, prev_xy: FloatArray, measured_v: FloatArray, prev_plan: SlotPlan | None
+) -> FloatArray:
+    """The velocity [M, 2] the horizon's first legs start with: last plan's end velocity where
+    the vehicle is within 2 tracking margins (and at least 2 m) of last plan's waypoint, else the
+    measured one. The bridge starts each leg from the plan's own end state (position and
+    velocity), not from the vehicle's (docs/service.md), so that is what the next leg flies
+    from; a measured velocity a few m/s off a hard turn's planned one made the start
+    infeasible and IPOPT hit its cap on about a quarter of the live slots."""
+    if prev_plan is None or prev_plan.uav_velocity_mps is None:
+        return measured_v
+    planned_v = np.asarray(prev_plan.uav_velocity_mps, dtype=float)
+    if planned_v.shape != measured_v.shape:
+        return measured_v
+    near = np.linalg.norm(np.asarray(prev_xy) - prev_plan.uav_xy_m, axis=1) <= max(
+        2.0, 2 * s.planner.tracking_margin_m
+    )
+    return np.asarray(np.where(near[:, None], planned_v, measured_v))
+
+
 def legs_ok(
     s: Scenario, prev_xy: FloatArray, prev_v: FloatArray, xy: FloatArray, v: FloatArray
 ) -> bool:
@@ -180,6 +200,7 @@ def plan_horizon(
     s = nlp.scenario
     M, L, dt = s.M, nlp.length, s.dt
     prev_v = np.zeros((M, 2)) if inp_prev_velocity is None else np.asarray(inp_prev_velocity)
+    prev_v = planned_start_velocity(s, inp_prev_xy, prev_v, prev_plan)
 
     def fall_back(why: str) -> SlotPlan:
         report = replace(
@@ -244,7 +265,7 @@ def plan_horizon(
         data.x_pred[:2],
         s,
         keep_out_xy=inp_keep_out,
-        target_clearance_m=float(data.clearance_m[0]),
+        target_clearance_m=float(predicted_clearances(s, target_cov_pred, 1)[0]),
         target_velocity_mps=data.x_pred[2:4],
     )
     if not bool(cons.feasible(xy1[None], eta1[None])[0]):

@@ -12,7 +12,12 @@ import pytest
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
 from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
-from isac_mission.planning.horizon import horizon_bound_traces, horizon_slot_data, legs_ok
+from isac_mission.planning.horizon import (
+    horizon_bound_traces,
+    horizon_slot_data,
+    legs_ok,
+    planned_start_velocity,
+)
 from isac_mission.planning.horizon_nlp import HorizonSlotData, horizon_weights
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import SensingParams
@@ -211,3 +216,21 @@ def test_vehicle_model_horizon_plans_stay_within_a_max_and_v_max() -> None:
         assert speed.max() <= s.v_max * 1.001
         assert accel.max() <= s.a_max * 1.01
     assert kept >= 7
+
+
+def test_the_first_legs_start_from_last_plans_end_velocity_where_the_vehicle_is_on_its_plan() -> (
+    None
+):
+    s = _vehicle(load_scenario("paper"))
+    kit = SolverKit(s)
+    inputs = _inputs(s, seed=8)
+    inp = inputs[10]
+    assert inp.prev_plan is not None and inp.prev_plan.uav_velocity_mps is not None
+    planned = inp.prev_plan.uav_velocity_mps
+    measured = planned + np.array([[3.0, -2.0], [0.0, 0.0], [-1.0, 4.0]])
+    far = inp.prev_xy + np.array([[0.0, 0.0], [0.0, 0.0], [5.0, 0.0]])  # vehicle 2 off its plan
+    got = planned_start_velocity(s, far, measured, inp.prev_plan)
+    np.testing.assert_array_equal(got[:2], planned[:2])
+    np.testing.assert_array_equal(got[2], measured[2])
+    plan = plan_slot(replace(inp, prev_velocity=measured), kit, "horizon")
+    assert plan.horizon is not None, plan.report.reason
