@@ -37,6 +37,7 @@ from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.planner_thread import SOLVE_LOCK
 from isac_mission.service.ground.report import GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
 
@@ -139,10 +140,10 @@ async def fly_mission(
     """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere."""
     say = on_status or (lambda _msg: None)
     planning = planning_scenario(s, opts)
-    kit = SolverKit(planning)
+    kit = SolverKit(planning, solve_lock=SOLVE_LOCK)
     # On a thread: the event loop meanwhile opens an embedded world's vehicles (ground stations
     # see them at once) and the bus; the kit is not used by anything else until it returns.
-    await asyncio.to_thread(kit.warm_up)
+    await asyncio.to_thread(kit.warm_up, opts.method)
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(
         s,

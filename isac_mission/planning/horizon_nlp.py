@@ -25,6 +25,7 @@ Distances are constrained squared in units of S^2, tightened by SOLVER_MARGIN_M.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +36,7 @@ from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
 from isac_mission.planning.legs import chord_point_clearance_m
-from isac_mission.planning.nlp_rows import NlpRows, relative_rate
+from isac_mission.planning.nlp_rows import NlpRows, SolveLock, relative_rate, scaled_inverse_sx
 from isac_mission.planning.polish import MIN_SHARE, RATE_MARGIN, _information_terms
 from isac_mission.planning.positions import SOLVER_MARGIN_M
 from isac_mission.planning.safety import SafetyMargins
@@ -103,7 +104,11 @@ class HorizonSolution:
 class HorizonNLP:
     """The horizon problem for the scenario's M UAVs and n_keep_out keep-out points."""
 
-    def __init__(self, scenario: Scenario, n_keep_out: int = 0) -> None:
+    def __init__(
+        self, scenario: Scenario, n_keep_out: int = 0, lock: SolveLock | None = None
+    ) -> None:
+        """lock: held around IPOPT's construction and every solve (SolverKit.solve_lock)."""
+        lock = lock if lock is not None else contextlib.nullcontext()
         s = scenario
         cfg = s.planner.horizon
         M, L, K = s.M, cfg.length, cfg.leg_samples
@@ -207,11 +212,11 @@ class HorizonNLP:
                     for frac in fracs:
                         add(sq(along(h, i, frac) - along(h, j, frac)), pair2, inf)
             add(ca.sum1(eta[h * M : (h + 1) * M]), 1.0, 1.0)
-            C = _scaled_inverse(0.5 * (J + J.T), scale_j[4 * h : 4 * h + 4])
+            C = scaled_inverse_sx(0.5 * (J + J.T), scale_j[4 * h : 4 * h + 4])
             objective = objective + weights[h] * ca.trace(C)
             if h + 1 < L:
                 P = ca.mtimes(ca.mtimes(ca.DM(F), C), ca.DM(F.T)) + ca.DM(W)
-                J_prior = _scaled_inverse(0.5 * (P + P.T), scale_p[4 * h : 4 * h + 4])
+                J_prior = scaled_inverse_sx(0.5 * (P + P.T), scale_p[4 * h : 4 * h + 4])
 
         x = ca.vertcat(z, u, eta)
         p = ca.vertcat(*params)
@@ -223,7 +228,9 @@ class HorizonNLP:
             "print_time": False,
             "ipopt": {**IPOPT_OPTIONS, "max_iter": cfg.max_iterations},
         }
-        self.solver = ca.nlpsol("horizon", "ipopt", nlp, opts)
+        with lock:
+            self.solver = ca.nlpsol("horizon", "ipopt", nlp, opts)
+        self.lock: SolveLock = lock
         # For tests and the start point's scale: the weighted objective itself and its gradient.
         self.objective = ca.Function("f", [x, p], [objective])
         self.gradient = ca.Function("df", [x, p], [ca.gradient(objective, x)])
@@ -362,8 +369,9 @@ class HorizonNLP:
         x0, p = self.pack(xy0, velocity0, eta0, data, f0 if np.isfinite(f0) and f0 > 0 else 1.0)
         lbx, ubx = self.bounds(data)
         x0 = np.clip(x0, lbx, ubx)
-        sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg)
-        stats = self.solver.stats()
+        with self.lock:
+            sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg)
+            stats = self.solver.stats()
         xy, velocity, eta = self.unpack(np.asarray(sol["x"], dtype=float).ravel(), data)
         eta = np.maximum(eta, 0.0)
         eta = eta / eta.sum(axis=1, keepdims=True)
@@ -375,27 +383,3 @@ class HorizonNLP:
             success=bool(stats.get("success", False)),
             iterations=int(stats.get("iter_count", 0)),
         )
-
-
-def _scaled_inverse(A: ca.SX, scale: ca.SX) -> ca.SX:
-    """A^-1 [4, 4] of a symmetric positive-definite SX matrix, scaled by D = diag(scale [4])
-    first (A^-1 = D (D A D)^-1 D), by 2 x 2 blocks (Schur complement: a far smaller expression,
-    and Hessian, than a symbolic solve; a symbolic scaling 1 / sqrt(diag A) made the Hessian ten
-    times dearer)."""
-    D = ca.diag(scale)
-    S = ca.mtimes(ca.mtimes(D, A), D)
-    P, Q, R = S[:2, :2], S[:2, 2:], S[2:, 2:]
-    P_inv = _inverse_2x2(P)
-    schur_inv = _inverse_2x2(R - ca.mtimes(ca.mtimes(Q.T, P_inv), Q))
-    X = ca.mtimes(P_inv, Q)  # P^-1 Q
-    top_right = -ca.mtimes(X, schur_inv)
-    top_left = P_inv + ca.mtimes(ca.mtimes(X, schur_inv), X.T)
-    inv = ca.vertcat(ca.horzcat(top_left, top_right), ca.horzcat(top_right.T, schur_inv))
-    return ca.mtimes(ca.mtimes(D, inv), D)
-
-
-def _inverse_2x2(A: ca.SX) -> ca.SX:
-    """A^-1 of a 2 x 2 SX matrix by its adjugate."""
-    det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-    adj = ca.vertcat(ca.horzcat(A[1, 1], -A[0, 1]), ca.horzcat(-A[1, 0], A[0, 0]))
-    return adj / det

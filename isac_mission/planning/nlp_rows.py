@@ -1,12 +1,21 @@
-"""Constraint rows shared by the CasADi NLPs (planning/polish.py, planning/horizon_nlp.py)."""
+"""Pieces shared by the CasADi NLPs (planning/polish.py, planning/horizon_nlp.py): constraint
+rows, the 14a row, 4 x 4 inverses of symbols, and the solve lock's type."""
 
 from __future__ import annotations
+
+from contextlib import AbstractContextManager
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.types import FloatArray
+
+SolveLock = AbstractContextManager[Any]
+"""What SolverKit.solve_lock is: held around every IPOPT construction and solve. The live service
+passes one threading lock to all its kits (IPOPT's MUMPS keeps global state: two solves at once,
+a timed-out plan's thread beside the next slot's, corrupt memory); offline it is a null context."""
 
 
 class NlpRows:
@@ -35,3 +44,27 @@ def relative_rate(q: ca.SX, serving: ca.SX, eta: ca.SX, s: Scenario, link_margin
     dist2 = d2 if link_margin_m == 0 else (ca.sqrt(d2 + 1e-12) + link_margin_m) ** 2
     rate: ca.SX = eta * s.B * ca.log1p(s.rho0 / (dist2 + s.dH**2)) / (np.log(2.0) * s.r_th)
     return rate - 1.0
+
+
+def scaled_inverse_sx(A: ca.SX, scale: ca.SX) -> ca.SX:
+    """A^-1 [4, 4] of a symmetric positive-definite SX matrix, scaled by D = diag(scale [4])
+    first (A^-1 = D (D A D)^-1 D), by 2 x 2 blocks (Schur complement: a far smaller expression,
+    and Hessian, than a symbolic solve; a symbolic scaling 1 / sqrt(diag A) made the Hessian ten
+    times dearer)."""
+    D = ca.diag(scale)
+    S = ca.mtimes(ca.mtimes(D, A), D)
+    P, Q, R = S[:2, :2], S[:2, 2:], S[2:, 2:]
+    P_inv = _inverse_2x2(P)
+    schur_inv = _inverse_2x2(R - ca.mtimes(ca.mtimes(Q.T, P_inv), Q))
+    X = ca.mtimes(P_inv, Q)  # P^-1 Q
+    top_right = -ca.mtimes(X, schur_inv)
+    top_left = P_inv + ca.mtimes(ca.mtimes(X, schur_inv), X.T)
+    inv = ca.vertcat(ca.horzcat(top_left, top_right), ca.horzcat(top_right.T, schur_inv))
+    return ca.mtimes(ca.mtimes(D, inv), D)
+
+
+def _inverse_2x2(A: ca.SX) -> ca.SX:
+    """A^-1 of a 2 x 2 SX matrix by its adjugate."""
+    det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    adj = ca.vertcat(ca.horzcat(A[1, 1], -A[0, 1]), ca.horzcat(-A[1, 0], A[0, 0]))
+    return adj / det

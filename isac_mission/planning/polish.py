@@ -31,6 +31,7 @@ squared, in units of L^2, tightened by SOLVER_MARGIN_M like the SCA subproblem.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,7 +40,7 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.planning.feasibility import SlotConstraints
-from isac_mission.planning.nlp_rows import NlpRows, relative_rate
+from isac_mission.planning.nlp_rows import NlpRows, SolveLock, relative_rate
 from isac_mission.planning.positions import SOLVER_MARGIN_M
 from isac_mission.planning.safety import SafetyMargins, leg_samples, rule_on
 from isac_mission.tracking.pcrb import PlanningObjective
@@ -88,8 +89,16 @@ class PolishNLP:
     """The exact slot problem for M UAVs and n_keep_out keep-out points, built once (symbolic
     parameters) and solved per slot by `polish`."""
 
-    def __init__(self, scenario: Scenario, n_keep_out: int = 0, max_iterations: int = 50) -> None:
-        """max_iterations: IPOPT's iteration cap (planner.polish_max_iterations)."""
+    def __init__(
+        self,
+        scenario: Scenario,
+        n_keep_out: int = 0,
+        max_iterations: int = 50,
+        lock: SolveLock | None = None,
+    ) -> None:
+        """max_iterations: IPOPT's iteration cap (planner.polish_max_iterations); lock: held
+        around IPOPT's construction and every solve (SolverKit.solve_lock)."""
+        self.lock: SolveLock = lock if lock is not None else contextlib.nullcontext()
         s = scenario
         M = s.M
         self.scenario = s
@@ -187,7 +196,8 @@ class PolishNLP:
             "print_time": False,
             "ipopt": {**IPOPT_OPTIONS, "max_iter": max_iterations},
         }
-        self.solver = ca.nlpsol("polish", "ipopt", nlp, opts)
+        with self.lock:
+            self.solver = ca.nlpsol("polish", "ipopt", nlp, opts)
         # For tests: the objective tr(C) itself (not divided by f_scale), its gradient and Hessian
         # with respect to x = (z [M, 2] column-major, eta [M]).
         self.objective = ca.Function("f", [x, p], [f_true])
@@ -318,8 +328,9 @@ class PolishNLP:
         lbx = np.concatenate([lbz.reshape(-1, order="F"), np.full(M, MIN_SHARE)])
         ubx = np.concatenate([ubz.reshape(-1, order="F"), np.ones(M)])
         x0 = np.clip(x0, lbx, ubx)
-        sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg)
-        stats = self.solver.stats()
+        with self.lock:
+            sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg)
+            stats = self.solver.stats()
         status = str(stats.get("return_status", "unknown"))
         iterations = int(stats.get("iter_count", 0))
         xy, eta = self.unpack(np.asarray(sol["x"], dtype=float).ravel(), cons)

@@ -19,6 +19,7 @@ call the same function. The strategies share it:
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from isac_mission.planning.communication import communication_optimal, lemma1_sh
 from isac_mission.planning.feasibility import SlotConstraints, capacity_ok, operating_area
 from isac_mission.planning.horizon import plan_horizon
 from isac_mission.planning.horizon_nlp import HorizonNLP
+from isac_mission.planning.nlp_rows import SolveLock
 from isac_mission.planning.polish import PolishNLP
 from isac_mission.planning.positions import PositionSubproblem, optimise_positions
 from isac_mission.planning.safety import target_clearance_m
@@ -78,12 +80,20 @@ class SlotInput:
 class SolverKit:
     """The convex problems of one scenario, built once (DPP) and re-solved every slot."""
 
-    def __init__(self, scenario: Scenario, fast: bool = True, n_keep_out: int = 0) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        fast: bool = True,
+        n_keep_out: int = 0,
+        solve_lock: SolveLock | None = None,
+    ) -> None:
         """fast=False is the reference path (the planner before docs/performance.md): (P1.1.2)
         through cvxpy instead of a direct Clarabel call, (P1.2.1) by the cvxpy LP instead of its
         closed-form vertex, the association LP every slot, and the per-UAV line search on full
         batches. Both paths solve the same problems; they differ by solver tolerance.
-        n_keep_out: the number of keep-out points (SlotInput.keep_out_xy) each slot carries."""
+        n_keep_out: the number of keep-out points (SlotInput.keep_out_xy) each slot carries.
+        solve_lock: held around every IPOPT construction and solve (planning/nlp_rows.SolveLock;
+        the live service shares one threading lock between its kits); None: a null context."""
         s = scenario
         self.scenario = s
         self.fast = fast
@@ -92,6 +102,9 @@ class SolverKit:
         self.positions = PositionSubproblem(s, s.planner.solver, direct=fast, n_keep_out=n_keep_out)
         self.shares = BandwidthSubproblem(s.M, "closed-form" if fast else "HIGHS")
         self.association = AssociationLP(s.M, s.K, s.n_a, shortcut=fast)
+        self.solve_lock: SolveLock = (
+            solve_lock if solve_lock is not None else contextlib.nullcontext()
+        )
         self._polish: PolishNLP | None = None
         self._horizon: HorizonNLP | None = None
 
@@ -100,14 +113,16 @@ class SolverKit:
         """The exact slot problem (planning/polish.py), built on first use and kept."""
         if self._polish is None:
             s = self.scenario
-            self._polish = PolishNLP(s, self.n_keep_out, s.planner.polish_max_iterations)
+            self._polish = PolishNLP(
+                s, self.n_keep_out, s.planner.polish_max_iterations, self.solve_lock
+            )
         return self._polish
 
     @property
     def horizon(self) -> HorizonNLP:
         """The receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept."""
         if self._horizon is None:
-            self._horizon = HorizonNLP(self.scenario, self.n_keep_out)
+            self._horizon = HorizonNLP(self.scenario, self.n_keep_out, self.solve_lock)
         return self._horizon
 
     def warm_up(self, method: Method = "proposed") -> None:

@@ -234,3 +234,44 @@ def test_the_first_legs_start_from_last_plans_end_velocity_where_the_vehicle_is_
     np.testing.assert_array_equal(got[2], measured[2])
     plan = plan_slot(replace(inp, prev_velocity=measured), kit, "horizon")
     assert plan.horizon is not None, plan.report.reason
+
+
+class _CountingLock:
+    """A context manager that counts how often it is entered (a stand-in for a lock)."""
+
+    def __init__(self) -> None:
+        self.entered = 0
+        self.depth = 0
+
+    def __enter__(self) -> None:
+        self.entered += 1
+        self.depth += 1
+
+    def __exit__(self, *exc: object) -> None:
+        self.depth -= 1
+
+
+def test_every_ipopt_construction_and_solve_holds_the_kits_solve_lock() -> None:
+    s = load_scenario("paper")
+    lock = _CountingLock()
+    kit = SolverKit(s, solve_lock=lock)
+    inp = _inputs(s, "proposed")[4]
+    plan_slot(inp, kit, "horizon")  # builds both NLPs, polishes and solves the horizon
+    assert lock.entered >= 4  # polish built + solved, horizon built + solved
+    assert lock.depth == 0
+    seen = lock.entered
+    calls = []
+    original = kit.horizon.solver
+
+    class Spy:
+        def __call__(self, **kw: object) -> object:
+            calls.append(lock.depth)
+            return original(**kw)
+
+        def stats(self) -> dict[str, object]:
+            return dict(original.stats())
+
+    kit.horizon.solver = Spy()
+    plan_slot(inp, kit, "horizon")
+    assert calls and all(depth == 1 for depth in calls)
+    assert lock.entered > seen

@@ -51,7 +51,12 @@ class KitCache:
         if kit is None:
             idx = list(active)
             sub = s.with_changes(M=len(idx), uav_start_xy=s.uav_start_xy[idx])
-            kit = SolverKit(sub, fast=self.full.fast, n_keep_out=s.M - len(idx))
+            kit = SolverKit(
+                sub,
+                fast=self.full.fast,
+                n_keep_out=s.M - len(idx),
+                solve_lock=self.full.solve_lock,
+            )
             kit.warm_up()
             self._kits[active] = kit
         return kit

@@ -27,7 +27,7 @@ from isac_mission.service.ground.control import ControlDesk
 from isac_mission.service.ground.exclusion import VehicleWatch
 from isac_mission.service.ground.fleet_plan import PlanningJob
 from isac_mission.service.ground.mission import MissionState
-from isac_mission.service.ground.planner_thread import consume_result, in_daemon_thread
+from isac_mission.service.ground.planner_thread import SOLVE_LOCK, consume_result, in_daemon_thread
 from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.service.ground.startup import PlanningGate, skip_slot
@@ -67,7 +67,7 @@ class GroundLoop:
         self.bus = bus
         self.keys = Keys(scenario.mission_id)
         self.settings = settings
-        self.kit = kit if kit is not None else SolverKit(scenario)
+        self.kit = kit if kit is not None else SolverKit(scenario, solve_lock=SOLVE_LOCK)
         self.on_slot = on_slot
         self.report = GroundReport()
         self.state = MissionState(

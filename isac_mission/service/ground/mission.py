@@ -127,7 +127,7 @@ class MissionState:
 
     def renew_kits(self) -> None:
         """Plan on fresh solver kits from now on (a timed-out planner thread keeps the old)."""
-        self.kit = SolverKit(self.scenario, fast=self.kit.fast)
+        self.kit = SolverKit(self.scenario, fast=self.kit.fast, solve_lock=self.kit.solve_lock)
         self.kits = KitCache(self.kit)
 
     def set_scenario(self, s: Scenario) -> None:

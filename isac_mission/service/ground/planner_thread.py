@@ -10,6 +10,13 @@ from typing import cast
 
 from isac_mission.types import SlotPlan
 
+SOLVE_LOCK = threading.RLock()
+"""The service's SolverKit.solve_lock, shared by every kit it builds: a plan that outlives its
+budget keeps its thread (and its kit), and its IPOPT solve must not run beside the next slot's
+(MUMPS keeps global state: a 3600-slot soak with `horizon` aborted with "malloc(): unaligned
+fastbin chunk detected" after a run of timed-out plans). Only IPOPT is serialised; the rest of a
+late plan runs beside the next."""
+
 
 def in_daemon_thread(fn: Callable[[], SlotPlan], name: str) -> asyncio.Future[SlotPlan]:
     """Run fn on a new daemon thread; its result as a future of the running loop. A daemon
