@@ -118,6 +118,17 @@ class SolverKit:
             )
         return self._polish
 
+    def renewed(self) -> SolverKit:
+        """A kit with fresh convex problems (their cvxpy Parameters are per-kit state, which a
+        timed-out plan's thread may still be writing) sharing this kit's IPOPT problems (built
+        once: their solves are serialised by solve_lock). A horizon kit rebuilt after every
+        timeout spent its next plan's budget on the build, and the timeouts cascaded."""
+        kit = SolverKit(
+            self.scenario, fast=self.fast, n_keep_out=self.n_keep_out, solve_lock=self.solve_lock
+        )
+        kit._polish, kit._horizon = self._polish, self._horizon
+        return kit
+
     @property
     def horizon(self) -> HorizonNLP:
         """The receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept."""

@@ -275,3 +275,15 @@ def test_every_ipopt_construction_and_solve_holds_the_kits_solve_lock() -> None:
     plan_slot(inp, kit, "horizon")
     assert calls and all(depth == 1 for depth in calls)
     assert lock.entered > seen
+
+
+def test_a_renewed_kit_shares_the_ipopt_problems_and_plans_the_same() -> None:
+    s = load_scenario("paper")
+    kit = SolverKit(s)
+    inp = _inputs(s, "proposed")[6]
+    first = plan_slot(inp, kit, "horizon")
+    renewed = kit.renewed()
+    assert renewed.horizon is kit.horizon and renewed.polish is kit.polish
+    assert renewed.positions is not kit.positions  # the convex problems are fresh
+    again = plan_slot(inp, renewed, "horizon")
+    np.testing.assert_allclose(again.uav_xy_m, first.uav_xy_m, atol=1e-6)

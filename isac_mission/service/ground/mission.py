@@ -126,8 +126,12 @@ class MissionState:
         return self.commit(job, job.run())
 
     def renew_kits(self) -> None:
-        """Plan on fresh solver kits from now on (a timed-out planner thread keeps the old)."""
-        self.kit = SolverKit(self.scenario, fast=self.kit.fast, solve_lock=self.kit.solve_lock)
+        """Plan on fresh solver kits from now on (a timed-out planner thread keeps the old);
+        the IPOPT problems are kept while the scenario is the same (SolverKit.renewed)."""
+        if self.kit.scenario is self.scenario:
+            self.kit = self.kit.renewed()
+        else:
+            self.kit = SolverKit(self.scenario, fast=self.kit.fast, solve_lock=self.kit.solve_lock)
         self.kits = KitCache(self.kit)
 
     def set_scenario(self, s: Scenario) -> None:
