@@ -376,6 +376,11 @@ async def test_serve_serves_the_console_of_a_mission_whose_world_runs_elsewhere(
             page = await b.new_page()
             await page.goto(url)
             await wait_slot(page, 3)
+            # The slot label and the vehicles are drawn from different streams: under load the
+            # telemetry can be drawn after slot 3 is shown (CI saw an empty map there).
+            await page.wait_for_function(
+                "Object.keys(window.consoleState.M.drawn).length >= 3", timeout=PAGE_TIMEOUT_MS
+            )
             drawn = await page.evaluate("window.consoleState.M.drawn")
             assert sorted(drawn) == ["0", "1", "2"]
         out, err = await asyncio.to_thread(serve.communicate, None, 300)
