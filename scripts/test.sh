@@ -1,12 +1,21 @@
 #!/usr/bin/env bash
-# The whole test suite: set up the venv if needed, lint, type-check, then pytest.
-# Extra arguments go to pytest (e.g. --full for the full-size Monte Carlo and soak tests).
+# The test suite by tiers (README, "Tests"; tiers in tests/conftest.py): set up the venv if
+# needed, lint, type-check, the fast tier, and, unless --fast, the live tier.
+#   ./scripts/test.sh           ruff, mypy, fast tier, then live tier (what CI runs: .ci/run)
+#   ./scripts/test.sh --fast    ruff, mypy, fast tier only (a few minutes: after every change)
+#   ./scripts/test.sh --full    also the slow tier (full-size variants) in each tier
+# Other arguments go to pytest (e.g. -k NAME, -x). The live tier runs only if the fast one passed.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+fast_only=0
+args=()
+for arg in "$@"; do
+    if [ "$arg" = "--fast" ]; then fast_only=1; else args+=("$arg"); fi
+done
 source "$root/scripts/setup-venv.sh"
 cd "$root"
-# The console's browser tests drive Debian's Chromium (tests/e2e/test_console.py).
-if [ ! -x /usr/bin/chromium ]; then
+# The console's browser tests (live tier) drive Debian's Chromium (tests/e2e/test_console.py).
+if [ "$fast_only" = 0 ] && [ ! -x /usr/bin/chromium ]; then
     echo "test.sh: /usr/bin/chromium is missing; installing Debian's chromium package" >&2
     if ! { apt-get update && apt-get install -y chromium; } >&2; then
         echo "test.sh: cannot install chromium (apt-get update && apt-get install -y chromium" \
@@ -17,4 +26,17 @@ fi
 ruff check .
 ruff format --check .
 mypy isac_mission sim
-exec python -m pytest -q "$@"
+
+# pytest's exit 5 (nothing collected) is a failure, except when the caller's own selection
+# (-k, a path) leaves one tier empty.
+tier() {
+    local status=0
+    echo "== $1 tier ==" >&2
+    python -m pytest -q -m "$1" "${@:2}" ${args[@]+"${args[@]}"} || status=$?
+    if [ "$status" = 5 ] && [ "${#args[@]}" -gt 0 ]; then status=0; fi
+    return "$status"
+}
+tier fast -p xdist -n 2
+python scripts/longest_modules.py
+if [ "$fast_only" = 1 ]; then exit 0; fi
+tier live -p xdist -n 2 --dist loadgroup

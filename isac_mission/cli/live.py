@@ -127,11 +127,46 @@ def _live(
         console_server = start_live_console(
             s, opts.method, ground_endpoint(s, opts), console_address, public=console_public
         )
+    code = 0
     try:
         _fly(s, opts, serve_only, out_dir)
+    except typer.Exit as done:
+        code = done.exit_code
+        raise
+    except BaseException:
+        code = 1
+        raise
     finally:
         if console_server is not None:
             console_server.stop()
+        _wait_for_the_planners(code)
+
+
+PLANNER_DRAIN_S = 60.0
+"""How long `run` and `serve` wait at exit for a plan still being solved (wall seconds): a
+timed-out plan's solve ends within IPOPT's iteration cap, seconds even for a large fleet."""
+
+
+def _wait_for_the_planners(code: int) -> None:
+    """No planner thread may be solving when the interpreter shuts down (a daemon thread in IPOPT
+    then aborts the process: service/ground/planner_thread.py). Wait for them, bounded; past the
+    bound, flush and leave at once with `code` (the trace and summary are already written)."""
+    import os
+    import sys
+
+    from isac_mission.service.ground.planner_thread import drain_planner_threads, planner_threads
+
+    if not planner_threads():
+        return
+    err_console.print("waiting for the planner to finish a solve before exiting")
+    if drain_planner_threads(PLANNER_DRAIN_S):
+        return
+    err_console.print(
+        f"a planner thread is still solving after {PLANNER_DRAIN_S:g} s; exiting without it"
+    )
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> None:

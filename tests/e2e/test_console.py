@@ -3,7 +3,7 @@
 - a live `run` on free ports: the page's slot counter advances, the UAV positions it draws are
   the telemetry's (within V_max / telemetry rate + 1 m), R_th set from the page reaches the ground
   loop, a screenshot is saved, and 20 WebSocket connections opened and dropped leave the service's
-  plan rate and memory alone;
+  planning and memory alone;
 - `view` over `simulate` traces: slider, play/pause, two methods side by side;
 - with Zenoh security on, a page without the operator password cannot send a control;
 - `serve` (the world in a separate `sim`) serves the same live page.
@@ -20,13 +20,12 @@ import subprocess
 import sys
 import time
 from collections import defaultdict
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pytest
-import websockets
 
 from isac_mission.bus import BusSettings, ZenohBus
 from isac_mission.bus.certs import generate_users_file
@@ -36,6 +35,7 @@ from isac_mission.records import read_trace
 from isac_mission.wire import Keys, decode_control, decode_plan, decode_telemetry
 from tests.support.browser import (
     browser,
+    churn_websockets,
     post,
     rss_kib,
     short_config,
@@ -112,10 +112,12 @@ async def wait_slot(page: Any, n: int) -> None:
     )
 
 
-def plan_rate(obs: Observer, t0: float, t1: float) -> float:
-    """Plans received per wall second in [t0, t1]."""
-    n = sum(1 for t, _ in obs.plans if t0 <= t <= t1)
-    return n / (t1 - t0)
+async def _wait_for(condition: Callable[[], bool], what: str, timeout_s: float = 120.0) -> None:
+    """Wait (bounded, generously) until condition() holds."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, f"no {what} within {timeout_s} s"
+        await asyncio.sleep(0.1)
 
 
 async def test_live_console_draws_the_telemetry_commands_and_survives_connection_churn(
@@ -194,26 +196,14 @@ async def test_live_console_draws_the_telemetry_commands_and_survives_connection
             if (target := _screenshot_target()) is not None:
                 shutil.copy(shot, target)
 
-            # 20 WebSocket connections opened and dropped, three times over.
-            t0 = time.monotonic()
-            await asyncio.sleep(8.0)
-            t1 = time.monotonic()
+            # 20 WebSocket connections opened and dropped, three times over: each is served
+            # its snapshot, the service goes on planning, its memory stays (the plan rate
+            # during the churn, a wall-clock figure, is bench/console_churn.py's).
             rss0 = rss_kib(proc.pid)
-            ws_url = url.replace("http://", "ws://") + "ws"
-            for _ in range(3):
-                socks = [await websockets.connect(ws_url) for _ in range(20)]
-                for s in socks:
-                    first_msg = json.loads(await asyncio.wait_for(s.recv(), 30))
-                    assert first_msg[0]["topic"] == "snapshot"
-                for s in socks:
-                    await s.close()
-                await asyncio.sleep(1.0)
-            await asyncio.sleep(2.0)
-            t2 = time.monotonic()
+            plans_before = len(obs.plans)
+            await churn_websockets(url, rounds=3, connections=20)
+            await _wait_for(lambda: len(obs.plans) > plans_before, "a plan after the churn")
             rss1 = rss_kib(proc.pid)
-            before, during = plan_rate(obs, t0, t1), plan_rate(obs, t1, t2)
-            assert before > 0.5
-            assert during >= 0.8 * before, (before, during)
             assert rss1 <= 1.1 * rss0, (rss0, rss1)
             # The dropped connections are gone: only the browser's page is left.
             deadline = time.monotonic() + 60

@@ -10,6 +10,7 @@ import re
 import signal
 import socket
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,14 @@ from isac_mission.planning.slot import METHODS
 from isac_mission.records import read_trace
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import compare_pcrb
-from tests.support.live_cli import cli, serve_argv, sim_argv, start
+from tests.support.live_cli import (
+    cli,
+    serve_argv,
+    short_mission,
+    sim_argv,
+    start,
+    wait_for_slots,
+)
 from tests.support.ports import SitlPorts, free_port_block, sitl_ports
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -304,3 +312,46 @@ def test_killed_run_leaves_every_completed_slot_readable(tmp_path: Path) -> None
     assert len(trace.slots) >= 4
     assert [r.slot for r in trace.slots] == list(range(1, len(trace.slots) + 1))
     assert compare_pcrb(trace) == []
+
+
+SLOW_SLOT, SLOW_SOLVE_S = 6, 20.0
+"""The plan of slot 6 first solves in IPOPT for about 20 s (tests/support/slow_solve.py): far past
+the 0.5 s plan budget, so it is held and the mission goes on, and past the mission's end."""
+
+
+@pytest.mark.parametrize("ending", ["completed", "sigint"])
+def test_a_solve_in_flight_when_the_mission_ends_leaves_a_clean_exit(
+    tmp_path: Path, ending: str
+) -> None:
+    """`run` exits 0 with its summary whether the mission completes (8 slots) or is stopped by
+    SIGINT while a timed-out plan's IPOPT solve is still running on its thread (before, the
+    interpreter's shutdown aborted the process: exit 134, "FATAL: exception not rethrown")."""
+    config = short_mission(tmp_path, 8, altitude_m=10.0)
+    endpoint, ports = _ports(3)
+    out = tmp_path / "run"
+    argv = [
+        *("run", str(config), "--speed", "5", "--plan-budget", "0.5", "--out", str(out)),
+        *("--zenoh-listen", endpoint, "--no-console", *ports.cli_args()),
+    ]
+    proc = start(
+        [sys.executable, "-m", "tests.support.slow_solve", str(SLOW_SLOT), str(SLOW_SOLVE_S), *argv]
+    )
+    trace_path = out / "trace_proposed.jsonl"
+    try:
+        if ending == "sigint":
+            # Record 5 is written once plan 6 is out: held after its budget, its solve running.
+            wait_for_slots(trace_path, SLOW_SLOT - 1, proc, timeout_s=240)
+            proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "slow solve started" in stderr
+    assert proc.returncode == 0, stderr[-3000:]
+    assert re.search(r"vehicles landed\s*│\s*3\s*│", stdout), stdout[-2000:]
+    trace = read_trace(trace_path)
+    statuses = {r.slot: r.status for r in trace.slots}
+    assert statuses[SLOW_SLOT - 1] == "ok"
+    if ending == "completed":
+        assert "8/8" in stdout
+        assert statuses[SLOW_SLOT] == "timeout", statuses

@@ -135,3 +135,21 @@ def stop(proc: subprocess.Popen[str], timeout_s: float = 120.0) -> str:
         proc.kill()
         out, _ = proc.communicate()
     return out or ""
+
+
+async def churn_websockets(url: str, rounds: int = 3, connections: int = 20) -> None:
+    """Open `connections` WebSocket clients on the console at `url`, read each one's first
+    message (a snapshot), close them all; `rounds` times, a wall second apart."""
+    import asyncio
+
+    import websockets
+
+    ws_url = url.replace("http://", "ws://") + "ws"
+    for _ in range(rounds):
+        socks = [await websockets.connect(ws_url) for _ in range(connections)]
+        for s in socks:
+            first_msg = json.loads(await asyncio.wait_for(s.recv(), 30))
+            assert first_msg[0]["topic"] == "snapshot"
+        for s in socks:
+            await s.close()
+        await asyncio.sleep(1.0)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
@@ -19,17 +17,6 @@ def test_version_prints_the_package_version() -> None:
     result = CliRunner().invoke(app, ["--version"])
     assert result.exit_code == 0
     assert result.output.strip() == f"isac-mission {isac_mission.__version__}"
-
-
-def test_python_dash_m_runs_the_cli() -> None:
-    out = subprocess.run(
-        [sys.executable, "-m", "isac_mission.cli", "--version"],
-        capture_output=True,
-        text=True,
-        check=True,
-        cwd=ROOT,
-    )
-    assert out.stdout.strip() == f"isac-mission {isac_mission.__version__}"
 
 
 def test_the_console_script_is_the_cli_main() -> None:
@@ -67,18 +54,6 @@ def test_an_unknown_scenario_name_exits_2_naming_the_choices() -> None:
     assert result.exit_code == 2
     assert "no such file, nor a shipped scenario" in result.output
     assert "paper-literal" in result.output
-
-
-def test_starting_the_cli_loads_neither_the_simulator_nor_the_service() -> None:
-    code = (
-        "import sys, isac_mission.cli; "
-        "print(sorted({m.split('.')[0] if m.startswith('sim') else m for m in sys.modules "
-        "if m == 'sim' or m.startswith(('sim.', 'isac_mission.service', 'zenoh', 'cvxpy'))}))"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
-    )
-    assert out.stdout.strip() == "[]"
 
 
 def test_simulate_takes_a_shipped_scenario_by_name(tmp_path: Path) -> None:

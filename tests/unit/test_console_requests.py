@@ -84,31 +84,3 @@ def test_console_addresses_are_loopback_unless_opted_in() -> None:
         with pytest.raises(ConfigError, match=text):
             parse_address(bad)
     assert parse_address("0.0.0.0:8080", allow_non_loopback=True).host == "0.0.0.0"
-
-
-def test_a_busy_console_port_is_reported_and_the_mission_goes_on(
-    capsys: pytest.CaptureFixture[str],
-) -> None:
-    import socket
-
-    from isac_mission.cli.view import start_live_console
-    from isac_mission.config import load_scenario
-    from isac_mission.console.server import ConsoleAddress, ConsolePortBusyError, bind
-
-    taken = socket.socket()
-    taken.bind(("127.0.0.1", 0))
-    taken.listen(1)
-    port = taken.getsockname()[1]
-    try:
-        with pytest.raises(ConsolePortBusyError) as info:
-            bind(ConsoleAddress("127.0.0.1", port))
-        text = str(info.value)
-        assert f"port {port}" in text and "--console HOST:PORT" in text and "--no-console" in text
-        server = start_live_console(
-            load_scenario("paper"), "proposed", "tcp/127.0.0.1:7447", f"127.0.0.1:{port}"
-        )
-        assert server is None
-        err = " ".join(capsys.readouterr().err.split())
-        assert f"port {port}" in err and "runs without the console" in err
-    finally:
-        taken.close()

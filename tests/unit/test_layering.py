@@ -79,8 +79,6 @@ CLI = "isac_mission.cli"
 EMBEDDED = "isac_mission/cli/embedded.py"
 """The one module that imports both `sim` and the service (`isac-mission run`)."""
 
-MAX_LINES = 400
-
 
 # --------------------------------------------------------------------------------------------
 # The checker
@@ -233,20 +231,6 @@ def console_violations(root: Path) -> list[str]:
     return out
 
 
-def line_count(path: Path) -> int:
-    """Lines in a file (as an editor numbers them)."""
-    return len(path.read_text(encoding="utf-8").splitlines())
-
-
-def length_violations(root: Path, limit: int = MAX_LINES) -> list[str]:
-    """Modules of isac_mission and sim over `limit` lines: each holds two jobs, split it."""
-    return [
-        f"{_rel(path, root)}: {n} lines (limit {limit})"
-        for path in python_files(root)
-        if (n := line_count(path)) > limit
-    ]
-
-
 # --------------------------------------------------------------------------------------------
 # The repository keeps the rules
 
@@ -308,10 +292,6 @@ def test_the_console_rule_finds_a_violation(tmp_path: Path) -> None:
     assert adapter_violations(root, "starlette", ADAPTERS["starlette"]) == []
 
 
-def test_no_module_is_over_400_lines() -> None:
-    assert length_violations(ROOT) == []
-
-
 # --------------------------------------------------------------------------------------------
 # The checker finds what it must
 
@@ -356,7 +336,6 @@ def test_each_rule_reports_a_violation(tmp_path: Path) -> None:
             "isac_mission/cli/live.py": "import sim.world\nfrom isac_mission.service import x\n",
             "isac_mission/records/writer.py": "from isac_mission.experiment import plots\n",
             "isac_mission/tracking/cycle.py": "def f():\n    from isac_mission.service import g\n",
-            "isac_mission/frames.py": "x = 1\n" * (MAX_LINES + 1),
         },
     )
     assert pure_io_violations(root) == ["isac_mission/planning/slot.py: imports socket"]
@@ -376,7 +355,6 @@ def test_each_rule_reports_a_violation(tmp_path: Path) -> None:
         "isac_mission/records/writer.py",
         "isac_mission/tracking/cycle.py",
     ]
-    assert length_violations(root) == [f"isac_mission/frames.py: {MAX_LINES + 1} lines (limit 400)"]
 
 
 def test_a_clean_tree_has_no_violations(tmp_path: Path) -> None:
@@ -388,7 +366,6 @@ def test_a_clean_tree_has_no_violations(tmp_path: Path) -> None:
             "isac_mission/mavwire/link.py": "import asyncio\nfrom . import dialect\n",
             "isac_mission/cli/embedded.py": "import sim.world\nimport isac_mission.service\n",
             "sim/world.py": "from isac_mission.bus import session\n",
-            "isac_mission/frames.py": "x = 1\n" * MAX_LINES,
         },
     )
     assert pure_io_violations(root) == []
@@ -397,4 +374,3 @@ def test_a_clean_tree_has_no_violations(tmp_path: Path) -> None:
     assert sim_violations(root) == []
     assert sim_importer_violations(root) == []
     assert neutral_violations(root) == []
-    assert length_violations(root) == []

@@ -3,8 +3,6 @@ package's, and the notebook helpers compose the library's own pieces without cha
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
@@ -35,12 +33,6 @@ def test_the_version_has_one_source() -> None:
     assert "version" not in project
     assert "version" in project["dynamic"]
     assert im.__version__.count(".") == 2
-
-
-def test_importing_the_package_loads_no_solver_nor_plotting() -> None:
-    code = "import sys, isac_mission; print(sorted(m for m in ('cvxpy', 'matplotlib', 'zenoh') if m in sys.modules))"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]"
 
 
 def test_first_slot_input_starts_at_the_start_points() -> None:
