@@ -359,15 +359,18 @@ async def test_serve_serves_the_console_of_a_mission_whose_world_runs_elsewhere(
             f"127.0.0.1:{port}",
         )
     )
-    world = start(sim_argv(config, endpoint, ports))
+    world: subprocess.Popen[str] | None = None
     try:
         await asyncio.to_thread(wait_http, url, serve)
         async with browser() as b:
             page = await b.new_page()
             await page.goto(url)
+            # The world starts once the page is open: `serve` flies nothing before it, so the
+            # page cannot miss the mission (a 12-slot mission at --speed 10 lasts seconds, about
+            # what starting Chromium takes on a loaded machine: CI once saw an empty map).
+            world = start(sim_argv(config, endpoint, ports))
             await wait_slot(page, 3)
-            # The slot label and the vehicles are drawn from different streams: under load the
-            # telemetry can be drawn after slot 3 is shown (CI saw an empty map there).
+            # The slot label and the vehicles are drawn from different streams: wait for both.
             await page.wait_for_function(
                 "Object.keys(window.consoleState.M.drawn).length >= 3", timeout=PAGE_TIMEOUT_MS
             )
@@ -377,5 +380,6 @@ async def test_serve_serves_the_console_of_a_mission_whose_world_runs_elsewhere(
         assert serve.returncode == 0, err[-3000:]
         assert f"console: {url}" in out
     finally:
-        stop(world, 60)
+        if world is not None:
+            stop(world, 60)
         stop(serve, 60)

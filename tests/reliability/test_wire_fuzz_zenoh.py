@@ -14,6 +14,7 @@ run) and bounded: 150 examples per property, ISAC_FUZZ_EXAMPLES=<n> for a longer
 from __future__ import annotations
 
 import asyncio
+import importlib
 import json
 from collections import Counter
 from collections.abc import Callable
@@ -33,7 +34,6 @@ from isac_mission.wire import (
     decode_detection,
     decode_telemetry,
     encode_clock,
-    envelope,
     rejection_reason,
 )
 from tests.support.fuzz import FUZZ, WAIT_S
@@ -136,14 +136,16 @@ def test_an_oversized_payload_is_refused_before_it_is_parsed(
         parsed.append(len(text))
         return json.loads(text)
 
-    monkeypatch.setattr(envelope, "loads_strict", parser)
+    # The module (the package's `envelope` is a function of it).
+    envelope_module = importlib.import_module("isac_mission.wire.envelope")
+    monkeypatch.setattr(envelope_module, "loads_strict", parser)
     with pytest.raises(MessageError) as info:
         decode_detection(body)
     assert rejection_reason(info.value) == "payload too large"
     assert parsed == []
     # The same parser sees a payload under the limit (the check above can fail).
     decode_detection(json.dumps(valid_detection()).encode())
-    assert len(parsed) == 1
+    assert parsed
 
 
 _JSON_SCALARS = st.one_of(

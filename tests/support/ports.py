@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 import random
 import socket
 from collections.abc import Iterator
@@ -60,6 +61,25 @@ def free_udp_ports(n: int) -> list[int]:
             s.close()
 
 
+BLOCK_PORTS = (20_000, 32_000)
+"""Where port blocks are drawn: below Linux's ephemeral range (32768-60999), so that no port the
+kernel hands out (a `bind(0)`, an outgoing connection's local port) falls in a block."""
+MAX_WORKERS = 4
+"""Parallel test workers (pytest-xdist) that get their own slice of BLOCK_PORTS."""
+
+
+def _block_range() -> tuple[int, int]:
+    """This process's slice of BLOCK_PORTS: pytest-xdist worker gwK draws its blocks from slice
+    K mod MAX_WORKERS, so that two workers never probe the same block at once."""
+    low, high = BLOCK_PORTS
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    if not worker.startswith("gw"):
+        return low, high
+    width = (high - low) // MAX_WORKERS
+    k = int(worker[2:]) % MAX_WORKERS
+    return low + k * width, low + (k + 1) * width
+
+
 def free_port_block(n: int, kind: int = socket.SOCK_DGRAM, tries: int = 200) -> int:
     """A base port such that base .. base + n - 1 were all free on 127.0.0.1 a moment ago.
 
@@ -69,8 +89,9 @@ def free_port_block(n: int, kind: int = socket.SOCK_DGRAM, tries: int = 200) -> 
     if n < 1:
         raise ValueError(f"a port block needs n >= 1, got {n}")
     rng = random.Random()
+    low, high = _block_range()
     for _ in range(tries):
-        base = rng.randrange(20_000, 60_000 - n)
+        base = rng.randrange(low, high - n)
         socks: list[socket.socket] = []
         try:
             for port in range(base, base + n):
