@@ -24,6 +24,8 @@ T = TypeVar("T")
 
 SIM_SPEED = 4.0
 """Simulation seconds per wall second in these tests."""
+SIM_TICK_HZ = 50.0
+"""The vehicles' simulation tick rate (Hz of simulation time)."""
 
 
 def wait_until(condition: Callable[[], T], timeout_s: float, what: str, poll_s: float = 0.01) -> T:
@@ -57,7 +59,7 @@ class SimRunner:
 
     def __init__(self, settings: list[AutopilotSettings], speed: float = SIM_SPEED) -> None:
         self.autopilots = [Autopilot(s) for s in settings]
-        self.clock = SimClock(tick_hz=50.0, speed=speed)
+        self.clock = SimClock(tick_hz=SIM_TICK_HZ, speed=speed)
         for ap in self.autopilots:
             self.clock.add_tick_callback(ap.step)
         self._loop = asyncio.new_event_loop()
