@@ -36,7 +36,10 @@ tier() {
     if [ "$status" = 5 ] && [ "${#args[@]}" -gt 0 ]; then status=0; fi
     return "$status"
 }
-tier fast -p xdist -n 2
+# Fast: two workers, a test file per worker (a module's fixtures, e.g. Monte Carlo runs, once).
+tier fast -n 2 --dist loadfile
 python scripts/longest_modules.py
 if [ "$fast_only" = 1 ]; then exit 0; fi
-tier live -p xdist -n 2 --dist loadgroup
+# Live: a live test mostly waits on simulation time (two workers kept about one core busy),
+# so three workers share the two cores; each test has its own ports (tests/support/ports.py).
+tier live -n 3 --dist worksteal

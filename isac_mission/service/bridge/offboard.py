@@ -35,6 +35,9 @@ from isac_mission.types import FloatArray
 
 log = logging.getLogger(__name__)
 
+TAKEOFF_ATTEMPTS = 3
+"""Arm-and-takeoff attempts at the mission start (OffboardEntry._arm_and_take_off)."""
+
 
 class OffboardEntry:
     """Takes one vehicle into OFFBOARD (and back into it after a link loss).
@@ -74,6 +77,22 @@ class OffboardEntry:
     def _vehicle_xy(self) -> FloatArray | None:
         return vehicle_xy(self.link.status(), self._origin)
 
+    async def _arm_and_take_off(self, target_amsl_m: float) -> None:
+        """Arm, then take off to `target_amsl_m`. A vehicle left armed on the ground disarms
+        itself after COM_DISARM_PRFLT (10 s), and then refuses the takeoff (DENIED): over a lossy
+        radio the takeoff's acknowledgements can be lost for that long (CI saw it). Arm again
+        and retry, TAKEOFF_ATTEMPTS times in all; LinkError after the last."""
+        vehicle = self.vehicle
+        for attempt in range(1, TAKEOFF_ATTEMPTS + 1):
+            await vehicle.command(arm_command(self.link.target, True))
+            try:
+                await vehicle.command(takeoff_command(self.link.target, target_amsl_m))
+                return
+            except LinkError as err:
+                if "DENIED" not in str(err) or attempt == TAKEOFF_ATTEMPTS:
+                    raise
+                log.warning("vehicle %d: %s; arming again (attempt %d)", self.index, err, attempt)
+
     async def enter(
         self, start: FloatArray, altitude_m: float, plan_arrived: Callable[[], bool]
     ) -> None:
@@ -97,8 +116,7 @@ class OffboardEntry:
                 lambda st: st.home_amsl_m is not None, s.phase_timeout_s, "home position"
             )
             assert st.home_amsl_m is not None
-            await vehicle.command(arm_command(self.link.target, True))
-            await vehicle.command(takeoff_command(self.link.target, st.home_amsl_m + altitude_m))
+            await self._arm_and_take_off(st.home_amsl_m + altitude_m)
             climb_s = altitude_m / 1.0 + s.phase_timeout_s
             await vehicle.wait(
                 lambda st: (
