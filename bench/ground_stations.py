@@ -12,7 +12,6 @@ Run: python bench/ground_stations.py [--repeats 5]
 from __future__ import annotations
 
 import argparse
-import signal
 import socket
 import subprocess
 import sys
@@ -25,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from isac_mission.bus import tcp_loopback  # noqa: E402
+from tests.support.browser import stop  # noqa: E402
 from tests.support.live_cli import sim_argv, start  # noqa: E402
 from tests.support.mavproxy import MavlinkListener, MavProxy  # noqa: E402
 from tests.support.ports import free_port_block, sitl_ports  # noqa: E402
@@ -48,12 +48,7 @@ def one_run(m: int) -> tuple[float, float]:
         try:
             seen.wait_for_systems(set(range(1, m + 1)), timeout_s=WAIT_S)
         finally:
-            sim.send_signal(signal.SIGINT)
-            try:
-                sim.communicate(timeout=60)
-            except subprocess.TimeoutExpired:
-                sim.kill()
-                sim.communicate()
+            stop(sim, 60.0)  # SIGINT: the vehicles land; SIGKILL after a minute
         first = seen.first_heard_s
         return min(first.values()) - started, max(first.values()) - min(first.values())
 
