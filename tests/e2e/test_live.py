@@ -284,21 +284,6 @@ def _start_run(
     )
 
 
-def _wait_for_slots(
-    trace_path: Path, n: int, proc: subprocess.Popen[str], timeout_s: float
-) -> None:
-    """Wait (polling the file, with a generous bound) until the trace holds n complete slots."""
-    import time
-
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
-        if trace_path.exists() and len(read_trace(trace_path).slots) >= n:
-            return
-        time.sleep(0.2)
-    raise AssertionError(f"fewer than {n} slots in {trace_path} after {timeout_s} s")
-
-
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signal_mid_mission_lands_flushes_and_exits_zero(
     tmp_path: Path, sig: signal.Signals
@@ -307,7 +292,7 @@ def test_signal_mid_mission_lands_flushes_and_exits_zero(
     proc = _start_run(out)
     trace_path = out / "trace_proposed.jsonl"
     try:
-        _wait_for_slots(trace_path, 3, proc, timeout_s=180)
+        wait_for_slots(trace_path, 3, proc, timeout_s=180)
         proc.send_signal(sig)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
@@ -326,7 +311,7 @@ def test_killed_run_leaves_every_completed_slot_readable(tmp_path: Path) -> None
     proc = _start_run(out)
     trace_path = out / "trace_proposed.jsonl"
     try:
-        _wait_for_slots(trace_path, 4, proc, timeout_s=180)
+        wait_for_slots(trace_path, 4, proc, timeout_s=180)
         proc.kill()
         proc.wait(timeout=30)
     finally:

@@ -106,8 +106,13 @@ async def _fly(
             "health saying why",
         )
         await w.until(lambda: w.t_s >= t_taken + HOLD_S, WAIT_S, f"{HOLD_S} s of HOLD")
-        # It stayed in HOLD, and still is: the service never switched it back.
-        held = [t for t in w.telemetry[TAKEN] if t.t_s >= t_taken]
+        # It stayed in HOLD, and still is: the service never switched it back. "From the
+        # override on" in arrival order (one bridge's messages arrive in order): selected by
+        # position stamp, a message from before the HOLD with an equal or later stamp came in
+        # (CI saw it under load).
+        reports = w.telemetry[TAKEN]
+        first = next(i for i, t in enumerate(reports) if t.override == "operator: HOLD")
+        held = reports[first:]
         assert held and all(t.mode == "hold" for t in held), {t.mode for t in held}
         assert seen.mode(TAKEN + 1) == "hold"
         # It held still once stopped (PX4's HOLD brakes to its stopping point first).

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import yaml
 
+from isac_mission.errors import MessageError
 from isac_mission.records import Trace, read_trace
 from tests.support.ports import SitlPorts
 
@@ -80,8 +81,11 @@ def wait_for_slots(path: Path, n: int, proc: subprocess.Popen[str], timeout_s: f
             err = proc.stderr.read() if proc.stderr else ""
             raise AssertionError(f"process exited with {proc.returncode}: {err[-3000:]}")
         if path.exists():
-            trace = read_trace(path)
-            if len(trace.slots) >= n:
+            try:
+                trace = read_trace(path)
+            except MessageError:  # created, its config line not written yet
+                trace = None
+            if trace is not None and len(trace.slots) >= n:
                 return trace
         time.sleep(0.2)
     raise AssertionError(f"fewer than {n} slots in {path} after {timeout_s} s")
