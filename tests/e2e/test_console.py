@@ -20,7 +20,7 @@ import subprocess
 import sys
 import time
 from collections import defaultdict
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,6 +45,7 @@ from tests.support.browser import (
 )
 from tests.support.live_cli import ROOT, cli, serve_argv, sim_argv, start
 from tests.support.ports import free_tcp_port, sitl_ports
+from tests.support.sim_harness import async_wait_until
 
 KEYS = Keys("paper")
 PAGE_TIMEOUT_MS = 240_000
@@ -110,14 +111,6 @@ async def wait_slot(page: Any, n: int) -> None:
         f"Number(document.getElementById('slot').dataset.slot || -1) >= {n}",
         timeout=PAGE_TIMEOUT_MS,
     )
-
-
-async def _wait_for(condition: Callable[[], bool], what: str, timeout_s: float = 120.0) -> None:
-    """Wait (bounded, generously) until condition() holds."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, f"no {what} within {timeout_s} s"
-        await asyncio.sleep(0.1)
 
 
 async def test_live_console_draws_the_telemetry_commands_and_survives_connection_churn(
@@ -202,7 +195,9 @@ async def test_live_console_draws_the_telemetry_commands_and_survives_connection
             rss0 = rss_kib(proc.pid)
             plans_before = len(obs.plans)
             await churn_websockets(url, rounds=3, connections=20)
-            await _wait_for(lambda: len(obs.plans) > plans_before, "a plan after the churn")
+            await async_wait_until(
+                lambda: len(obs.plans) > plans_before, 120.0, "a plan after the churn"
+            )
             rss1 = rss_kib(proc.pid)
             assert rss1 <= 1.1 * rss0, (rss0, rss1)
             # The dropped connections are gone: only the browser's page is left.
