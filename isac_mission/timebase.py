@@ -122,3 +122,14 @@ class SlotTimeline:
     def slot_end_s(self, n: int) -> float:
         """End of slot n: t0 + n dt, s."""
         return self.t0_s + n * self.dt_s
+
+
+LATE_PLAN_SLOTS = 1.0
+"""A plan whose slot ended more than this many slots ago is dropped as late, not flown (the
+bridges drop it; the ground loop records the slot's fallback as "late")."""
+
+
+def plan_is_late(slot_end_s: float | None, now_s: float, slot_s: float) -> bool:
+    """Whether a plan whose slot ends at `slot_end_s` (None: the mission start is unknown) is
+    late at simulation time `now_s` (slot length `slot_s`; all in s)."""
+    return slot_end_s is not None and now_s > slot_end_s + LATE_PLAN_SLOTS * slot_s

@@ -47,7 +47,9 @@ class Detections:
 class SolveReport:
     """How a slot plan was obtained: status is "ok" or "infeasible"; reason says why if not ok,
     or why an ok plan is the SCA's when the polish ran and was not kept; polish: what the polish
-    did ("" when it did not run); polish_iterations: IPOPT's iterations."""
+    did ("" when it did not run); polish_iterations: IPOPT's iterations; fallback: why the
+    method's own answer was not flown, as a short kind that summaries count ("" when it was;
+    docs/trace.md, "Fallbacks": "infeasible", "horizon: ...", "timeout", "late", ...)."""
 
     status: str
     reason: str = ""
@@ -58,6 +60,7 @@ class SolveReport:
     objective_history: tuple[float, ...] = field(default_factory=tuple)
     polish: str = ""
     polish_iterations: int = 0
+    fallback: str = ""
 
 
 @dataclass(frozen=True)

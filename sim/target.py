@@ -75,8 +75,10 @@ class CvTarget:
     """Constant-velocity target with process noise W(kappa) (eq. 3-4), reflected off the area.
 
     x0 [4]: state at slot 0 (m, m/s); dt_s: slot length (s); kappa: process-noise intensity
-    (m^2/s^3); rng: the only source of randomness; bounds_m [2] = (W, H) or None for an unbounded
-    plane. The state at slot 0 is x0 exactly (the target starts moving at slot 0).
+    (m^2/s^3); rng: the only source of randomness after `increments`; bounds_m [2] = (W, H) or
+    None for an unbounded plane; increments [K, 4]: the process noise w_0..w_{K-1} of the first K
+    steps (m, m/s; e.g. the draws of `simulate`'s run, model/run_noise.py), rng's draws after
+    them. The state at slot 0 is x0 exactly (the target starts moving at slot 0).
     """
 
     def __init__(
@@ -86,8 +88,12 @@ class CvTarget:
         kappa: float,
         rng: np.random.Generator,
         bounds_m: FloatArray | None = None,
+        increments: FloatArray | None = None,
     ) -> None:
         x0 = np.asarray(x0, dtype=float)
+        self._increments = np.zeros((0, 4)) if increments is None else np.asarray(increments)
+        if self._increments.ndim != 2 or self._increments.shape[1] != 4:
+            raise ValueError(f"increments must be [K, 4], got shape {self._increments.shape}")
         if x0.shape != (4,) or not np.all(np.isfinite(x0)):
             raise ValueError(f"x0 must be 4 finite numbers, got {x0!r}")
         if not dt_s > 0:
@@ -125,8 +131,12 @@ class CvTarget:
         return self._W.copy()
 
     def advance(self) -> FloatArray:
-        """x_{n+1} = F x_n + w_n, w_n ~ N(0, W), then reflected into the area. Returns x_{n+1}."""
-        w = self._L @ self._rng.standard_normal(4)
+        """x_{n+1} = F x_n + w_n, w_n ~ N(0, W) (the given increment while there is one), then
+        reflected into the area. Returns x_{n+1}."""
+        if self._slot < len(self._increments):
+            w = np.array(self._increments[self._slot], dtype=float)
+        else:
+            w = self._L @ self._rng.standard_normal(4)
         x = self._F @ self._x + w
         if self._bounds is not None:
             x = reflect_into_area(x, self._bounds)

@@ -15,6 +15,7 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.mavwire.modes import FlightMode
+from isac_mission.model.run_noise import draw_run_noise
 from isac_mission.types import FloatArray
 from sim.autopilot.battery import BatterySettings
 from sim.autopilot.endpoint import Autopilot
@@ -30,13 +31,22 @@ def make_target_and_sensor(scenario: Scenario, options: WorldOptions) -> tuple[T
     world's seed (options.seed, else the scenario's)."""
     seed = scenario.seed if options.seed is None else options.seed
     target_seq, sensing_seq = np.random.SeedSequence(seed).spawn(2)
-    target = make_target(scenario, options, np.random.default_rng(target_seq))
+    target = make_target(scenario, options, np.random.default_rng(target_seq), seed)
     sensor = Sensor(SensingModel.from_scenario(scenario), np.random.default_rng(sensing_seq))
     return target, sensor
 
 
-def make_target(scenario: Scenario, options: WorldOptions, rng: np.random.Generator) -> TargetModel:
-    """The target the options ask for: scripted path, or the CV model of the scenario."""
+def make_target(
+    scenario: Scenario, options: WorldOptions, rng: np.random.Generator, seed: int
+) -> TargetModel:
+    """The target the options ask for: scripted path, or the CV model of the scenario.
+
+    The CV target draws what `simulate` draws for run seed `seed` (model/run_noise.py): its
+    process noise over the N slots (rng's draws after them), and, with options.initial_error,
+    the initial error e, as x_0 = x0 - e: the configured x0 is the tracker's cue, off the truth
+    by e as simulate's estimate x0 + e is off its truth x0. Without the initial error the
+    target flies simulate's true path exactly (the embedded `run` then starts its tracker at
+    simulate's x0 + e: cli/embedded.py), until a wall reflects it."""
     bounds = scenario.area if options.reflect_target else None
     if options.target_waypoints_xy_m is not None:
         speed = options.target_speed_mps
@@ -45,12 +55,13 @@ def make_target(scenario: Scenario, options: WorldOptions, rng: np.random.Genera
         return ScriptedTarget(
             options.target_waypoints_xy_m, speed, scenario.dt, bounds_m=scenario.area
         )
+    noise = draw_run_noise(scenario, seed)
     x0 = scenario.x0
     if options.initial_error:
         # The configured x0 is the cue the tracker starts from; the truth differs from it by a
         # draw from P0, as in `simulate` (docs/model.md, "EKF start and P0").
-        x0 = x0 + rng.multivariate_normal(np.zeros(4), scenario.P0)
-    return CvTarget(x0, scenario.dt, scenario.kappa, rng, bounds_m=bounds)
+        x0 = x0 - noise.initial_error
+    return CvTarget(x0, scenario.dt, scenario.kappa, rng, bounds_m=bounds, increments=noise.process)
 
 
 def autopilot_settings(scenario: Scenario, options: WorldOptions, m: int) -> AutopilotSettings:

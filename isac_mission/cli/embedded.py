@@ -179,6 +179,7 @@ async def run_embedded(
     from isac_mission.bus import ZenohBus
     from isac_mission.bus.security import secured_settings
     from isac_mission.cli.mission import fly_mission, ground_endpoint
+    from isac_mission.model.run_noise import draw_run_noise
     from sim.world import run_world
     from sim.world_options import WorldOptions, parse_outages
 
@@ -189,10 +190,15 @@ async def run_embedded(
     world_bus = secured_settings(
         zenoh_cfg, s.mission_id, "world", connect=(endpoint,), login_from_users_file=True
     )
+    # The offline twin: the world's target flies `simulate`'s true path for this seed, and the
+    # tracker starts from simulate's estimate x0 + e (sim/world_assembly.make_target).
+    seed = s.seed if opts.seed is None else opts.seed
+    initial_x = s.x0 + draw_run_noise(s, seed).initial_error
     world_opts = WorldOptions(
         speed=opts.speed,
         lockstep=opts.lockstep,
-        seed=opts.seed,
+        seed=seed,
+        initial_error=False,
         bus=world_bus,
         mavlink_base_port=opts.mavlink_base_port,
         mavlink_local_base_port=opts.mavlink_local_base_port,
@@ -205,7 +211,7 @@ async def run_embedded(
     with ZenohBus.open(hub) as bus:
         world = asyncio.create_task(run_world(s, world_opts, world_stop))
         try:
-            return await fly_mission(s, opts, bus, stop, on_slot, on_status)
+            return await fly_mission(s, opts, bus, stop, on_slot, on_status, initial_x)
         finally:
             world_stop.set()
             await asyncio.wait_for(world, timeout=30.0)

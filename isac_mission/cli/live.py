@@ -246,6 +246,8 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
             f"{summary.latency_median_ms:.1f} / {summary.latency_p99_ms:.1f} ms",
         ),
         ("infeasible slots", str(summary.infeasible)),
+        ("fallback slots (method's answer not flown)", str(sum(summary.fallbacks.values()))),
+        *((f"fallback: {k}", str(v)) for k, v in sorted(summary.fallbacks.items())),
         *((k, str(v)) for k, v in sorted(result.report.counters.items()) if k != "slots"),
         *((k, str(v)) for k, v in result.fleet_counters.items()),
     ):

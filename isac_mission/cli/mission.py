@@ -40,6 +40,7 @@ from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.planner_thread import SOLVE_LOCK
 from isac_mission.service.ground.report import GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.types import FloatArray
 
 log = logging.getLogger(__name__)
 
@@ -136,8 +137,10 @@ async def fly_mission(
     stop: asyncio.Event,
     on_slot: Callable[[SlotEvent], None] | None,
     on_status: Callable[[str], None] | None,
+    initial_x: FloatArray | None = None,
 ) -> LiveResult:
-    """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere."""
+    """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere.
+    initial_x [4]: the tracker's initial estimate (None: the scenario's x0)."""
     say = on_status or (lambda _msg: None)
     planning = planning_scenario(s, opts)
     kit = SolverKit(planning, solve_lock=SOLVE_LOCK)
@@ -174,6 +177,7 @@ async def fly_mission(
         ),
         kit,
         on_slot,
+        initial_x,
     )
     result = LiveResult(GroundReport(), opts.trace_path)
     async with fleet:
@@ -302,6 +306,8 @@ class LiveSummary:
     latency_median_ms: float
     latency_p99_ms: float
     infeasible: int
+    fallbacks: dict[str, int]
+    """Slots whose method's answer was not flown, by kind (docs/trace.md, "Fallbacks")."""
 
 
 def summarize_live(result: LiveResult) -> LiveSummary:
@@ -326,4 +332,5 @@ def summarize_live(result: LiveResult) -> LiveSummary:
         latency_median_ms=float(np.median(lat)),
         latency_p99_ms=float(np.percentile(lat, 99)),
         infeasible=tot.not_ok,
+        fallbacks=dict(tot.fallbacks),
     )

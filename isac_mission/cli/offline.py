@@ -104,3 +104,107 @@ def _with_live_settings(s: Scenario) -> Scenario:
         table.add_row(*row)
     console.print(table)
     return LIVE_SETTINGS.apply(s)
+
+
+@app.command()
+def replay(
+    config: ConfigArg,
+    trace: Annotated[
+        Path, typer.Argument(help="A trace of `run`, `serve` or `simulate` (docs/trace.md).")
+    ],
+    from_slot: Annotated[
+        int, typer.Option(min=1, help="Summarise slots from this one on too (tracking phase).")
+    ] = 11,
+    out: Annotated[
+        Path | None, typer.Option(help="Write the per-slot rows and the summaries as JSON.")
+    ] = None,
+) -> None:
+    """Replay a trace's planner inputs through the offline planner: where each slot's plan
+    started against where the offline loop starts, and whether the same planner makes the same
+    plan (docs/performance.md, "Live against offline")."""
+    import json
+    from dataclasses import asdict
+
+    from isac_mission.config.live_settings import LIVE_SETTINGS
+    from isac_mission.errors import IsacError
+    from isac_mission.experiment.replay import (
+        config_differences,
+        replay_trace,
+        summarize_replay,
+    )
+    from isac_mission.records import read_trace
+
+    s = load_or_exit(config)
+    quiet_highs_banner()
+    try:
+        recorded = read_trace(trace)
+    except (OSError, IsacError) as err:
+        err_console.print(f"[bold red]cannot read the trace {trace}:[/] {err}")
+        raise typer.Exit(1) from None
+    candidates = [s, LIVE_SETTINGS.apply(s)]
+    planning = next((c for c in candidates if not config_differences(recorded.config, c)), None)
+    if planning is None:
+        live = "plan_v_max" in recorded.config
+        diff = config_differences(recorded.config, candidates[1] if live else s)
+        err_console.print(
+            f"[bold red]{config} does not give the scenario {trace} was planned with"
+            f"{' (with the live settings)' if live else ''}:[/] " + "; ".join(diff)
+        )
+        raise typer.Exit(1)
+    if not any(r.plan_start_xy is not None for r in recorded.slots):
+        err_console.print(
+            f"[bold red]{trace} records no planner inputs (plan_start_xy): written by an "
+            "older isac-mission?[/]"
+        )
+        raise typer.Exit(1)
+    rows = replay_trace(recorded, planning)
+    table = Table(title=f"replay of {trace} ({recorded.method}), per UAV mean")
+    for col in ("slot", "status", "start gap m", "v gap m/s", "replay gap m", "step m",
+                "from offline start m", "fallback (replay)"):  # fmt: skip
+        table.add_column(col, justify="left" if col in ("status", "fallback (replay)") else "right")
+    for r in rows:
+        fb = r.fallback or "-"
+        if r.replay_fallback != r.fallback:
+            fb += f" ({r.replay_fallback or '-'})"
+        table.add_row(
+            str(r.slot),
+            r.status,
+            f"{r.start_gap_m.mean():.2f}",
+            f"{r.start_velocity_gap_mps.mean():.2f}",
+            f"{r.replay_gap_m.mean():.3f}",
+            f"{r.planned_step_m.mean():.2f}",
+            f"{r.offline_step_m.mean():.2f}",
+            fb,
+        )
+    console.print(table)
+    summaries = {f"slots {first}..": summarize_replay(rows, first) for first in (1, from_slot)}
+    sums = Table(title="summary: mean (max) per UAV-slot")
+    for col in ("slots", "n", "start gap m", "v gap m/s", "prediction gap", "replay gap m",
+                "step m", "from offline start m", "fallbacks (replay)"):  # fmt: skip
+        sums.add_column(col, justify="right")
+    for name, v in summaries.items():
+        sums.add_row(
+            name,
+            str(v.slots),
+            f"{v.start_gap_m:.2f} ({v.start_gap_max_m:.2f})",
+            f"{v.start_velocity_gap_mps:.2f}",
+            f"{v.prediction_gap_max:.2g}",
+            f"{v.replay_gap_m:.3f} ({v.replay_gap_max_m:.3f})",
+            f"{v.planned_step_m:.2f}",
+            f"{v.offline_step_m:.2f}",
+            f"{v.fallbacks} ({v.replay_fallbacks})",
+        )
+    console.print(sums)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(
+            json.dumps(
+                {
+                    "trace": str(trace),
+                    "slots": [r.to_dict() for r in rows],
+                    "summaries": {k: asdict(v) for k, v in summaries.items()},
+                },
+                indent=2,
+            )
+        )
+        console.print(f"replay: {out}")

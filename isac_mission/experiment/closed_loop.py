@@ -10,45 +10,19 @@ method's own noise standard deviations. The planner is the same `plan_slot` the 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.model.detections import noisy_detections
-from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.model.kinematics import transition_matrix
+from isac_mission.model.run_noise import RunNoise
+from isac_mission.model.run_noise import draw_run_noise as draw_run_noise
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.cycle import CycleModel, TrackState, predict, update
 from isac_mission.tracking.pcrb import Bound
 from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan
-
-
-@dataclass(frozen=True)
-class RunNoise:
-    """Common random numbers of one run.
-
-    process [N, 4]: target process noise w_{n-1}; initial_error [4]: x_hat_0 - x_0;
-    measurement [N, 2M]: standard normals; miss_draw [N, M]: uniforms for missed detections.
-    """
-
-    seed: int
-    process: FloatArray
-    initial_error: FloatArray
-    measurement: FloatArray
-    miss_draw: FloatArray
-
-
-def draw_run_noise(s: Scenario, seed: int) -> RunNoise:
-    """Draw one run's random numbers from a seeded generator."""
-    rng = np.random.default_rng(seed)
-    W = process_noise(s.dt, s.kappa)
-    return RunNoise(
-        seed=seed,
-        process=rng.multivariate_normal(np.zeros(4), W, size=s.N),
-        initial_error=rng.multivariate_normal(np.zeros(4), s.P0),
-        measurement=rng.standard_normal((s.N, 2 * s.M)),
-        miss_draw=rng.uniform(size=(s.N, s.M)),
-    )
 
 
 def true_trajectory(s: Scenario, noise: RunNoise) -> FloatArray:
@@ -88,7 +62,7 @@ class RunResult:
     """Per-slot arrays of one run of one method (slots 1..N).
 
     est, true [N, 4]; pcrb [N, 4, 4] (C = J^-1); solve_s [N]; status [N]; uav_xy [N, M, 2];
-    eta [N, M]; assoc [N, M].
+    eta [N, M]; assoc [N, M]; fallback [N]: why the method's answer was not flown ("" = it was).
     """
 
     method: str
@@ -101,6 +75,7 @@ class RunResult:
     uav_xy: FloatArray
     eta: FloatArray
     assoc: IntArray
+    fallback: list[str] = field(default_factory=list)
 
 
 def run_closed_loop(
@@ -124,7 +99,7 @@ def run_closed_loop(
     velocity = np.zeros((s.M, 2))
     plan: SlotPlan | None = None
     rows: dict[str, list[object]] = {
-        k: [] for k in ("est", "pcrb", "solve_s", "status", "uav_xy", "eta", "assoc")
+        k: [] for k in ("est", "pcrb", "solve_s", "status", "fallback", "uav_xy", "eta", "assoc")
     }
     for n in range(1, s.N + 1):
         predicted = predict(model, state)
@@ -157,6 +132,7 @@ def run_closed_loop(
             ("pcrb", bound.C),
             ("solve_s", plan.report.solve_s),
             ("status", plan.report.status),
+            ("fallback", plan.report.fallback),
             ("uav_xy", uav_xy),
             ("eta", eta),
             ("assoc", assoc),
@@ -186,6 +162,7 @@ def run_closed_loop(
         pcrb=np.array(rows["pcrb"]),
         solve_s=np.array(rows["solve_s"], dtype=float),
         status=[str(v) for v in rows["status"]],
+        fallback=[str(v) for v in rows["fallback"]],
         uav_xy=np.array(rows["uav_xy"]),
         eta=np.array(rows["eta"]),
         assoc=np.array(rows["assoc"], dtype=np.int64),

@@ -14,9 +14,10 @@ reduction against `proposed` with paired bootstrap intervals).
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -66,6 +67,8 @@ class MethodSummary:
     pcrb_late: float = math.nan
     loc_rmse_from2: float = math.nan
     vel_rmse_from2: float = math.nan
+    fallbacks: dict[str, int] = field(default_factory=dict)
+    """Slots whose method's answer was not flown, by kind (SolveReport.fallback)."""
 
     @property
     def pcrb_total(self) -> float:
@@ -99,6 +102,7 @@ def summarize(results: Sequence[RunResult]) -> MethodSummary:
         pcrb_late=figures["pcrb_late"],
         loc_rmse_from2=figures["loc_rmse"],
         vel_rmse_from2=figures["vel_rmse"],
+        fallbacks=dict(Counter(f for r in results for f in r.fallback if f)),
     )
 
 
@@ -129,6 +133,9 @@ def outcome_record(o: SlotOutcome) -> SlotRecord:
         plan_pcrb_trace=o.plan.pcrb_trace,
         plan_velocity=o.plan.uav_velocity_mps,
         reason=rep.reason,
+        fallback=rep.fallback or None,
+        plan_start_xy=o.slot_input.prev_xy,
+        plan_start_velocity=o.slot_input.prev_velocity,
         extra={
             "pcrb_pos": o.bound.position_trace,
             "pcrb_vel": o.bound.velocity_trace,

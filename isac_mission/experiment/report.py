@@ -60,7 +60,8 @@ FIGURE_HEADS = {
 
 
 def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
-    """One row per method: bound, errors, efficiency, infeasible slots, planning time."""
+    """One row per method: bound, errors, efficiency, infeasible slots, slots whose method's
+    answer was not flown (SolveReport.fallback; summary.json has them by kind), planning time."""
     t = Table(title=title)
     for col in (
         "method",
@@ -71,6 +72,7 @@ def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
         "RMSE vel m/s",
         "MSE/PCRB",
         "infeas.",
+        "fallbacks",
         "plan ms med",
         "p95",
     ):
@@ -85,6 +87,7 @@ def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
             f"{s.vel_rmse:.4g}",
             f"{s.efficiency:.3f}",
             f"{s.infeasible_slots}/{s.slots}",
+            f"{sum(s.fallbacks.values())}/{s.slots}",
             f"{s.solve_median_ms:.1f}",
             f"{s.solve_p95_ms:.1f}",
         )

@@ -202,17 +202,19 @@ def plan_horizon(
     prev_v = np.zeros((M, 2)) if inp_prev_velocity is None else np.asarray(inp_prev_velocity)
     prev_v = planned_start_velocity(s, inp_prev_xy, prev_v, prev_plan)
 
-    def fall_back(why: str) -> SlotPlan:
+    def fall_back(why: str, kind: str) -> SlotPlan:
+        """`base`, saying why; kind: the short fallback kind the summaries count."""
         report = replace(
             base.report,
             reason=f"horizon: {why}; per-slot plan"
             + (f"; {base.report.reason}" * bool(base.report.reason)),
             solve_s=time.perf_counter() - t0,
+            fallback=base.report.fallback or f"horizon: {kind}",
         )
         return replace(base, report=report)
 
     if base.report.status != "ok":
-        return fall_back("the per-slot plan is infeasible")
+        return fall_back("the per-slot plan is infeasible", "per-slot plan infeasible")
     data = horizon_slot_data(
         s, inp_prev_xy, prev_v, inp_keep_out, x_pred, J_pred, target_cov_pred, base, L
     )
@@ -246,7 +248,7 @@ def plan_horizon(
     start = starts[first]
     sol = nlp.solve(start[0], velocities(start[1]), start[2], data)
     if not sol.success:
-        return fall_back(f"IPOPT {sol.status} after {sol.iterations} it")
+        return fall_back(f"IPOPT {sol.status} after {sol.iterations} it", f"IPOPT {sol.status}")
     note = f"IPOPT {sol.status} in {sol.iterations} it"
     if not start_infeasible and value(sol.uav_xy_m, sol.bandwidth_share) > start_value:
         # A local solver may end above a feasible start: the start is a valid horizon then.
@@ -270,12 +272,12 @@ def plan_horizon(
     )
     if not bool(cons.feasible(xy1[None], eta1[None])[0]):
         bad = ", ".join(cons.describe_violations(xy1, eta1))
-        return fall_back(f"IPOPT's answer violates {bad}")
+        return fall_back(f"IPOPT's answer violates {bad}", "answer infeasible")
     velocity1 = None
     if sol.uav_velocity_mps is not None:
         velocity1 = sol.uav_velocity_mps[0]
         if not legs_ok(s, data.prev_xy, prev_v, xy1, velocity1):
-            return fall_back("IPOPT's first leg breaks the vehicle limits")
+            return fall_back("IPOPT's first leg breaks the vehicle limits", "leg limits")
     traces = horizon_bound_traces(s, J_pred, x_pred, sol.uav_xy_m, sol.bandwidth_share, sensing)
     report = replace(
         base.report,

@@ -279,7 +279,7 @@ def _plan_slot(inp: SlotInput, kit: SolverKit, method: Method) -> SlotPlan:
         best = comm.uav_xy if ballistic is None else ballistic
         xy = evade_target(best, inp.prev_xy, inp.x_pred[:2], cons.clearance_m, step)
         xy = np.clip(xy, *cons.area_bounds())  # the vehicles' geofence would clamp it anyway
-        report = SolveReport("infeasible", reason, solve_s=elapsed())
+        report = SolveReport("infeasible", reason, solve_s=elapsed(), fallback="infeasible")
         return _plan(xy, assoc, comm.eta, objective, report)
 
     if comm.worst_rate_bps < s.r_th:

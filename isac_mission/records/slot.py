@@ -1,6 +1,7 @@
 """Trace records in memory: one slot's `SlotRecord` and a whole `Trace` (format: docs/trace.md).
 
-Shapes: M UAVs; uav_xy, plan_xy [M, 2] m; plan_velocity [M, 2] m/s; eta [M]; assoc [M] 0-based BS index (-1 = none);
+Shapes: M UAVs; uav_xy, plan_xy, plan_start_xy [M, 2] m; plan_velocity, plan_start_velocity
+[M, 2] m/s; eta [M]; assoc [M] 0-based BS index (-1 = none);
 target_* [4] = [x, y, vx, vy] in m and m/s; r_diag [2M] = range variances (m^2) then
 radial-velocity variances (m^2/s^2), NaN for a measurement that did not arrive; P, J [4, 4].
 """
@@ -37,8 +38,21 @@ CONTRACT_KEYS: Final[tuple[str, ...]] = (
 )
 """The fields every slot line carries (docs/trace.md), in the order they are written."""
 
-OPTIONAL_KEYS: Final[tuple[str, ...]] = ("plan_xy", "plan_pcrb_trace", "reason", "plan_velocity")
+OPTIONAL_KEYS: Final[tuple[str, ...]] = (
+    "plan_xy",
+    "plan_pcrb_trace",
+    "reason",
+    "plan_velocity",
+    "fallback",
+    "plan_start_xy",
+    "plan_start_velocity",
+)
 """Named optional fields; written only when set."""
+
+_PER_UAV_XY: Final[frozenset[str]] = frozenset(
+    ("plan_xy", "plan_velocity", "plan_start_xy", "plan_start_velocity")
+)
+"""The optional [M, 2] fields (`Trace.stack` fills a slot without one with NaN)."""
 
 _RESERVED: Final[frozenset[str]] = frozenset((*CONTRACT_KEYS, *OPTIONAL_KEYS, "config"))
 
@@ -56,7 +70,10 @@ class SlotRecord:
     solve_ms: planner wall time (ms); P [4, 4]: EKF covariance; J [4, 4]: PCRB information.
     Optional: plan_xy [M, 2] planned waypoints; plan_pcrb_trace: the planner's objective;
     reason: why status is not "ok"; plan_velocity [M, 2] m/s: the planned velocity at each
-    waypoint (planner.vehicle_model); extra: further JSON-ready fields, written at the top level.
+    waypoint (planner.vehicle_model); fallback: why the method's own answer was not flown (a
+    short kind, docs/trace.md); plan_start_xy [M, 2] m, plan_start_velocity [M, 2] m/s: the
+    state the planner planned from (its SlotInput's prev_xy and prev_velocity; the replay's
+    input, experiment/replay.py); extra: further JSON-ready fields, written at the top level.
 
     Construction checks shapes and types and raises MessageError naming the field. Two records
     are equal when their JSON forms are (so NaN equals NaN).
@@ -80,6 +97,9 @@ class SlotRecord:
     plan_pcrb_trace: float | None = None
     reason: str | None = None
     plan_velocity: FloatArray | None = None
+    fallback: str | None = None
+    plan_start_xy: FloatArray | None = None
+    plan_start_velocity: FloatArray | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -112,6 +132,11 @@ class SlotRecord:
             put(self, "reason", as_str(self.reason, "reason"))
         if self.plan_velocity is not None:
             put(self, "plan_velocity", float_array(self.plan_velocity, "plan_velocity", (m, 2)))
+        if self.fallback is not None:
+            put(self, "fallback", as_str(self.fallback, "fallback"))
+        for key in ("plan_start_xy", "plan_start_velocity"):
+            if getattr(self, key) is not None:
+                put(self, key, float_array(getattr(self, key), key, (m, 2)))
         if not isinstance(self.extra, Mapping):
             raise MessageError(f"extra: expected a mapping (got {self.extra!r})")
         clash = sorted(_RESERVED.intersection(self.extra))
@@ -186,7 +211,7 @@ class Trace:
         default: tuple[int, ...] = ()
         if name == "target_true":
             default = (4,)
-        elif name in ("plan_xy", "plan_velocity") and self.slots:
+        elif name in _PER_UAV_XY and self.slots:
             default = (self.slots[0].n_uavs, 2)
         shape = next((np.shape(v) for v in values if v is not None), default)
         return np.array(

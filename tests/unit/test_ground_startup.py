@@ -10,13 +10,13 @@ import pytest
 
 from isac_mission.config import Scenario
 from isac_mission.planning.slot import SolverKit
-from isac_mission.service.bridge.fleet import plan_is_late
 from isac_mission.service.ground import exclusion
 from isac_mission.service.ground.exclusion import VehicleWatch
 from isac_mission.service.ground.mission import MissionState
 from isac_mission.service.ground.report import GroundReport
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.service.ground.startup import PlanningGate, skip_slot
+from isac_mission.timebase import plan_is_late
 from isac_mission.types import Gaussian
 from isac_mission.wire import DetectionMsg, TelemetryMsg
 

@@ -120,13 +120,12 @@ def test_world_target_starts_at_a_seeded_draw_from_p0_around_the_cue() -> None:
     from sim.world_options import WorldOptions
 
     s = parse_scenario({})
-    starts = np.array(
-        [make_target(s, WorldOptions(), np.random.default_rng(k)).state for k in range(400)]
-    )
-    again = make_target(s, WorldOptions(), np.random.default_rng(0)).state
+    rng = np.random.default_rng
+    starts = np.array([make_target(s, WorldOptions(), rng(k), k).state for k in range(400)])
+    again = make_target(s, WorldOptions(), rng(0), 0).state
     np.testing.assert_array_equal(again, starts[0])
     err = starts - s.x0
     # Sample covariance of 400 draws within a few standard errors of P0's diagonal.
     np.testing.assert_allclose(err.var(axis=0), np.diag(s.P0), rtol=0.25)
-    exact = make_target(s, WorldOptions(initial_error=False), np.random.default_rng(0)).state
+    exact = make_target(s, WorldOptions(initial_error=False), rng(0), 0).state
     np.testing.assert_array_equal(exact, s.x0)

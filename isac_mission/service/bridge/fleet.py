@@ -29,20 +29,11 @@ from isac_mission.service.bridge.clock_time import (
 from isac_mission.service.bridge.counters import FleetCounters
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
-from isac_mission.timebase import SimTime
+from isac_mission.timebase import SimTime, plan_is_late
 from isac_mission.types import FloatArray
 from isac_mission.wire import Keys, PlanMsg, decode_fleet, decode_plan
 
 log = logging.getLogger(__name__)
-
-LATE_PLAN_SLOTS = 1.0
-"""A plan whose slot ended more than this many slots ago is dropped as late, not flown."""
-
-
-def plan_is_late(slot_end_s: float | None, now_s: float, slot_s: float) -> bool:
-    """Whether a plan whose slot ends at `slot_end_s` (None: the mission start is unknown) is
-    late at simulation time `now_s` (slot length `slot_s`; all in s)."""
-    return slot_end_s is not None and now_s > slot_end_s + LATE_PLAN_SLOTS * slot_s
 
 
 @dataclass

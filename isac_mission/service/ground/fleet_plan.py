@@ -173,7 +173,7 @@ class PlanningJob:
             assoc,
             eta,
             pcrb,
-            SolveReport(status, reason, solve_s=solve_s),
+            SolveReport(status, reason, solve_s=solve_s, fallback=status),
         )
 
     def fallback_after_error(self, reason: str, solve_s: float) -> SlotPlan:
@@ -189,7 +189,14 @@ class PlanningJob:
             )
         note = f"{reason}; fell back to the communication-optimal plan"
         return replace(
-            plan, report=replace(plan.report, status="solver error", reason=note, solve_s=solve_s)
+            plan,
+            report=replace(
+                plan.report,
+                status="solver error",
+                reason=note,
+                solve_s=solve_s,
+                fallback="solver error",
+            ),
         )
 
 

@@ -14,6 +14,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
@@ -32,6 +33,7 @@ from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEve
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.service.ground.startup import PlanningGate, skip_slot
 from isac_mission.service.ground.tracefile import open_trace
+from isac_mission.timebase import SlotTimeline, plan_is_late
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
 from isac_mission.wire import (
     MAX_REASON_CHARS,
@@ -63,7 +65,10 @@ class GroundLoop:
         settings: GroundSettings,
         kit: SolverKit | None = None,
         on_slot: Callable[[SlotEvent], None] | None = None,
+        initial_x: FloatArray | None = None,
     ) -> None:
+        """initial_x [4]: the tracker's initial estimate (m, m/s), with covariance P0; None:
+        the scenario's x0 (the cue)."""
         self.bus = bus
         self.keys = Keys(scenario.mission_id)
         self.settings = settings
@@ -71,7 +76,13 @@ class GroundLoop:
         self.on_slot = on_slot
         self.report = GroundReport()
         self.state = MissionState(
-            scenario, self.kit, settings.method, Gaussian(scenario.x0.copy(), scenario.P0.copy())
+            scenario,
+            self.kit,
+            settings.method,
+            Gaussian(
+                np.array(scenario.x0 if initial_x is None else initial_x, dtype=float),
+                scenario.P0.copy(),
+            ),
         )
         self.writer: TraceWriter | None = None
         self.t_s = 0.0
@@ -271,7 +282,9 @@ class GroundLoop:
         if self.state.done:
             self._complete_record(record, truth, 0.0)
         else:
-            self._start_planning(self._uav_positions(det.uav_xy_m), latency_from, (record, truth))
+            self._start_planning(
+                self._uav_positions(det.uav_xy_m), latency_from, (record, truth), det.uav_xy_m
+            )
 
     def _track_and_truth(self, n: int, record: SlotRecord) -> tuple[SlotRecord, FloatArray | None]:
         """Publish slot n's track; the record with the world's truth for slot n (if it came)."""
@@ -311,12 +324,17 @@ class GroundLoop:
         uav_xy: FloatArray,
         latency_from: float | None,
         record: tuple[SlotRecord, FloatArray | None] | None,
+        boundary_xy: FloatArray | None = None,
     ) -> None:
         """Plan the next slot on the planner thread, within the time budget; then publish it
-        and complete `record` (the slot just processed, with its truth)."""
+        and complete `record` (the slot just processed, with its truth). boundary_xy [M, 2]:
+        where the slot's detections say the vehicles were at its end (NaN = unknown)."""
         self._update_vehicle_states()
         job = self.state.next_job(
-            uav_xy, self.vehicles.velocities(self.t_s), tuple(self.vehicles.excluded)
+            uav_xy,
+            self.vehicles.velocities(self.t_s),
+            tuple(self.vehicles.excluded),
+            boundary_xy,
         )
         self.planning = asyncio.get_running_loop().create_task(
             self._plan(job, latency_from, record), name=f"plan-{job.slot}"
@@ -362,6 +380,7 @@ class GroundLoop:
             # Made before a stall: never published (startup.py); replanned once it opens.
             self.report.counters["plans dropped after a stall"] += 1
         else:
+            plan = self._marked_if_late(job.slot, plan)
             pending = self.state.commit(job, plan)
             msg = PlanMsg(pending.slot, self.t_s, pending.plan)
             self._publish(self.keys.plan, lambda: encode_plan(msg))
@@ -374,6 +393,21 @@ class GroundLoop:
             self.report.latencies_s.append(latency)
         if record is not None:
             self._complete_record(record[0], record[1], latency)
+
+    def _marked_if_late(self, slot: int, plan: SlotPlan) -> SlotPlan:
+        """`plan`, with fallback "late" when it is published so long after its slot's end that
+        the bridges drop it (timebase.plan_is_late): the vehicles then fly on without it."""
+        t0 = self.mission_t0_s
+        if t0 is None:
+            return plan
+        end_s = SlotTimeline(t0, self.s.dt).slot_end_s(slot)
+        if not plan_is_late(end_s, self.t_s, self.s.dt):
+            return plan
+        self.report.counters["plans late"] += 1
+        why = f"late: published at {self.t_s:.1f} s, its slot ended at {end_s:.1f} s"
+        reason = f"{why}; {plan.report.reason}" if plan.report.reason else why
+        report = replace(plan.report, reason=reason, fallback=plan.report.fallback or "late")
+        return replace(plan, report=report)
 
     def _publish(self, key: str, encode: Callable[[], bytes]) -> None:
         """Publish encode() on `key`; a message that fails its own validation is counted and

@@ -9,6 +9,7 @@ network: `next_job` predicts (the plan is made on the planner's thread), `proces
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,11 +37,55 @@ class PendingSlot:
     slot: int
     predicted: SlotPrediction
     plan: SlotPlan
+    start_xy: FloatArray | None = None
+    """[M, 2] m: where the planner planned from (None: no plan of this loop)."""
+    start_velocity: FloatArray | None = None
+    """[M, 2] m/s: the velocities it was given (None: none)."""
+    planned_around: tuple[int, ...] = ()
+    """The vehicles the plan left out (PlanningJob.excluded)."""
 
     @property
     def prediction(self) -> Gaussian:
         """The EKF prediction of the slot."""
         return self.predicted.prediction
+
+
+LEG_CHAIN_WITHIN_M = 3.0
+"""A vehicle within this distance of last plan's waypoint is following its plan (m)."""
+
+
+def leg_start_state(
+    measured_xy: FloatArray,
+    measured_v: FloatArray,
+    last: SlotPlan,
+    followed: Sequence[int],
+    boundary_xy: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Where the next leg of each vehicle starts: [M, 2] positions (m) and velocities (m/s).
+
+    The bridge flies each smooth leg from the previous leg's goal and end velocity, the plan's
+    own end state (service/bridge/setpoints.py), not from where the vehicle is: a vehicle
+    trails its setpoint by its tracking error (about 1-2 m on the receding horizon's
+    accelerating legs). Planning from the measured position then capped the next waypoint at
+    V_max dt from a point behind the leg's real start, and the vehicles lost that much every
+    slot (live `horizon` flew 6 % shorter steps than its offline twin, whose vehicles are where
+    it planned them; docs/performance.md, "Live against offline"). So the vehicles in
+    `followed` that were within LEG_CHAIN_WITHIN_M of `last`'s waypoint at the slot boundary
+    (boundary_xy [M, 2], the slot's detection positions, where finite; else measured_xy: a
+    telemetry sample taken after the boundary is ahead of it by the time since) start from its
+    waypoint and end velocity; the others (off their plan, or `last` has no end velocity or
+    came too late to be flown) from their measured state."""
+    xy, v = np.array(measured_xy, dtype=float), np.array(measured_v, dtype=float)
+    end_v = last.uav_velocity_mps
+    if end_v is None or last.report.fallback == "late" or not followed:
+        return xy, v
+    where = xy if boundary_xy is None else np.where(np.isfinite(boundary_xy), boundary_xy, xy)
+    idx = np.asarray(followed, dtype=np.int64)
+    near = np.linalg.norm(where[idx] - last.uav_xy_m[idx], axis=1) <= LEG_CHAIN_WITHIN_M
+    chained = idx[near]
+    xy[chained] = last.uav_xy_m[chained]
+    v[chained] = np.asarray(end_v)[chained]
+    return xy, v
 
 
 class MissionState:
@@ -81,26 +126,34 @@ class MissionState:
         uav_xy: FloatArray,
         uav_v: FloatArray | None = None,
         excluded: tuple[int, ...] = (),
+        boundary_xy: FloatArray | None = None,
     ) -> PlanningJob:
         """Predict slot n+1: the planning job from the UAVs' current positions uav_xy [M, 2]
         (and velocities uav_v [M, 2], for a dynamics-aware planner), planning without the
-        `excluded` vehicles (fleet_plan.py). Nothing changes until `commit`. The job carries
-        the planner's prev_plan: last slot's plan when the active vehicles are the same (over
-        them only), else None."""
+        `excluded` vehicles (fleet_plan.py). Nothing changes until `commit`. A vehicle that
+        follows last slot's plan starts from that plan's end state (`leg_start_state`; where
+        the vehicles were at the slot boundary: boundary_xy [M, 2], NaN = unknown). The
+        job carries the planner's prev_plan: last slot's plan when the active vehicles are the
+        same (over them only), else None."""
         predicted = predict(self.model, TrackState(self.belief, self.bound))
         excluded = tuple(sorted(excluded))
         active = tuple(m for m in range(self.scenario.M) if m not in excluded)
+        xy = np.asarray(uav_xy, dtype=float)
+        v = None if uav_v is None else np.asarray(uav_v, dtype=float)
         prev_plan = None
         if self.last_plan is not None:
             slot, last_active, plan = self.last_plan
             if slot == self.slot and last_active == active:
                 prev_plan = active_part(plan, active)
+            if slot == self.slot and v is not None:
+                followed = [m for m in active if m in last_active]
+                xy, v = leg_start_state(xy, v, plan, followed, boundary_xy)
         return PlanningJob(
             slot=self.slot + 1,
             method=self.method,
             kits=self.kits,
-            uav_xy=np.asarray(uav_xy, dtype=float),
-            uav_v=None if uav_v is None else np.asarray(uav_v, dtype=float),
+            uav_xy=xy,
+            uav_v=v,
             prev_eta=self.eta,
             prev_assoc=self.assoc,
             prediction=predicted.prediction,
@@ -114,7 +167,7 @@ class MissionState:
         if job.slot != self.slot + 1:
             raise ValueError(f"job for slot {job.slot}, but the next slot is {self.slot + 1}")
         predicted = SlotPrediction(job.prediction, job.J_pred)
-        self.pending = PendingSlot(job.slot, predicted, plan)
+        self.pending = PendingSlot(job.slot, predicted, plan, job.uav_xy, job.uav_v, job.excluded)
         self.last_plan = (job.slot, job.active, plan)
         return self.pending
 
@@ -162,7 +215,9 @@ class MissionState:
         known = np.isfinite(det.uav_xy_m)
         xy = np.where(known, det.uav_xy_m, np.nan)
         assoc = self.assoc if self.assoc is not None else np.full(self.scenario.M, -1)
-        plan = SlotPlan(xy, assoc, eta_used, float("nan"), SolveReport(status, reason))
+        plan = SlotPlan(
+            xy, assoc, eta_used, float("nan"), SolveReport(status, reason, fallback=status)
+        )
         self.pending = PendingSlot(n, predicted, plan)
         record = self.process(det, eta_used, np.asarray(compute_xy, dtype=float))
         return SlotRecord.from_dict(record.to_dict() | {"uav_xy": xy.tolist(), "plan_xy": None})
@@ -219,9 +274,13 @@ class MissionState:
             plan_pcrb_trace=plan.pcrb_trace,
             plan_velocity=plan.uav_velocity_mps,
             reason=rep.reason or None,
+            fallback=rep.fallback or None,
+            plan_start_xy=pending.start_xy,
+            plan_start_velocity=pending.start_velocity,
             extra={
                 "pcrb_pos": self.bound.position_trace,
                 "pcrb_vel": self.bound.velocity_trace,
                 "received": int(np.count_nonzero(det.received)),
-            },
+            }
+            | ({"planned_around": list(pending.planned_around)} if pending.planned_around else {}),
         )

@@ -40,11 +40,15 @@ class MissionTotals:
     velocity_sq_error_m2ps2: float = 0.0
     pcrb_trace_sum: float = 0.0
     not_ok: int = 0
+    fallbacks: Counter[str] = field(default_factory=Counter)
+    """Slots whose method's answer was not flown, by kind (the records' `fallback`)."""
 
     def add(self, record: SlotRecord) -> None:
         self.slots += 1
         self.pcrb_trace_sum += float(record.pcrb_trace)
         self.not_ok += record.status != "ok"
+        if record.fallback:
+            self.fallbacks[record.fallback] += 1
         if record.target_true is not None:
             err = np.asarray(record.target_est) - np.asarray(record.target_true)
             self.with_truth += 1
