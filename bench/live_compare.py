@@ -223,8 +223,19 @@ def main() -> None:
     report(methods, seeds, traces, out, time.monotonic() - t0, mode, exits)
 
 
+def percent_off(live: float, sim: float) -> float:
+    """Live's % deviation from simulate (+: live higher); inf when simulate's is 0 and live's
+    is not (a method that parks its UAVs steps 0 m)."""
+    if sim == 0.0:
+        return 0.0 if live == 0.0 else math.inf
+    return 100.0 * (live / sim - 1.0)
+
+
 def deviation(sim: np.ndarray, live: np.ndarray, key: str) -> Interval | None:
-    """Live's % deviation from simulate (+: live higher), paired over seeds, 95 % BCa."""
+    """Live's % deviation from simulate (+: live higher), paired over seeds, 95 % BCa (None
+    when simulate's mean is 0)."""
+    if not np.mean(sim) > 0.0:
+        return None
     iv = interval(sim, live, key)
     return None if iv is None else Interval(-iv.estimate, -iv.high, -iv.low, iv.level)
 
@@ -278,7 +289,7 @@ def report(
                 f"{m if kind == 'live' else '':9s} {kind:9s} "
                 + " ".join(f"{p[k]:9.4g}" for k in PHASE_KEYS)
             )
-        dev = {k: 100.0 * (pl[k] / ps[k] - 1.0) for k in TARGETS}
+        dev = {k: percent_off(pl[k], ps[k]) for k in TARGETS}
         ivs = {k: deviation(sim[k], live[k], k) for k in TARGETS}
         ok = {k: abs(dev[k]) <= 100 * TARGETS[k] for k in TARGETS}
         print(

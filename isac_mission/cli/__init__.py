@@ -1,6 +1,6 @@
 """The `isac-mission` command line, one module per command group.
 
-- `offline`: `check-config`, `simulate`
+- `offline`: `check-config`, `simulate`, `replay` (a trace's planner inputs replayed)
 - `sweep`: `sweep`
 - `embedded`: `sim` (the world alone), and the world of `run` (`run_embedded`): the only module
   importing `sim`, and so the only one importing both `sim` and the service

@@ -1,4 +1,5 @@
-"""Offline commands: `check-config` (derived constants) and `simulate` (Monte Carlo closed loop)."""
+"""Offline commands: `check-config` (derived constants), `simulate` (Monte Carlo closed loop) and
+`replay` (a trace's planner inputs through the offline planner, experiment/replay.py)."""
 
 from __future__ import annotations
 
@@ -144,11 +145,11 @@ def replay(
     candidates = [s, LIVE_SETTINGS.apply(s)]
     planning = next((c for c in candidates if not config_differences(recorded.config, c)), None)
     if planning is None:
-        live = "plan_v_max" in recorded.config
-        diff = config_differences(recorded.config, candidates[1] if live else s)
+        diffs = [config_differences(recorded.config, c) for c in candidates]
+        live = len(diffs[1]) < len(diffs[0])
         err_console.print(
             f"[bold red]{config} does not give the scenario {trace} was planned with"
-            f"{' (with the live settings)' if live else ''}:[/] " + "; ".join(diff)
+            f"{' (with the live settings)' if live else ''}:[/] " + "; ".join(diffs[live])
         )
         raise typer.Exit(1)
     if not any(r.plan_start_xy is not None for r in recorded.slots):

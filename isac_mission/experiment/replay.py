@@ -17,7 +17,7 @@ slot n with a plan this module rebuilds the planner's input and answers three qu
 3. *What the gap costs.* The plan made from the offline start instead (`offline_step_m`,
    against the recorded `planned_step_m`, both from the previous plan's waypoint).
 
-The replay plans as the live ground loop does (fleet_plan.PlanningJob: the vehicles a plan left
+The replay plans as the live ground loop does (planning/fleet.py, PlanningJob: the vehicles a plan left
 out, `planned_around`, held and kept out), chaining its own replayed plans as each slot's previous
 plan. Pure computation on a trace and a scenario (no I/O: `read_trace` is the caller's).
 """
@@ -31,9 +31,9 @@ from typing import Any
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.planning.fleet import KitCache, PlanningJob, active_part
 from isac_mission.planning.slot import METHODS, Method, SolverKit
 from isac_mission.records import SlotRecord, Trace
-from isac_mission.service.ground.fleet_plan import KitCache, PlanningJob, active_part
 from isac_mission.tracking.cycle import CycleModel, TrackState, predict
 from isac_mission.tracking.pcrb import Bound
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
@@ -76,21 +76,28 @@ class ReplayedSlot:
 def config_differences(trace_config: dict[str, Any], s: Scenario) -> list[str]:
     """The planner-relevant trace config entries `s` does not reproduce ("key: trace x, here y").
     A live trace's plan_* entries are compared with s's v_max, r_th and d_safe."""
-    mine = s.trace_config()
+    want = {k: v for k, v in trace_config.items() if k not in IGNORED_KEYS}
+    for key, planned in PLANNING_KEYS_REPLACED.items():
+        if planned in trace_config:
+            want[key] = trace_config[planned]
+    return _differences(want, s.trace_config(), "")
+
+
+def _differences(want: dict[str, Any], mine: dict[str, Any], prefix: str) -> list[str]:
+    """Entries of `want` that `mine` has with another value, nested keys dotted."""
     out: list[str] = []
-    for key, want in trace_config.items():
-        if key in IGNORED_KEYS or key not in mine:
+    for key, value in want.items():
+        if key not in mine:
             continue
-        if key in PLANNING_KEYS_REPLACED and PLANNING_KEYS_REPLACED[key] in trace_config:
-            want = trace_config[PLANNING_KEYS_REPLACED[key]]
-        if not _same(want, mine[key]):
-            out.append(f"{key}: trace {want!r}, here {mine[key]!r}")
+        here = mine[key]
+        if isinstance(value, dict) and isinstance(here, dict):
+            out += _differences(value, here, f"{prefix}{key}.")
+        elif not _same(value, here):
+            out.append(f"{prefix}{key}: trace {value!r}, here {here!r}")
     return out
 
 
 def _same(a: Any, b: Any) -> bool:
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
     if isinstance(a, (int, float, list)) and isinstance(b, (int, float, list)):
         try:
             return bool(np.allclose(np.asarray(a, float), np.asarray(b, float), rtol=1e-9))

@@ -21,10 +21,11 @@ from scipy import stats
 from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions, planning_scenario, summarize_live
-from isac_mission.config import Scenario
+from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo
+from isac_mission.experiment.replay import replay_trace, summarize_replay
 from isac_mission.planning.slot import METHODS
-from isac_mission.records import read_trace
+from isac_mission.records import Trace, read_trace
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import compare_pcrb
 from tests.support.live_cli import (
@@ -38,6 +39,7 @@ from tests.support.live_cli import (
 from tests.support.ports import SitlPorts, free_port_block, sitl_ports
 
 ROOT = Path(__file__).resolve().parents[2]
+CONFIG = ROOT / "config" / "paper.yaml"
 LIVE_TOL_M = 1.0
 """Tolerance of the constraint re-check on telemetry positions (the issue allows at most 1 m)."""
 
@@ -102,6 +104,32 @@ def test_run_cli_flies_all_60_slots_within_the_constraints(
     assert compare_pcrb(trace) == []
     for png in ("fig2a_trajectories.png", "fig2b_bandwidth.png", "fig3_performance.png"):
         assert (out / png).stat().st_size > 10_000
+    assert_planned_as_offline(trace, planning_scenario(load_scenario(CONFIG), LiveOptions()))
+
+
+CHAINED_SHARE = 0.9
+"""Of the UAV-slots after the first, at least this share must start on their last plan."""
+
+
+def assert_planned_as_offline(trace: Trace, planning: Scenario) -> None:
+    """The live planner was given what its offline twin would have been given, and planned what
+    the offline planner plans from it (experiment/replay.py): the prediction is the previous
+    belief's; a vehicle on its plan starts from the plan's end state, as offline (one more than
+    LEG_CHAIN_WITHIN_M off it, from where it is); the same inputs give the same waypoints; and
+    planning from the offline start would not have stepped further. Slots after a timed-out
+    plan (a hold: no planner answer to compare) are left out."""
+    rows = replay_trace(trace, planning)
+    skip = {r.slot for r in trace.slots if r.fallback in ("timeout", "late", "held")}
+    skip |= {n + 1 for n in skip}
+    rows = [r for r in rows if r.slot not in skip]
+    assert len(rows) >= 0.8 * len(trace.slots)
+    assert max(r.prediction_gap for r in rows) < 1e-6
+    assert max(float(r.replay_gap_m.max()) for r in rows) < 1e-3
+    later = [r for r in rows if r.slot > 1]
+    gaps = np.concatenate([r.start_gap_m for r in later])
+    assert np.mean(gaps == 0.0) >= CHAINED_SHARE, np.percentile(gaps, [50, 90, 99])
+    summary = summarize_replay(rows, first_slot=11)
+    assert summary.planned_step_m >= 0.97 * summary.offline_step_m
 
 
 FALSE_ALARM = 1e-3

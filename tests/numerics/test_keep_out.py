@@ -9,9 +9,9 @@ import pytest
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.fleet import NO_BS, KitCache, PlanningJob
 from isac_mission.planning.positions import PositionSubproblem
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
-from isac_mission.service.ground.fleet_plan import NO_BS, KitCache, PlanningJob
 from isac_mission.types import Gaussian
 from isac_mission.wire import PlanMsg, decode_plan, encode_plan
 

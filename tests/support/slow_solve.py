@@ -19,7 +19,7 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
-from isac_mission.service.ground import fleet_plan
+from isac_mission.planning import fleet as fleet_plan
 
 
 def long_native_solve(wall_s: float) -> None:

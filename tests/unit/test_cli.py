@@ -29,9 +29,10 @@ def test_every_command_is_registered_in_help_order() -> None:
         c.name or getattr(c.callback, "__name__", "").replace("_", "-")
         for c in app.registered_commands
     ]
-    assert names[:8] == [
+    assert names[:9] == [
         "check-config",
         "simulate",
+        "replay",
         "sweep",
         "sim",
         "run",

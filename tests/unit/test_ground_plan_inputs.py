@@ -1,4 +1,4 @@
-"""What the ground loop hands the planner besides positions (ground/mission.py, fleet_plan.py):
+"""What the ground loop hands the planner besides positions (ground/mission.py, planning/fleet.py):
 the tracker's predicted covariance (target_cov_pred) and last slot's plan (prev_plan) when the
 active vehicles are unchanged, over those vehicles only (the inverse of the plan's widening)."""
 
@@ -12,8 +12,8 @@ import pytest
 from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.association import associate
+from isac_mission.planning.fleet import NO_BS, active_part
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
-from isac_mission.service.ground.fleet_plan import NO_BS, active_part
 from isac_mission.service.ground.mission import MissionState
 from isac_mission.types import Detections, Gaussian, HorizonPlan, SlotPlan
 

@@ -40,7 +40,7 @@ def test_seeds_and_default_methods(lc: ModuleType) -> None:
 def test_report_compares_both_sides_and_reduces_against_sd(
     lc: ModuleType, paper: Scenario, tmp_path: Path
 ) -> None:
-    s = dataclasses.replace(paper, N=8)
+    s = dataclasses.replace(paper, N=13)  # slots 11..N exist
     seeds = [4, 5, 6]
     paths: dict[str, dict[int, Path]] = {"sd": {}, "comm": {}}
     for seed in seeds:
@@ -48,15 +48,43 @@ def test_report_compares_both_sides_and_reduces_against_sd(
         run_monte_carlo(s, ["sd", "comm"], 1, seed=seed, trace_dir=where)
         for m in paths:
             paths[m][seed] = trace_path(where, m, 0)
-    lc.report(["sd", "comm"], seeds, {"live": paths, "simulate": paths}, tmp_path, 1.0)
+    lc.report(["sd", "comm"], seeds, {"live": paths, "simulate": paths}, tmp_path, 1.0, "x", [0])
     out = json.loads((tmp_path / "live_compare.json").read_text())
     assert out["seeds"] == seeds
+    assert out["live_exit_codes"] == {"0": 1}
     for m in ("sd", "comm"):
-        assert out["figures"][m]["within"] == {"pcrb": True, "loc_mse": True}
-        assert out["figures"][m]["simulate_vs_live_pct"]["pcrb"] == pytest.approx(0.0)
+        assert out["figures"][m]["within"] == {"pcrb_from11": True, "step_from11_m": True}
+        assert out["figures"][m]["live_vs_simulate_pct"]["pcrb_from11"] == pytest.approx(0.0)
     # comm's tr(PCRB) reduction against sd, recomputed from the per-seed figures.
-    sd = np.array(out["figures"]["sd"]["per_seed"]["live"]["pcrb"])
-    comm = np.array(out["figures"]["comm"]["per_seed"]["live"]["pcrb"])
-    est, low, high = out["reductions"]["live"]["comm"]["sd"]["pcrb"]
-    assert est == pytest.approx(100 * (1 - comm.mean() / sd.mean()))
-    assert low <= est <= high
+    for key in ("pcrb", "pcrb_from11"):
+        sd = np.array(out["figures"]["sd"]["per_seed"]["live"][key])
+        comm = np.array(out["figures"]["comm"]["per_seed"]["live"][key])
+        est, low, high = out["reductions"]["live"]["comm"]["sd"][key]
+        assert est == pytest.approx(100 * (1 - comm.mean() / sd.mean()))
+        assert low <= est <= high
+
+
+def test_report_flags_a_live_side_off_its_twin(
+    lc: ModuleType, paper: Scenario, tmp_path: Path
+) -> None:
+    """`comm` flown "live" against `sd` offline: the deviation is recomputed from the per-seed
+    figures, and the targets are judged on it (sd's parked UAVs take no step at all)."""
+    s = dataclasses.replace(paper, N=13)
+    seeds = [4, 5]
+    paths: dict[str, dict[int, Path]] = {"sd": {}, "comm": {}}
+    for seed in seeds:
+        where = tmp_path / f"seed{seed}"
+        run_monte_carlo(s, ["sd", "comm"], 1, seed=seed, trace_dir=where)
+        for m in paths:
+            paths[m][seed] = trace_path(where, m, 0)
+    traces = {"live": {"sd": paths["comm"]}, "simulate": {"sd": paths["sd"]}}
+    lc.report(["sd"], seeds, traces, tmp_path, 1.0, "x", [0, 0])
+    row = json.loads((tmp_path / "live_compare.json").read_text())["figures"]["sd"]
+    live = np.mean(row["per_seed"]["live"]["pcrb_from11"])
+    sim = np.mean(row["per_seed"]["simulate"]["pcrb_from11"])
+    dev = row["live_vs_simulate_pct"]["pcrb_from11"]
+    assert dev == pytest.approx(100 * (live / sim - 1))
+    assert row["within"]["pcrb_from11"] == (abs(dev) <= 20)
+    assert row["simulate"]["step_from11_m"] == 0.0  # sd never moves
+    assert row["live"]["step_from11_m"] > 0.0
+    assert row["within"]["step_from11_m"] is False

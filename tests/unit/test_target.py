@@ -129,3 +129,24 @@ def test_world_target_starts_at_a_seeded_draw_from_p0_around_the_cue() -> None:
     np.testing.assert_allclose(err.var(axis=0), np.diag(s.P0), rtol=0.25)
     exact = make_target(s, WorldOptions(initial_error=False), rng(0), 0).state
     np.testing.assert_array_equal(exact, s.x0)
+
+
+def test_the_world_target_flies_simulates_path_for_the_seed() -> None:
+    """`run --seed S` and `simulate --seed S` (run 0) see the same target: the world draws the
+    offline run's process noise (model/run_noise.py), and its initial error as the cue's."""
+    from isac_mission.config import parse_scenario
+    from isac_mission.experiment.closed_loop import draw_run_noise, true_trajectory
+    from sim.world_assembly import make_target
+    from sim.world_options import WorldOptions
+
+    s = parse_scenario({})
+    for seed in (1, 31):
+        want = true_trajectory(s, draw_run_noise(s, seed))
+        options = WorldOptions(initial_error=False, reflect_target=False)
+        target = make_target(s, options, np.random.default_rng(99), seed)
+        got = np.array([target.state, *(target.advance() for _ in range(s.N))])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+        # Past the mission the world's own stream goes on (a long-lived service).
+        assert np.all(np.isfinite(target.advance()))
+        cued = make_target(s, WorldOptions(), np.random.default_rng(99), seed)
+        np.testing.assert_allclose(cued.state, s.x0 - draw_run_noise(s, seed).initial_error)

@@ -40,3 +40,31 @@ def test_slots_without_truth_are_left_out_of_the_errors(paper: Scenario, tmp_pat
     loc = np.mean([np.sum((r.target_est[:2] - r.target_true[:2]) ** 2) for r in kept])
     np.testing.assert_allclose(part["loc_mse"], [loc])
     np.testing.assert_allclose(part["pcrb"], full["pcrb"])  # the bound needs no truth
+
+
+def test_steps_and_the_tracking_phase_from_the_positions(paper: Scenario, tmp_path: Path) -> None:
+    """The mean step per UAV per slot and the figures over slots 11..N, recomputed by hand; a
+    UAV without a known position (a `held` slot's null) is left out of the steps it ends."""
+    s = dataclasses.replace(paper, N=14)
+    run_monte_carlo(s, ["proposed"], 1, seed=2, trace_dir=tmp_path)
+    trace = read_trace(trace_path(tmp_path, "proposed", 0))
+    got = trace_figures([trace])
+    xy = trace.stack("uav_xy")
+    steps = np.linalg.norm(np.diff(xy, axis=0), axis=2)  # [N - 1, M], step n ends in slot n + 2
+    np.testing.assert_allclose(got["step_m"], [steps.mean()])
+    np.testing.assert_allclose(got["step_from11_m"], [steps[9:].mean()])
+    assert got["step_m"][0] > 1.0  # proposed moves
+    err = trace.stack("target_est") - trace.stack("target_true")
+    loc = np.sum(err[:, :2] ** 2, axis=1)
+    np.testing.assert_allclose(got["loc_mse_from11"], [loc[10:].mean()])
+    np.testing.assert_allclose(got["loc_mse"], [loc[1:].mean()])
+    unknown = xy.copy()
+    unknown[5, 1] = np.nan  # UAV 1 unknown in slot 6: its steps into and out of slot 6 go
+    slots = [
+        dataclasses.replace(r, uav_xy=unknown[i]) if i == 5 else r
+        for i, r in enumerate(trace.slots)
+    ]
+    part = trace_figures([dataclasses.replace(trace, slots=slots)])
+    kept = np.ones_like(steps, dtype=bool)
+    kept[4, 1] = kept[5, 1] = False
+    np.testing.assert_allclose(part["step_m"], [steps[kept].mean()])

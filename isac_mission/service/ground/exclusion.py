@@ -2,7 +2,7 @@
 
 A vehicle whose bridge reports its link lost, or whose telemetry position is older than both
 `vehicle_lost_after_s` (simulation) and `vehicle_lost_wall_s` (wall), is excluded: the slot is
-planned for the others (fleet_plan.py) and the vehicle holds where it was last seen. So is a
+planned for the others (planning/fleet.py) and the vehicle holds where it was last seen. So is a
 vehicle its bridge reports as not flown by the service (telemetry `override`: an operator's mode
 change, the vehicle's own failsafe, landed, killed; docs/service.md, "Operator override"), and one
 an operator's `hold` or `land` on `control` took out (`held`, control.py). It is re-admitted once

@@ -21,12 +21,12 @@ import numpy as np
 from isac_mission.bus import Subscription, ZenohBus
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
+from isac_mission.planning.fleet import PlanningJob
 from isac_mission.planning.slot import SolverKit
 from isac_mission.records import SlotRecord, TraceWriter
 from isac_mission.service.ground.assembler import DetectionAssembler
 from isac_mission.service.ground.control import ControlDesk
 from isac_mission.service.ground.exclusion import VehicleWatch
-from isac_mission.service.ground.fleet_plan import PlanningJob
 from isac_mission.service.ground.mission import MissionState
 from isac_mission.service.ground.planner_thread import SOLVE_LOCK, consume_result, in_daemon_thread
 from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEvent

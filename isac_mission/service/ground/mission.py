@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.planning.fleet import KitCache, PlanningJob, active_part
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord
-from isac_mission.service.ground.fleet_plan import KitCache, PlanningJob, active_part
 from isac_mission.tracking.cycle import CycleModel, SlotPrediction, TrackState, predict, update
 from isac_mission.tracking.pcrb import Bound
 from isac_mission.types import (
@@ -130,7 +130,7 @@ class MissionState:
     ) -> PlanningJob:
         """Predict slot n+1: the planning job from the UAVs' current positions uav_xy [M, 2]
         (and velocities uav_v [M, 2], for a dynamics-aware planner), planning without the
-        `excluded` vehicles (fleet_plan.py). Nothing changes until `commit`. A vehicle that
+        `excluded` vehicles (planning/fleet.py). Nothing changes until `commit`. A vehicle that
         follows last slot's plan starts from that plan's end state (`leg_start_state`; where
         the vehicles were at the slot boundary: boundary_xy [M, 2], NaN = unknown). The
         job carries the planner's prev_plan: last slot's plan when the active vehicles are the

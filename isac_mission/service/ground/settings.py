@@ -8,8 +8,8 @@ from typing import ClassVar
 from pydantic import Field
 
 from isac_mission.config.validation import Settings
+from isac_mission.planning.fleet import Planner
 from isac_mission.planning.slot import Method, plan_slot
-from isac_mission.service.ground.fleet_plan import Planner
 
 
 class GroundSettings(Settings):
@@ -27,7 +27,7 @@ class GroundSettings(Settings):
     no limit); past it the slot's plan is "hold" (status "timeout") and the next slot plans
     normally. vehicle_lost_after_s (simulation) and vehicle_lost_wall_s (wall): a vehicle whose
     telemetry position is older than both, or whose bridge reports its link lost, is planned
-    around (fleet_plan.py) until its link is back and it is in OFFBOARD again.
+    around (planning/fleet.py) until its link is back and it is in OFFBOARD again.
     wait_for_telemetry: plan only from fresh telemetry at a start, a resume and after a stall
     (startup.py; the live service sets it: its bridges publish telemetry). False (a loop fed by
     a world without telemetry): plan from the detections' positions and the start points.
