@@ -37,17 +37,25 @@ def test_seeds_and_default_methods(lc: ModuleType) -> None:
     assert ("horizon" in methods) == ("horizon" in METHODS)
 
 
-def test_report_compares_both_sides_and_reduces_against_sd(
-    lc: ModuleType, paper: Scenario, tmp_path: Path
-) -> None:
-    s = dataclasses.replace(paper, N=13)  # slots 11..N exist
-    seeds = [4, 5, 6]
+def sd_and_comm_traces(
+    paper: Scenario, seeds: list[int], tmp_path: Path
+) -> dict[str, dict[int, Path]]:
+    """One `simulate` trace per seed of sd and comm, 13 slots (so that slots 11..N exist)."""
+    s = dataclasses.replace(paper, N=13)
     paths: dict[str, dict[int, Path]] = {"sd": {}, "comm": {}}
     for seed in seeds:
         where = tmp_path / f"seed{seed}"
         run_monte_carlo(s, ["sd", "comm"], 1, seed=seed, trace_dir=where)
         for m in paths:
             paths[m][seed] = trace_path(where, m, 0)
+    return paths
+
+
+def test_report_compares_both_sides_and_reduces_against_sd(
+    lc: ModuleType, paper: Scenario, tmp_path: Path
+) -> None:
+    seeds = [4, 5, 6]
+    paths = sd_and_comm_traces(paper, seeds, tmp_path)
     lc.report(["sd", "comm"], seeds, {"live": paths, "simulate": paths}, tmp_path, 1.0, "x", [0])
     out = json.loads((tmp_path / "live_compare.json").read_text())
     assert out["seeds"] == seeds
@@ -69,14 +77,8 @@ def test_report_flags_a_live_side_off_its_twin(
 ) -> None:
     """`comm` flown "live" against `sd` offline: the deviation is recomputed from the per-seed
     figures, and the targets are judged on it (sd's parked UAVs take no step at all)."""
-    s = dataclasses.replace(paper, N=13)
     seeds = [4, 5]
-    paths: dict[str, dict[int, Path]] = {"sd": {}, "comm": {}}
-    for seed in seeds:
-        where = tmp_path / f"seed{seed}"
-        run_monte_carlo(s, ["sd", "comm"], 1, seed=seed, trace_dir=where)
-        for m in paths:
-            paths[m][seed] = trace_path(where, m, 0)
+    paths = sd_and_comm_traces(paper, seeds, tmp_path)
     traces = {"live": {"sd": paths["comm"]}, "simulate": {"sd": paths["sd"]}}
     lc.report(["sd"], seeds, traces, tmp_path, 1.0, "x", [0, 0])
     row = json.loads((tmp_path / "live_compare.json").read_text())["figures"]["sd"]
