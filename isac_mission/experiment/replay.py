@@ -25,7 +25,7 @@ plan. Pure computation on a trace and a scenario (no I/O: `read_trace` is the ca
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -143,9 +143,7 @@ def replay_trace(
         if wanted is not None and rec.slot not in wanted:
             continue
         start_xy, start_v = _offline_start(prev, s)
-        offline = PlanningJob(
-            **(job.__dict__ | {"uav_xy": start_xy, "uav_v": start_v}),
-        ).run()
+        offline = replace(job, uav_xy=start_xy, uav_v=start_v).run()
         x_pred = job.prediction.x
         start_v_live = (
             np.zeros((s.M, 2)) if rec.plan_start_velocity is None else rec.plan_start_velocity
