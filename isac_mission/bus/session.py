@@ -128,7 +128,10 @@ class Subscription:
 
     async def get(self, timeout_s: float) -> tuple[str, bytes]:
         """The next sample, or TimeoutError after timeout_s (wall seconds)."""
-        return await asyncio.wait_for(self.__anext__(), timeout_s)
+        # asyncio.timeout, not wait_for: on Python 3.11 wait_for swallows a cancellation that
+        # arrives as the sample does (an enclosing timeout then never fires).
+        async with asyncio.timeout(timeout_s):
+            return await self.__anext__()
 
     async def __aenter__(self) -> Subscription:
         return self
@@ -239,7 +242,8 @@ class ZenohBus:
             if bool(getattr(pub.matching_status, "matching", pub.matching_status)):
                 return True
             try:
-                await asyncio.wait_for(matched.wait(), timeout_s)
+                async with asyncio.timeout(timeout_s):
+                    await matched.wait()
             except TimeoutError:
                 return False
             return True

@@ -214,4 +214,5 @@ async def run_embedded(
             return await fly_mission(s, opts, bus, stop, on_slot, on_status, initial_x)
         finally:
             world_stop.set()
-            await asyncio.wait_for(world, timeout=30.0)
+            async with asyncio.timeout(30.0):
+                await world

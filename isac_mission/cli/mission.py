@@ -204,7 +204,8 @@ async def fly_mission(
             try:
                 # Descent at about 1 m/s of simulation time, plus margin, in wall seconds.
                 land_budget_s = 60.0 + 3.0 * s.H / max(opts.speed, 1e-3)
-                await asyncio.wait_for(fleet.land_all(), timeout=land_budget_s)
+                async with asyncio.timeout(land_budget_s):
+                    await fleet.land_all()
             except (IsacError, TimeoutError) as err:
                 log.error("landing: %s", err)
                 result.report.last_error = f"landing: {err}"

@@ -110,7 +110,8 @@ def build_app(service: ConsoleService, replay: dict[str, Any] | None = None) -> 
                     batch = feed.take()
                     if batch:
                         text = batch_text(batch)
-                        await asyncio.wait_for(websocket.send_text(text), SEND_TIMEOUT_S)
+                        async with asyncio.timeout(SEND_TIMEOUT_S):
+                            await websocket.send_text(text)
                     await asyncio.sleep(MIN_SEND_INTERVAL_S)
             finally:
                 receiver.cancel()

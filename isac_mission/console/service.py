@@ -122,7 +122,8 @@ class ConsoleService:
                     log.info("console: waiting for the ground loop's bus: %s", err)
                     warned = True
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._stop.wait(), RETRY_S)
+                async with asyncio.timeout(RETRY_S):
+                    await self._stop.wait()
         return None
 
     async def _watch(self) -> None:
@@ -151,7 +152,8 @@ class ConsoleService:
     async def _stats(self) -> None:
         while not self._stop.is_set():
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._stop.wait(), STATS_PERIOD_S)
+                async with asyncio.timeout(STATS_PERIOD_S):
+                    await self._stop.wait()
             self.hub.broadcast("console", self.console_state())
 
     def console_state(self) -> dict[str, Any]:

@@ -84,7 +84,8 @@ class CommandProtocol:
                     wait_s = timeout_s
                     while True:
                         try:
-                            result = await asyncio.wait_for(asyncio.shield(pending.future), wait_s)
+                            async with asyncio.timeout(wait_s):
+                                result = await asyncio.shield(pending.future)
                         except TimeoutError:
                             progress = pending.progress_wall_s
                             if progress is None or loop.time() - progress >= timeout_s:

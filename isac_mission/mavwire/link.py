@@ -289,7 +289,8 @@ class MavlinkLink(asyncio.DatagramProtocol):
         True if one was."""
         event = self._changed
         try:
-            await asyncio.wait_for(event.wait(), timeout_s)
+            async with asyncio.timeout(timeout_s):
+                await event.wait()
         except TimeoutError:
             return False
         return True

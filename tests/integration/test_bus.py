@@ -119,3 +119,21 @@ def test_keys_follow_the_design() -> None:
     )
     with pytest.raises(ConfigError):
         Keys("bad/id")
+
+
+async def test_a_cancellation_that_arrives_with_a_sample_is_not_swallowed() -> None:
+    """`get` inside an enclosing timeout: a sample handed over in the same loop iteration as the
+    cancellation must not eat it (Python 3.11's wait_for did: the window of a test never closed),
+    and the sample stays queued for the next `get`."""
+    endpoint = tcp_loopback(free_tcp_port())
+    async with (
+        await ZenohBus.open_async(BusSettings.hub(endpoint)) as bus,
+        bus.subscribe("bus-test/cancel/**") as sub,
+    ):
+        getter = asyncio.create_task(sub.get(TIMEOUT_S))
+        await asyncio.sleep(0)  # the getter now waits on the queue
+        sub._deliver(("bus-test/cancel/a", b"1"))  # what the Zenoh thread's callback does
+        getter.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await getter
+        assert await sub.get(TIMEOUT_S) == ("bus-test/cancel/a", b"1")

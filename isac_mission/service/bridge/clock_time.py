@@ -116,7 +116,8 @@ class ClockSimTime:
     async def wait_ready(self, timeout_s: float) -> None:
         """Wait for the first clock message, `timeout_s` wall seconds; IsacError after."""
         try:
-            await asyncio.wait_for(self._ready.wait(), timeout_s)
+            async with asyncio.timeout(timeout_s):
+                await self._ready.wait()
         except TimeoutError:
             raise IsacError(f"no clock message within {timeout_s:g} s") from None
 

@@ -350,7 +350,8 @@ class GroundLoop:
         budget = self.settings.plan_budget_s
         future = in_daemon_thread(lambda: job.run(self.settings.planner), f"plan-{job.slot}")
         try:
-            plan = await asyncio.wait_for(asyncio.shield(future), budget)
+            async with asyncio.timeout(budget):
+                plan = await asyncio.shield(future)
         except TimeoutError:
             self.report.counters["plans timed out"] += 1
             why = f"timeout: planning took longer than the {budget:g} s budget; hold"
