@@ -361,12 +361,12 @@ SLOW_SLOT, SLOW_SOLVE_S = 6, 20.0
 the 0.5 s plan budget, so it is held and the mission goes on, and past the mission's end."""
 
 
-@pytest.mark.parametrize("ending", ["completed", "sigint"])
+@pytest.mark.parametrize("ending", ["completed", "sigint", "sigterm"])
 def test_a_solve_in_flight_when_the_mission_ends_leaves_a_clean_exit(
     tmp_path: Path, ending: str
 ) -> None:
     """`run` exits 0 with its summary whether the mission completes (8 slots) or is stopped by
-    SIGINT while a timed-out plan's IPOPT solve is still running on its thread (before, the
+    SIGINT or SIGTERM while a timed-out plan's IPOPT solve is still running on its thread (before, the
     interpreter's shutdown aborted the process: exit 134, "FATAL: exception not rethrown")."""
     config = short_mission(tmp_path, 8, altitude_m=10.0)
     endpoint, ports = _ports(3)
@@ -380,10 +380,10 @@ def test_a_solve_in_flight_when_the_mission_ends_leaves_a_clean_exit(
     )
     trace_path = out / "trace_proposed.jsonl"
     try:
-        if ending == "sigint":
+        if ending != "completed":
             # Record 5 is written once plan 6 is out: held after its budget, its solve running.
             wait_for_slots(trace_path, SLOW_SLOT - 1, proc, timeout_s=240)
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(signal.SIGINT if ending == "sigint" else signal.SIGTERM)
         stdout, stderr = proc.communicate(timeout=300)
     finally:
         if proc.poll() is None:
