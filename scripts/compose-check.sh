@@ -18,7 +18,7 @@ project=isaccheck
 base_official=python:3.11-slim
 base_standin=isac-mission-base:bookworm
 min_ok_slots=5
-speed=5 # simulation seconds per wall second: the takeoff and the landing in seconds
+speed=2 # simulation seconds per wall second: the 60 s mission outlasts the checks below
 say() { echo "compose-check: $*" >&2; }
 fail() {
     say "FAILED: $*"
@@ -98,7 +98,13 @@ cleanup() {
     if [ "$started_dockerd" = 1 ]; then
         kill "$dockerd_pid" 2> /dev/null
         wait "$dockerd_pid" 2> /dev/null
+        # dockerd leaves its default network namespace's bind mount behind.
+        awk '$2 ~ "^/run/isac-compose-check/" {print $2}' /proc/mounts | xargs -r umount
         rm -rf /run/isac-compose-check
+    fi
+    if grep -q " /run/isac-compose-check/" /proc/mounts; then
+        say "FAILED: mounts left under /run/isac-compose-check"
+        status=1
     fi
     if [ "$(net_state)" != "$net_before" ]; then
         say "FAILED: the host's network settings changed:"
@@ -224,6 +230,11 @@ out="$(mktemp -d)"
 docker cp "$("${compose[@]}" -p "$project" ps -a -q ground)":/data/serve "$out/" > /dev/null
 ok_slots="$(grep -c '"status": *"ok"' "$out/serve/trace_proposed.jsonl" || true)"
 [ "$ok_slots" -ge "$min_ok_slots" ] || fail "the trace has $ok_slots ok slots"
+# `stop` came mid-mission (the landing is the shutdown's, not the mission's end).
+docker logs "$ground" 2>&1 | grep -Eq 'slots completed[^0-9]*([0-9]|[1-5][0-9])/60' || {
+    docker logs --tail 40 "$ground" >&2
+    fail "the mission was not stopped mid-way (see the summary above)"
+}
 rm -rf "$out" "$heartbeats"
 say "both exited 0; 3 vehicles landed; $ok_slots ok slots in the trace"
 say "passed in $((SECONDS - t_start)) s"
