@@ -131,22 +131,22 @@ def exact_problem(s: Scenario, inp: SlotInput, plan: SlotPlan) -> ExactProblem:
         )
     )
     ballistic, radius = None, np.inf
-    if s.planner.accel_limit_mps2 is not None and inp.prev_velocity is not None:
+    if s.planner.accel_limit_mps2 is not None and inp.prev_velocity_mps is not None:
         ballistic = np.empty((s.M, 2))
         for m in range(s.M):
-            coast = inp.prev_velocity[m] * s.dt
+            coast = inp.prev_velocity_mps[m] * s.dt
             norm = math.hypot(*coast)
             limit = s.v_max * s.dt * (1 - 1e-9)
             if norm > limit:
                 coast = coast * (limit / norm)
-            ballistic[m] = np.minimum(np.maximum(inp.prev_xy[m] + coast, lo), hi)
+            ballistic[m] = np.minimum(np.maximum(inp.prev_xy_m[m] + coast, lo), hi)
         radius = s.planner.accel_limit_mps2 * s.dt**2 / 4
-    keep_out = np.zeros((0, 2)) if inp.keep_out_xy is None else np.asarray(inp.keep_out_xy)
+    keep_out = np.zeros((0, 2)) if inp.keep_out_xy_m is None else np.asarray(inp.keep_out_xy_m)
     return ExactProblem(
         s,
-        np.asarray(inp.prev_xy, float),
+        np.asarray(inp.prev_xy_m, float),
         s.bs_xy[plan.bs_of_uav],
-        np.asarray(inp.x_pred[:2], float),
+        np.asarray(inp.target_state_pred[:2], float),
         keep_out,
         ballistic,
         radius,
@@ -404,7 +404,7 @@ def multistart(
 ) -> Reference:
     """The SLSQP multistart of one slot (starts seeded by rng_seed, independent of the plan)."""
     p = exact_problem(s, slot.inp, slot.plan)
-    objective = PlanningObjective(slot.inp.J_pred, slot.inp.x_pred, sensing)
+    objective = PlanningObjective(slot.inp.prior_information, slot.inp.target_state_pred, sensing)
     rng = np.random.default_rng(rng_seed)
     found: list[float] = []
     capped = 0

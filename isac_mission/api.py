@@ -43,12 +43,12 @@ def first_slot_input(scenario: Scenario) -> SlotInput:
     )
     slot_1 = predict(CycleModel.from_scenario(scenario), start)
     return SlotInput(
-        prev_xy=scenario.uav_start_xy.copy(),
-        prev_eta=np.full(scenario.M, 1.0 / scenario.M),
-        prev_assoc=None,
-        x_pred=slot_1.prediction.x,
-        J_pred=slot_1.prior,
-        prev_velocity=np.zeros((scenario.M, 2)),
+        prev_xy_m=scenario.uav_start_xy.copy(),
+        prev_bandwidth_share=np.full(scenario.M, 1.0 / scenario.M),
+        prev_bs_of_uav=None,
+        target_state_pred=slot_1.prediction.x,
+        prior_information=slot_1.prior,
+        prev_velocity_mps=np.zeros((scenario.M, 2)),
     )
 
 

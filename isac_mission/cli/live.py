@@ -29,6 +29,7 @@ from isac_mission.cli.ports import (
     MavlinkLocalBasePortOpt,
     port_options,
 )
+from isac_mission.planning.registry import methods_help
 from isac_mission.quiet import quiet_highs_banner
 
 if TYPE_CHECKING:
@@ -64,7 +65,7 @@ def _live(
     import logging
 
     from isac_mission.cli.mission import LiveOptions
-    from isac_mission.planning.slot import METHODS
+    from isac_mission.planning.registry import METHODS
 
     s = load_or_exit(config)
     if method not in METHODS:
@@ -272,9 +273,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
     console.print(f"trace: {result.trace_path}")
 
 
-MethodOpt = Annotated[
-    str, typer.Option(help="Planning method: proposed, proposed-sca, sd, aba, crb, comm, horizon.")
-]
+MethodOpt = Annotated[str, typer.Option(help=f"Planning method: {methods_help()}.")]
 SpeedOpt = Annotated[float, typer.Option(help="Simulation seconds per wall second.")]
 
 

@@ -4,17 +4,17 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, cast
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
 from isac_mission.cli.app import ConfigArg, app, console, err_console, load_or_exit
+from isac_mission.planning.registry import methods_help
 from isac_mission.quiet import quiet_highs_banner
 
 if TYPE_CHECKING:
     from isac_mission.config import Scenario
-    from isac_mission.planning.slot import Method
 
 
 @app.command("check-config")
@@ -55,7 +55,7 @@ def simulate(
     ] = None,
     methods: Annotated[
         str,
-        typer.Option(help="Comma-separated: proposed, proposed-sca, sd, aba, crb, comm, horizon."),
+        typer.Option(help=f"Comma-separated: {methods_help()}."),
     ] = "proposed,sd,aba,crb,horizon",
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 2,
     plots: Annotated[bool, typer.Option(help="Write the Fig. 2 / Fig. 3 style PNGs.")] = True,
@@ -70,7 +70,7 @@ def simulate(
 ) -> None:
     """Offline closed loop (Section II-C) for every method, Monte Carlo with common random numbers."""
     from isac_mission.experiment.report import simulate_report
-    from isac_mission.planning.slot import METHODS
+    from isac_mission.planning.registry import METHODS
 
     s = load_or_exit(config)
     if live_settings:
@@ -84,7 +84,7 @@ def simulate(
     out_dir = out if out is not None else Path("out") / f"simulate-{s.mission_id}"
     simulate_report(
         s,
-        [cast("Method", m) for m in chosen],
+        chosen,
         runs=runs,
         seed=s.seed if seed is None else seed,
         out_dir=out_dir,

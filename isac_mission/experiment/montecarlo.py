@@ -134,8 +134,8 @@ def outcome_record(o: SlotOutcome) -> SlotRecord:
         plan_velocity=o.plan.uav_velocity_mps,
         reason=rep.reason,
         fallback=rep.fallback or None,
-        plan_start_xy=o.slot_input.prev_xy,
-        plan_start_velocity=o.slot_input.prev_velocity,
+        plan_start_xy=o.slot_input.prev_xy_m,
+        plan_start_velocity=o.slot_input.prev_velocity_mps,
         extra={
             "pcrb_pos": o.bound.position_trace,
             "pcrb_vel": o.bound.velocity_trace,

@@ -32,7 +32,8 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.planning.fleet import KitCache, PlanningJob, active_part
-from isac_mission.planning.slot import METHODS, Method, SolverKit
+from isac_mission.planning.registry import METHODS
+from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord, Trace
 from isac_mission.tracking.cycle import CycleModel, TrackState, predict
 from isac_mission.tracking.pcrb import Bound

@@ -33,21 +33,13 @@ from isac_mission.experiment.montecarlo import (
     summarize,
     trace_path,
 )
+from isac_mission.planning.registry import LABELS
 from isac_mission.planning.slot import Method
 from isac_mission.types import FloatArray
 
 TABLE_WIDTH_NOT_TERMINAL = 160
 """Columns a table is rendered in when the console is not a terminal (at least)."""
 
-LABELS = {
-    "proposed": "Proposed",
-    "proposed-sca": "Proposed (SCA only)",
-    "sd": "SD",
-    "aba": "ABA",
-    "crb": "CRB-criterion",
-    "comm": "Comm-optimal",
-    "horizon": "Horizon",
-}
 
 FIGURE_HEADS = {
     "pcrb": "tr(PCRB)",

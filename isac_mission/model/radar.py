@@ -6,9 +6,57 @@ from UAVs at uav_xy [M, 2]; UAVs and target fly at the same altitude, so distanc
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from isac_mission.types import FloatArray
+
+if TYPE_CHECKING:
+    from isac_mission.config import Scenario
+
+Values = Any
+"""numpy arrays, or CasADi expressions (the NLPs build eq. 8 symbolically from the same code)."""
+
+
+@dataclass(frozen=True)
+class SensingParams:
+    """Constants of eq. 8: SNR^s = radar_gain / d^4 [m^4]; alpha_d, alpha_v; B [Hz]; Ts [s].
+
+    The one definition of eq. 8's information: the objective (tracking/pcrb.py), the simulated
+    detections (model/detections.py) and the polish and horizon NLPs (planning/nlp_model.py)
+    all evaluate these methods, on numpy arrays or on CasADi symbols.
+    """
+
+    radar_gain: float
+    alpha_d: float
+    alpha_v: float
+    B: float
+    Ts: float
+
+    @classmethod
+    def from_scenario(cls, s: Scenario) -> SensingParams:
+        return cls(s.radar_gain, s.alpha_d, s.alpha_v, s.B, s.Ts)
+
+    def range_information(self, range_m: Values, eta: Values) -> Values:
+        """a = 1 / sigma_d^2 = radar_gain (eta B)^2 / (alpha_d d^4) [1/m^2], shape of range_m."""
+        return self.radar_gain * (_values(eta) * self.B) ** 2 / (self.alpha_d * range_m**4)
+
+    def velocity_information(self, range_m: Values) -> Values:
+        """b = 1 / sigma_v^2 = radar_gain Ts^2 / (alpha_v d^4) [s^2/m^2], shape of range_m."""
+        return self.radar_gain * self.Ts**2 / (self.alpha_v * _values(range_m) ** 4)
+
+    def variances(self, range_m: FloatArray, eta: FloatArray) -> FloatArray:
+        """r_diag [2M]: sigma_d^2 (m^2) then sigma_v^2 (m^2/s^2) for ranges [M] and shares [M]."""
+        return np.concatenate(
+            [1.0 / self.range_information(range_m, eta), 1.0 / self.velocity_information(range_m)]
+        )
+
+
+def _values(x: Any) -> Any:
+    """x as an array when it is a Python number or sequence; CasADi symbols and arrays as given."""
+    return x if hasattr(x, "shape") else np.asarray(x)
 
 
 def echo_snr(range_m: FloatArray, radar_gain: float) -> FloatArray:
@@ -26,14 +74,13 @@ def noise_variances(
     B: float,
     Ts: float,
 ) -> tuple[FloatArray, FloatArray]:
-    """(sigma_d^2 [M] in m^2, sigma_v^2 [M] in m^2/s^2) from eq. 8.
+    """(sigma_d^2 [M] in m^2, sigma_v^2 [M] in m^2/s^2) from eq. 8 (SensingParams.variances).
 
     sigma_d^2 = alpha_d / (SNR^s (eta B)^2) and sigma_v^2 = alpha_v / (SNR^s Ts^2).
     """
-    snr = echo_snr(range_m, radar_gain)
-    var_d = alpha_d / (snr * (np.asarray(eta) * B) ** 2)
-    var_v = alpha_v / (snr * Ts**2) * np.ones_like(var_d)
-    return var_d, var_v
+    r = np.asarray(range_m, dtype=float)
+    variances = SensingParams(radar_gain, alpha_d, alpha_v, B, Ts).variances(r, np.asarray(eta))
+    return variances[: r.size].reshape(r.shape), variances[r.size :].reshape(r.shape)
 
 
 def measure(x: FloatArray, uav_xy: FloatArray) -> FloatArray:

@@ -12,12 +12,10 @@ from collections.abc import Callable
 import cvxpy as cp
 import numpy as np
 
+from isac_mission.planning.descent import DescentResult, line_search
 from isac_mission.planning.feasibility import SlotConstraints
-from isac_mission.planning.positions import DescentResult, line_search
+from isac_mission.planning.margins import SHARE_MARGIN
 from isac_mission.types import FloatArray
-
-# 20a is tightened by this relative amount so that solver round-off never breaks 14a.
-SHARE_MARGIN = 1e-9
 
 
 class BandwidthSubproblem:

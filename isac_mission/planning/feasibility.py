@@ -3,7 +3,7 @@
 The SCA subproblem only approximates 14b, 14i and 14j; every plan the planner returns passes these
 checks. Functions take batches: positions [L, M, 2], shares [L, M] -> [L] booleans.
 
-With the safety rule on (planner.safety_margin, planning/safety.py; docs/model.md, "Safety")
+With the safety rule on (planner.safety_margin, planning/margins.py; docs/model.md, "Safety")
 14j keeps the slot's clearance from the predicted target, 14i keeps D_s + 2 e, 14a and 14b hold
 e farther from the BS, and 14i/14j hold along the legs too (planning/legs.py); with "none" the
 checks are the paper's.
@@ -26,7 +26,7 @@ from isac_mission.planning.legs import (
     target_leg_points,
     uav_leg_points,
 )
-from isac_mission.planning.safety import SafetyMargins, leg_samples, rule_on
+from isac_mission.planning.margins import SafetyMargins, leg_samples, rule_on
 from isac_mission.types import BoolArray, FloatArray, IntArray
 
 
@@ -59,7 +59,7 @@ class SlotConstraints:
 
     @property
     def margins(self) -> SafetyMargins:
-        """The scenario's fixed margins (planning/safety.py)."""
+        """The scenario's fixed margins (planning/margins.py)."""
         return SafetyMargins.of(self.scenario)
 
     @property

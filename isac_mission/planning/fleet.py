@@ -19,13 +19,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.planning.association import association_costs, optimal_assignment
+from isac_mission.planning.fallback import NO_BS, hold_plan
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
-from isac_mission.tracking.pcrb import PlanningObjective
-from isac_mission.types import FloatArray, Gaussian, HorizonPlan, IntArray, SlotPlan, SolveReport
-
-NO_BS = -1
-"""bs_of_uav of a vehicle outside the plan."""
+from isac_mission.types import FloatArray, Gaussian, HorizonPlan, IntArray, SlotPlan
 
 Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
 
@@ -103,13 +99,13 @@ class PlanningJob:
         if assoc is not None and np.any(assoc < 0):
             assoc = None
         inp = SlotInput(
-            prev_xy=self.uav_xy[idx],
-            prev_eta=eta,
-            prev_assoc=assoc,
-            x_pred=self.prediction.x,
-            J_pred=self.J_pred,
-            prev_velocity=None if self.uav_v is None else self.uav_v[idx],
-            keep_out_xy=self.uav_xy[list(self.excluded)] if self.excluded else None,
+            prev_xy_m=self.uav_xy[idx],
+            prev_bandwidth_share=eta,
+            prev_bs_of_uav=assoc,
+            target_state_pred=self.prediction.x,
+            prior_information=self.J_pred,
+            prev_velocity_mps=None if self.uav_v is None else self.uav_v[idx],
+            keep_out_xy_m=self.uav_xy[list(self.excluded)] if self.excluded else None,
             target_cov_pred=self.prediction.P,
             prev_plan=self.prev_plan,
         )
@@ -150,30 +146,19 @@ class PlanningJob:
         )
 
     def hold(self, reason: str, status: str, solve_s: float = 0.0) -> SlotPlan:
-        """Every vehicle holds where it is, with last slot's shares and association (a plan that
-        needs no solver; its bound is evaluated for the record). Without a last association (a
-        hold at the first slot) each vehicle gets the communication-optimal BS for where it is
-        (the exact assignment, no LP), and a vehicle outside the plan none."""
-        s = self.kits.scenario
-        M = s.M
-        eta = np.array(self.prev_eta, dtype=float)
-        eta[list(self.excluded)] = 0.0
-        eta = eta / eta.sum() if eta.sum() > 0 else np.full(M, 1.0 / M)
-        if self.prev_assoc is not None:
-            assoc = np.array(self.prev_assoc, dtype=np.int64)
-        else:
-            costs = association_costs(self.uav_xy, s.bs_xy, dH=s.dH, rho0=s.rho0, B=s.B)
-            assoc = optimal_assignment(costs, s.n_a)
-            assoc[list(self.excluded)] = NO_BS
-        objective = PlanningObjective(self.J_pred, self.prediction.x, self.kits.full.sensing)
-        with np.errstate(divide="ignore"):
-            pcrb = float(objective.value(self.uav_xy, np.maximum(eta, 1e-12)))
-        return SlotPlan(
-            np.array(self.uav_xy, dtype=float),
-            assoc,
-            eta,
-            pcrb,
-            SolveReport(status, reason, solve_s=solve_s, fallback=status),
+        """Every vehicle holds where it is (planning/fallback.hold_plan)."""
+        return hold_plan(
+            self.kits.scenario,
+            self.kits.full.sensing,
+            self.uav_xy,
+            self.prev_eta,
+            self.prev_assoc,
+            self.excluded,
+            self.J_pred,
+            self.prediction.x,
+            reason,
+            status,
+            solve_s,
         )
 
     def fallback_after_error(self, reason: str, solve_s: float) -> SlotPlan:

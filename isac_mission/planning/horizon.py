@@ -1,7 +1,7 @@
 """Method `horizon`: plan slots n..n+L-1 together, fly the first, re-plan every slot.
 
 Each slot (docs/model.md, "Receding horizon"):
-1. the polished per-slot plan (`proposed`) is computed: it fixes slot n's association, which
+1. the polished per-slot plan (`proposed`, planning/per_slot.py) is computed: it fixes slot n's association, which
    the horizon keeps over all L slots, it is one start point, and it is the fallback;
 2. the horizon NLP (planning/horizon_nlp.py) is solved from the better (lower horizon objective)
    of two starts: last slot's horizon shifted by one slot (the warm start), and the per-slot plan
@@ -17,26 +17,31 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, velocity_control_points
+from isac_mission.planning.fallback import per_slot_instead
 from isac_mission.planning.feasibility import SlotConstraints, operating_area
 from isac_mission.planning.horizon_nlp import HorizonNLP, HorizonSlotData, horizon_weights
 from isac_mission.planning.legs import chord_point_clearance_m
-from isac_mission.planning.safety import target_clearance_m
+from isac_mission.planning.margins import LEG_LIMIT_TOLERANCE, sag_m, target_clearance_m
+from isac_mission.planning.per_slot import Proposed
+from isac_mission.planning.problem import PlansOnceToWarmUp, SlotInput, with_end_velocity
 from isac_mission.tracking.pcrb import (
     Bound,
     SensingParams,
     measurement_information,
     predict_information,
+    scaled_inverse,
 )
 from isac_mission.types import FloatArray, HorizonPlan, SlotPlan
 
-TOLERANCE = 1e-6
-"""Relative slack of the exact leg checks (IPOPT's constraint tolerance is 1e-8)."""
+if TYPE_CHECKING:
+    from isac_mission.planning.slot import SolverKit
 
 
 def horizon_bound_traces(
@@ -143,7 +148,7 @@ def sample_clearances(s: Scenario, clearance_m: FloatArray, x_pred: FloatArray) 
     V_max + |v_target|) and, on the vehicle model's curved legs, their sag a_max h^2 / 8."""
     gap_s = s.dt / s.planner.horizon.leg_samples
     chord = (s.v_max + float(np.linalg.norm(np.asarray(x_pred)[2:4]))) * gap_s
-    sag = s.a_max * gap_s**2 / 8 if s.planner.vehicle_model else 0.0
+    sag = sag_m(s.a_max, gap_s) if s.planner.vehicle_model else 0.0
     return np.asarray(chord_point_clearance_m(clearance_m, chord) + sag)
 
 
@@ -171,47 +176,47 @@ def legs_ok(
     s: Scenario, prev_xy: FloatArray, prev_v: FloatArray, xy: FloatArray, v: FloatArray
 ) -> bool:
     """True if the Hermite legs (prev_xy, prev_v) -> (xy, v) [M, 2] are within a_max and V_max
-    (the vehicle model's exact limits, with relative slack TOLERANCE)."""
+    (the vehicle model's exact limits, with relative slack LEG_LIMIT_TOLERANCE)."""
     a0, a1 = end_accelerations(prev_xy, prev_v, xy, v, s.dt)
     _, mid, v_end = velocity_control_points(prev_xy, prev_v, xy, v, s.dt)
     acc_ok = max(np.max(np.linalg.norm(a0, axis=1)), np.max(np.linalg.norm(a1, axis=1)))
     speed = max(np.max(np.linalg.norm(mid, axis=1)), np.max(np.linalg.norm(v_end, axis=1)))
-    return bool(acc_ok <= s.a_max * (1 + TOLERANCE) and speed <= s.v_max * (1 + TOLERANCE))
+    return bool(
+        acc_ok <= s.a_max * (1 + LEG_LIMIT_TOLERANCE)
+        and speed <= s.v_max * (1 + LEG_LIMIT_TOLERANCE)
+    )
 
 
-def plan_horizon(
-    inp_prev_xy: FloatArray,
-    inp_prev_velocity: FloatArray | None,
-    inp_keep_out: FloatArray | None,
-    x_pred: FloatArray,
-    J_pred: FloatArray,
-    target_cov_pred: FloatArray,
-    prev_plan: SlotPlan | None,
-    base: SlotPlan,
-    nlp: HorizonNLP,
-    sensing: SensingParams,
-    t0: float,
-) -> SlotPlan:
+def horizon_nlp(kit: SolverKit) -> HorizonNLP:
+    """The kit's receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept."""
+    return kit.built("horizon", lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock))
+
+
+def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: float) -> SlotPlan:
     """The horizon plan of this slot, or `base` (the polished per-slot plan, already feasible
-    or already the best effort) with the reason when the horizon's answer is not kept.
+    or already the best effort) with the reason when the horizon's answer is not kept
+    (planning/fallback.py, `per_slot_instead`).
 
-    inp_*: the slot's SlotInput fields (m, m/s); base: plan_slot(..., "proposed"); t0: the
-    perf_counter time the slot's planning started (for solve_s)."""
+    base: the `proposed` plan of inp; started_s: the perf_counter time the slot's planning
+    started (for solve_s)."""
+    nlp = horizon_nlp(kit)
+    sensing = kit.sensing
+    inp_prev_xy = inp.prev_xy_m
+    inp_prev_velocity = inp.prev_velocity_mps
+    inp_keep_out = inp.keep_out_xy_m
+    x_pred = inp.target_state_pred
+    J_pred = inp.prior_information
+    cov = inp.target_cov_pred
+    target_cov_pred = scaled_inverse(J_pred) if cov is None else cov
+    prev_plan = inp.prev_plan
+    t0 = started_s
     s = nlp.scenario
     M, L, dt = s.M, nlp.length, s.dt
     prev_v = np.zeros((M, 2)) if inp_prev_velocity is None else np.asarray(inp_prev_velocity)
     prev_v = planned_start_velocity(s, inp_prev_xy, prev_v, prev_plan)
 
     def fall_back(why: str, kind: str) -> SlotPlan:
-        """`base`, saying why; kind: the short fallback kind the summaries count."""
-        report = replace(
-            base.report,
-            reason=f"horizon: {why}; per-slot plan"
-            + (f"; {base.report.reason}" * bool(base.report.reason)),
-            solve_s=time.perf_counter() - t0,
-            fallback=base.report.fallback or f"horizon: {kind}",
-        )
-        return replace(base, report=report)
+        return per_slot_instead(base, "horizon", why, kind, time.perf_counter() - t0)
 
     if base.report.status != "ok":
         return fall_back("the per-slot plan is infeasible", "per-slot plan infeasible")
@@ -300,3 +305,13 @@ def plan_horizon(
             pcrb_trace=traces,
         ),
     )
+
+
+class Horizon(PlansOnceToWarmUp):
+    """`horizon`: slots n..n+L-1 planned together on the bound's recursion, the first flown; the
+    polished per-slot plan is its start and its fallback."""
+
+    def plan(self, inp: SlotInput, kit: SolverKit) -> SlotPlan:
+        started_s = time.perf_counter()
+        base = with_end_velocity(Proposed().plan(inp, kit), inp, kit.scenario)
+        return plan_horizon(inp, base, kit, started_s)

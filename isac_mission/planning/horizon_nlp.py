@@ -36,10 +36,20 @@ from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
 from isac_mission.planning.legs import chord_point_clearance_m
-from isac_mission.planning.nlp_rows import NlpRows, SolveLock, relative_rate, scaled_inverse_sx
-from isac_mission.planning.polish import MIN_SHARE, RATE_MARGIN, _information_terms
-from isac_mission.planning.positions import SOLVER_MARGIN_M
-from isac_mission.planning.safety import SafetyMargins
+from isac_mission.planning.margins import (
+    MIN_SHARE,
+    RATE_MARGIN,
+    SOLVER_MARGIN_M,
+    SafetyMargins,
+    sag_m,
+)
+from isac_mission.planning.nlp_model import (
+    NlpRows,
+    SolveLock,
+    information_terms,
+    relative_rate,
+    scaled_inverse_sx,
+)
 from isac_mission.tracking.pcrb import SensingParams, measurement_information, scaled_inverse
 from isac_mission.types import FloatArray
 
@@ -174,7 +184,7 @@ class HorizonNLP:
         # Between two samples a leg may come closer than at either (docs/model.md, "Safety"):
         # the samples keep the chord's distance, plus the curve's sag off its chord.
         gap_s = dt / K
-        sag = s.a_max * gap_s**2 / 8 if self.vehicle_model else 0.0
+        sag = sag_m(s.a_max, gap_s) if self.vehicle_model else 0.0
         sep = margins.separation_m if s.d_safe > 0 else 0.0
         keep2 = ((float(chord_point_clearance_m(sep, s.v_max * gap_s)) + sag) / S) ** 2
         pair2 = ((float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag) / S) ** 2
@@ -188,7 +198,7 @@ class HorizonNLP:
             for m in range(M):
                 qm = q(h, m)
                 em = eta[h * M + m]
-                J = J + _information_terms(qm, em, x_l, s)
+                J = J + information_terms(qm, em, x_l, self._sensing)
                 rate = relative_rate(qm, serving[2 * m : 2 * m + 2], em, s, e)
                 add(rate, RATE_MARGIN, inf)
                 add(sq(qm - control[2 * m : 2 * m + 2]), -inf, d_ctrl2)

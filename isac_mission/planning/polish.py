@@ -13,7 +13,7 @@ with the bandwidth shares jointly, i.e. (P1) for the chosen association):
           ||q_m - p_pred|| >= D_s                 (14j)
           (safety rule on: 14j at the slot's clearance and 14i at D_s + 2 e, both at every leg
           sample of the straight legs with the chord margin; 14a/14b e farther from the BS;
-          planning/safety.py, planning/legs.py)
+          planning/margins.py, planning/legs.py)
           ||q_m - ballistic_m|| <= r_a            (planner.accel_limit_mps2, when set)
           0 <= q <= area                          (planner.keep_in_area, as variable bounds)
 
@@ -39,18 +39,19 @@ import casadi as ca
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.model.radar import SensingParams
 from isac_mission.planning.feasibility import SlotConstraints
-from isac_mission.planning.nlp_rows import NlpRows, SolveLock, relative_rate
-from isac_mission.planning.positions import SOLVER_MARGIN_M
-from isac_mission.planning.safety import SafetyMargins, leg_samples, rule_on
+from isac_mission.planning.margins import (
+    MIN_SHARE,
+    RATE_MARGIN,
+    SOLVER_MARGIN_M,
+    SafetyMargins,
+    leg_samples,
+    rule_on,
+)
+from isac_mission.planning.nlp_model import NlpRows, SolveLock, information_terms, relative_rate
 from isac_mission.tracking.pcrb import PlanningObjective
 from isac_mission.types import FloatArray
-
-# The rate constraint eta R~ / R_th - 1 >= RATE_MARGIN (relative), so that a solution within
-# IPOPT's tolerance still passes the exact 14a check (relative tolerance 1e-12).
-RATE_MARGIN = 1e-7
-# Shares stay at least this far from 0 (a_m is quadratic in eta: 0 is a stationary point).
-MIN_SHARE = 1e-9
 
 IPOPT_OPTIONS: dict[str, Any] = {
     "print_level": 0,
@@ -130,9 +131,10 @@ class PolishNLP:
         self._param_shapes = [(p.size1(), p.size2()) for p in params]
 
         q = prev + L * z
+        sensing = SensingParams.from_scenario(s)
         J = j_pred
         for m in range(M):
-            J = J + _information_terms(q[m, :].T, eta[m], x_pred, s)
+            J = J + information_terms(q[m, :].T, eta[m], x_pred, sensing)
         D = ca.diag(scale)
         Js = D @ J @ D
         inv = ca.solve(Js, ca.SX.eye(4))
@@ -349,18 +351,3 @@ class PolishNLP:
         if not value < f_start:
             return result(False, "polish kept the SCA plan: no improvement")
         return result(True, f"polished: {f_start:.6g} -> {value:.6g} in {iterations} it")
-
-
-def _information_terms(q: ca.SX, eta: ca.SX, x_pred: ca.SX, s: Scenario) -> ca.SX:
-    """J_M's terms [4, 4] of one UAV at q [2] with share eta (eq. 8, as PlanningObjective)."""
-    r = x_pred[:2] - q
-    d2 = ca.sumsqr(r)
-    d = ca.sqrt(d2)
-    u = r / d
-    w = x_pred[2:]
-    v_r = ca.dot(u, w)
-    g = ca.vertcat(u, 0.0, 0.0)
-    k = ca.vertcat((w - v_r * u) / d, u)
-    a = s.radar_gain * (eta * s.B) ** 2 / (s.alpha_d * d2**2)
-    b = s.radar_gain * s.Ts**2 / (s.alpha_v * d2**2)
-    return a * (g @ g.T) + b * (k @ k.T)

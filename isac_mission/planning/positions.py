@@ -6,13 +6,18 @@ first-order inner approximations of 14i and 14j (eq. 22-23; with the safety rule
 sampled instant of the straight legs, planning/legs.py) — then line-searches
 Q^(l) + omega (Q* - Q^(l)) over omega in {0, d_omega, ..., 1} keeping only points that satisfy the
 original constraints. The cvxpy problem is built once per M with Parameters (DPP) and re-solved.
+
+The rows of eq. 22-23 at every leg sample (`leg_rows`, the safety rule, docs/model.md): a
+sample's position tau q + (1 - tau) q_prev is affine in the waypoint q, so each distance
+constraint |tau q + (1 - tau) q_prev - u(tau)| >= R is linearised at q^r as eq. 23 is:
+2 tau r^T q >= R^2 - |r|^2 + 2 tau r^T q^r, r = tau q^r + (1 - tau) q_prev - u. At tau = 1 these
+are eq. 22 and 23 themselves.
 """
 
 from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import clarabel
 import cvxpy as cp
@@ -21,17 +26,13 @@ from scipy import sparse
 
 from isac_mission.config import Scenario
 from isac_mission.model.channel import rate_radius
+from isac_mission.planning.descent import DescentResult, line_search
 from isac_mission.planning.feasibility import SlotConstraints
-from isac_mission.planning.leg_rows import leg_rows
-from isac_mission.planning.safety import SafetyMargins, leg_samples
-from isac_mission.types import BoolArray, FloatArray, IntArray
+from isac_mission.planning.margins import SOLVER_MARGIN_M, SafetyMargins, leg_samples
+from isac_mission.types import FloatArray, IntArray
 
 # f of a plan [M, 2] with one UAV m moved to candidates [L, 2]: (current, eta, m, cands) -> [L].
 MovingOne = Callable[[FloatArray, FloatArray, int, FloatArray], FloatArray]
-
-# Constraints of the convex subproblem are tightened by this much (m) so that a solver answer
-# within its own tolerance still satisfies the original constraints exactly.
-SOLVER_MARGIN_M = 1e-3
 
 
 class PositionSubproblem:
@@ -46,7 +47,7 @@ class PositionSubproblem:
         n_keep_out: fixed points (vehicles outside this plan) every UAV keeps D_s from, as it
         keeps D_s from the target (eq. 23 per point). With the safety rule on, eq. 22 and 23 hold
         at each of the S leg samples (rows repeated per sample) and the control range is
-        kept e closer (planning/safety.py)."""
+        kept e closer (planning/margins.py)."""
         s = scenario
         M = s.M
         self.scenario = s
@@ -267,38 +268,6 @@ class PositionSubproblem:
         return np.asarray(np.asarray(sol.x, dtype=float).reshape(M, 2) + shift)
 
 
-@dataclass(frozen=True)
-class DescentResult:
-    """Outcome of a descent search: best point, its objective, iterations, whether it is feasible."""
-
-    point: FloatArray
-    value: float
-    iterations: int
-    feasible: bool
-
-
-def line_search(
-    start: FloatArray,
-    target: FloatArray,
-    step: float,
-    values: Callable[[FloatArray], FloatArray],
-    feasible: Callable[[FloatArray], BoolArray],
-) -> tuple[FloatArray, float] | None:
-    """argmin over omega in {0, step, ..., 1} of f(start + omega (target - start)) among feasible
-    candidates; None if none is feasible. start/target are arrays of any equal shape."""
-    omegas = np.unique(np.append(np.arange(0.0, 1.0, step), 1.0))
-    cands = start[None] + omegas.reshape((-1,) + (1,) * start.ndim) * (target - start)[None]
-    ok = feasible(cands)
-    if not np.any(ok):
-        return None
-    f = values(cands)
-    f = np.where(ok, f, np.inf)
-    i = int(np.argmin(f))
-    if not np.isfinite(f[i]):
-        return None
-    return cands[i], float(f[i])
-
-
 def _per_uav_refinement(
     start: FloatArray,
     target: FloatArray,
@@ -393,3 +362,45 @@ def optimise_positions(
         if decrease <= epsilon:
             break
     return DescentResult(point=Q, value=float(f), iterations=it, feasible=feasible_now)
+
+
+def leg_rows(
+    origin: SlotConstraints,
+    pairs: IntArray,
+    n_keep_out: int,
+    lin: FloatArray,
+    shift: FloatArray,
+    solver_margin_m: float,
+) -> dict[str, FloatArray]:
+    """The Parameter values target_normal [S (1 + L) M, 2], target_rhs, pair_normal [S P, 2]
+    and pair_rhs (row order: sample, then point or pair, then UAV) linearised at lin [M, 2],
+    in coordinates shifted by `shift` [2]; pairs [P, 2] the UAV index pairs; R the per-sample
+    clearances (SlotConstraints.sample_clearances_m) plus solver_margin_m."""
+    M = origin.scenario.M
+    c_target, c_keep, c_pairs = origin.sample_clearances_m()  # [S, M], [S, M, K], [S, P]
+    prev = origin.prev_xy - shift
+    target = origin.target_points() - shift  # [S, 2]
+    keep = np.zeros((0, 2)) if not n_keep_out else np.asarray(origin.keep_out_xy) - shift
+    lin_rows = np.tile(lin, (1 + len(keep), 1))
+    normals, rhs, pair_normals, pair_rhs = [], [], [], []
+    for f, tau in enumerate(origin.leg_fractions):
+        points = np.vstack([target[f][None], keep])  # [1 + L, 2]
+        at = tau * lin + (1.0 - tau) * prev  # the sample's position at the linearisation point
+        r = np.tile(at, (len(points), 1)) - np.repeat(points, M, axis=0)
+        radii2 = (np.concatenate([c_target[f], c_keep[f].T.ravel()]) + solver_margin_m) ** 2
+        normals.append(2.0 * tau * r)
+        rhs.append(radii2 - np.sum(r**2, axis=1) + 2.0 * tau * np.sum(r * lin_rows, axis=1))
+        if len(pairs):
+            i, j = pairs[:, 0], pairs[:, 1]
+            rp = at[i] - at[j]
+            pair_normals.append(2.0 * tau * rp)
+            pair_rhs.append(
+                (c_pairs[f] + solver_margin_m) ** 2
+                - np.sum(rp**2, axis=1)
+                + 2.0 * tau * np.sum(rp * (lin[i] - lin[j]), axis=1)
+            )
+    out = {"target_normal": np.vstack(normals), "target_rhs": np.concatenate(rhs)}
+    if len(pairs):
+        out["pair_normal"] = np.vstack(pair_normals)
+        out["pair_rhs"] = np.concatenate(pair_rhs)
+    return out

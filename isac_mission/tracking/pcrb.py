@@ -15,37 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isac_mission.config import Scenario
+from isac_mission.model.radar import SensingParams
 from isac_mission.types import FloatArray
 
-
-@dataclass(frozen=True)
-class SensingParams:
-    """Constants of eq. 8: SNR^s = radar_gain / d^4 [m^4]; alpha_d, alpha_v; B [Hz]; Ts [s]."""
-
-    radar_gain: float
-    alpha_d: float
-    alpha_v: float
-    B: float
-    Ts: float
-
-    @classmethod
-    def from_scenario(cls, s: Scenario) -> SensingParams:
-        return cls(s.radar_gain, s.alpha_d, s.alpha_v, s.B, s.Ts)
-
-    def range_information(self, range_m: FloatArray, eta: FloatArray) -> FloatArray:
-        """a = 1 / sigma_d^2 = radar_gain (eta B)^2 / (alpha_d d^4) [1/m^2], shape of range_m."""
-        return self.radar_gain * (np.asarray(eta) * self.B) ** 2 / (self.alpha_d * range_m**4)
-
-    def velocity_information(self, range_m: FloatArray) -> FloatArray:
-        """b = 1 / sigma_v^2 = radar_gain Ts^2 / (alpha_v d^4) [s^2/m^2], shape of range_m."""
-        return self.radar_gain * self.Ts**2 / (self.alpha_v * np.asarray(range_m) ** 4)
-
-    def variances(self, range_m: FloatArray, eta: FloatArray) -> FloatArray:
-        """r_diag [2M]: sigma_d^2 (m^2) then sigma_v^2 (m^2/s^2) for ranges [M] and shares [M]."""
-        return np.concatenate(
-            [1.0 / self.range_information(range_m, eta), 1.0 / self.velocity_information(range_m)]
-        )
+__all__ = ["Bound", "PlanningObjective", "SensingParams", "scaled_inverse"]
 
 
 def scaled_inverse(A: FloatArray) -> FloatArray:

@@ -14,11 +14,13 @@ from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inpu
 from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
 from isac_mission.planning.horizon import (
     horizon_bound_traces,
+    horizon_nlp,
     horizon_slot_data,
     legs_ok,
     planned_start_velocity,
 )
 from isac_mission.planning.horizon_nlp import HorizonSlotData, horizon_weights
+from isac_mission.planning.per_slot import polish_nlp
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import SensingParams
 from tests.support.independent.constraints import check_constraints
@@ -40,15 +42,17 @@ def _inputs(s: Scenario, method: str = "horizon", seed: int = 5) -> list[SlotInp
 
 
 def _data(s: Scenario, inp: SlotInput, L: int) -> HorizonSlotData:
-    nearest = np.argmin(np.linalg.norm(inp.prev_xy[:, None] - s.bs_xy[None], axis=-1), axis=1)
+    nearest = np.argmin(np.linalg.norm(inp.prev_xy_m[:, None] - s.bs_xy[None], axis=-1), axis=1)
     return HorizonSlotData(
-        prev_xy=inp.prev_xy,
-        prev_velocity=np.zeros((s.M, 2)) if inp.prev_velocity is None else inp.prev_velocity,
+        prev_xy=inp.prev_xy_m,
+        prev_velocity=np.zeros((s.M, 2))
+        if inp.prev_velocity_mps is None
+        else inp.prev_velocity_mps,
         serving_xy=s.bs_xy[nearest],
         control_xy=s.bs_xy[nearest],
         keep_out_xy=np.zeros((0, 2)),
-        x_pred=inp.x_pred,
-        J_pred=inp.J_pred,
+        x_pred=inp.target_state_pred,
+        J_pred=inp.prior_information,
         clearance_m=np.full(L, s.d_safe),
     )
 
@@ -57,7 +61,7 @@ def _random_horizon(
     s: Scenario, inp: SlotInput, L: int, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     step = np.cumsum(rng.uniform(-15, 15, size=(L, s.M, 2)), axis=0)
-    xy = inp.prev_xy[None] + step
+    xy = inp.prev_xy_m[None] + step
     velocity = rng.uniform(-20, 20, size=(L, s.M, 2))
     eta = rng.dirichlet(np.ones(s.M), size=L)
     return xy, velocity, eta
@@ -69,7 +73,7 @@ def test_horizon_gradient_matches_central_finite_differences(vehicle_model: bool
     if vehicle_model:
         s = _vehicle(s)
     L = s.planner.horizon.length
-    nlp = SolverKit(s).horizon
+    nlp = horizon_nlp(SolverKit(s))
     inp = _inputs(s, "proposed")[12]
     rng = np.random.default_rng(4)
     xy, velocity, eta = _random_horizon(s, inp, L, rng)
@@ -89,14 +93,14 @@ def test_horizon_gradient_matches_central_finite_differences(vehicle_model: bool
 def test_horizon_objective_is_the_bound_recursion_recomputed_independently() -> None:
     s = _scenario(length=4, discount=0.8, terminal_weight=2.0)
     L = 4
-    nlp = SolverKit(s).horizon
+    nlp = horizon_nlp(SolverKit(s))
     inp = _inputs(s, "proposed")[20]
     xy, _, eta = _random_horizon(s, inp, L, np.random.default_rng(9))
     x, p = nlp.pack(xy, None, eta, _data(s, inp, L))
     # Independent: hand-written H, the square-root-information update of tests/support.
     F, W = cv_model(s.dt, s.kappa)
     sensing = SensingParams.from_scenario(s)
-    state = np.asarray(inp.x_pred, dtype=float)
+    state = np.asarray(inp.target_state_pred, dtype=float)
     traces = []
     C = None
     for h in range(L):
@@ -104,7 +108,7 @@ def test_horizon_objective_is_the_bound_recursion_recomputed_independently() -> 
         r_diag = sensing.variances(d, eta[h])
         H = jacobian(state, xy[h])
         if h == 0:
-            J = inp.J_pred + H.T @ np.diag(1.0 / r_diag) @ H
+            J = inp.prior_information + H.T @ np.diag(1.0 / r_diag) @ H
             C = np.linalg.inv(J)
         else:
             C, _ = bound_update(C, F, W, H, r_diag)
@@ -112,7 +116,7 @@ def test_horizon_objective_is_the_bound_recursion_recomputed_independently() -> 
         state = F @ state
     expected = float(horizon_weights(L, 0.8, 2.0) @ np.array(traces))
     assert float(nlp.objective(x, p)) == pytest.approx(expected, rel=1e-8)
-    ours = horizon_bound_traces(s, inp.J_pred, inp.x_pred, xy, eta, sensing)
+    ours = horizon_bound_traces(s, inp.prior_information, inp.target_state_pred, xy, eta, sensing)
     np.testing.assert_allclose(ours, traces, rtol=1e-8)
 
 
@@ -144,7 +148,7 @@ def test_horizon_plans_carry_their_horizon_and_beat_the_per_slot_start() -> None
         assert plan.pcrb_trace == pytest.approx(plan.horizon.pcrb_trace[0])
         # The per-slot plan continued at constant velocity is one start: where it is feasible
         # the horizon's answer is no worse on the horizon objective.
-        v = (base.uav_xy_m - inp.prev_xy) / s.dt
+        v = (base.uav_xy_m - inp.prev_xy_m) / s.dt
         cont = np.array([base.uav_xy_m + h * s.dt * v for h in range(L)])
         eta = np.repeat(base.bandwidth_share[None], L, axis=0)
         cfg = s.planner.horizon
@@ -152,18 +156,20 @@ def test_horizon_plans_carry_their_horizon_and_beat_the_per_slot_start() -> None
         assert inp.target_cov_pred is not None
         data = horizon_slot_data(
             s,
-            inp.prev_xy,
+            inp.prev_xy_m,
             np.zeros((s.M, 2)),
             None,
-            inp.x_pred,
-            inp.J_pred,
+            inp.target_state_pred,
+            inp.prior_information,
             inp.target_cov_pred,
             base,
             L,
         )
-        if kit.horizon.satisfies(cont, None, eta, data):
+        if horizon_nlp(kit).satisfies(cont, None, eta, data):
             compared += 1
-            start = w @ horizon_bound_traces(s, inp.J_pred, inp.x_pred, cont, eta, kit.sensing)
+            start = w @ horizon_bound_traces(
+                s, inp.prior_information, inp.target_state_pred, cont, eta, kit.sensing
+            )
             assert w @ plan.horizon.pcrb_trace <= start * (1 + 1e-6)
     assert kept >= len(inputs[1::6]) // 2
     assert compared >= 1
@@ -195,8 +201,8 @@ def test_vehicle_model_horizon_plans_stay_within_a_max_and_v_max() -> None:
         assert plan.uav_velocity_mps is not None
         H = plan.horizon
         assert H.uav_velocity_mps is not None
-        prev_xy = np.concatenate([inp.prev_xy[None], H.uav_xy_m[:-1]])
-        prev_v = np.concatenate([inp.prev_velocity[None], H.uav_velocity_mps[:-1]])
+        prev_xy = np.concatenate([inp.prev_xy_m[None], H.uav_xy_m[:-1]])
+        prev_v = np.concatenate([inp.prev_velocity_mps[None], H.uav_velocity_mps[:-1]])
         for h in range(len(H.uav_xy_m)):
             assert legs_ok(s, prev_xy[h], prev_v[h], H.uav_xy_m[h], H.uav_velocity_mps[h])
         # Brute force along the first leg: acceleration and speed sampled densely.
@@ -206,7 +212,12 @@ def test_vehicle_model_horizon_plans_stay_within_a_max_and_v_max() -> None:
         path = np.array(
             [
                 hermite_position(
-                    inp.prev_xy, inp.prev_velocity, plan.uav_xy_m, plan.uav_velocity_mps, s.dt, f
+                    inp.prev_xy_m,
+                    inp.prev_velocity_mps,
+                    plan.uav_xy_m,
+                    plan.uav_velocity_mps,
+                    s.dt,
+                    f,
                 )
                 for f in t
             ]
@@ -228,11 +239,11 @@ def test_the_first_legs_start_from_last_plans_end_velocity_where_the_vehicle_is_
     assert inp.prev_plan is not None and inp.prev_plan.uav_velocity_mps is not None
     planned = inp.prev_plan.uav_velocity_mps
     measured = planned + np.array([[3.0, -2.0], [0.0, 0.0], [-1.0, 4.0]])
-    far = inp.prev_xy + np.array([[0.0, 0.0], [0.0, 0.0], [5.0, 0.0]])  # vehicle 2 off its plan
+    far = inp.prev_xy_m + np.array([[0.0, 0.0], [0.0, 0.0], [5.0, 0.0]])  # vehicle 2 off its plan
     got = planned_start_velocity(s, far, measured, inp.prev_plan)
     np.testing.assert_array_equal(got[:2], planned[:2])
     np.testing.assert_array_equal(got[2], measured[2])
-    plan = plan_slot(replace(inp, prev_velocity=measured), kit, "horizon")
+    plan = plan_slot(replace(inp, prev_velocity_mps=measured), kit, "horizon")
     assert plan.horizon is not None, plan.report.reason
 
 
@@ -261,7 +272,7 @@ def test_every_ipopt_construction_and_solve_holds_the_kits_solve_lock() -> None:
     assert lock.depth == 0
     seen = lock.entered
     calls = []
-    original = kit.horizon.solver
+    original = horizon_nlp(kit).solver
 
     class Spy:
         def __call__(self, **kw: object) -> object:
@@ -271,7 +282,7 @@ def test_every_ipopt_construction_and_solve_holds_the_kits_solve_lock() -> None:
         def stats(self) -> dict[str, object]:
             return dict(original.stats())
 
-    kit.horizon.solver = Spy()
+    horizon_nlp(kit).solver = Spy()
     plan_slot(inp, kit, "horizon")
     assert calls and all(depth == 1 for depth in calls)
     assert lock.entered > seen
@@ -283,7 +294,7 @@ def test_a_renewed_kit_shares_the_ipopt_problems_and_plans_the_same() -> None:
     inp = _inputs(s, "proposed")[6]
     first = plan_slot(inp, kit, "horizon")
     renewed = kit.renewed()
-    assert renewed.horizon is kit.horizon and renewed.polish is kit.polish
+    assert horizon_nlp(renewed) is horizon_nlp(kit) and polish_nlp(renewed) is polish_nlp(kit)
     assert renewed.positions is not kit.positions  # the convex problems are fresh
     again = plan_slot(inp, renewed, "horizon")
     np.testing.assert_allclose(again.uav_xy_m, first.uav_xy_m, atol=1e-6)

@@ -59,7 +59,7 @@ def test_planner_keeps_d_safe_from_an_unplanned_vehicle_it_would_otherwise_appro
     # Put the keep-out point where UAV 0 went without it.
     keep_out = free.uav_xy_m[[0]].copy()
     kit = SolverKit(s, n_keep_out=1)
-    plan = plan_slot(SlotInput(prev, np.full(2, 0.5), None, x_pred, J, keep_out_xy=keep_out), kit)
+    plan = plan_slot(SlotInput(prev, np.full(2, 0.5), None, x_pred, J, keep_out_xy_m=keep_out), kit)
     assert plan.report.status == "ok"
     gaps = np.linalg.norm(plan.uav_xy_m - keep_out, axis=1)
     assert np.all(gaps >= s.d_safe)
@@ -102,7 +102,7 @@ def test_a_job_without_a_vehicle_widens_to_all_and_round_trips_the_codec(
             None,
             s.x0,
             np.linalg.inv(s.P0),
-            keep_out_xy=s.uav_start_xy[[1]],
+            keep_out_xy_m=s.uav_start_xy[[1]],
         ),
         SolverKit(sub, n_keep_out=1),
     )

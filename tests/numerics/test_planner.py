@@ -91,7 +91,7 @@ def test_single_uav_plan_reaches_grid_optimum() -> None:
         inp = SlotInput(s.uav_start_xy, np.ones(1), None, x_pred, _prior(s))
         plan = plan_slot(inp, kit, "proposed")
         assert plan.report.status == "ok", plan.report.reason
-        obj = PlanningObjective(inp.J_pred, x_pred, kit.sensing)
+        obj = PlanningObjective(inp.prior_information, x_pred, kit.sensing)
         r = np.linspace(0, s.v_max * s.dt, 120)[:, None]
         a = np.linspace(0, 2 * np.pi, 720, endpoint=False)[None, :]
         pts = s.uav_start_xy[0] + np.stack([r * np.cos(a), r * np.sin(a)], -1).reshape(-1, 2)
@@ -114,13 +114,13 @@ def _independent_violations(
         bad.append("14c/d")
     if np.bincount(assoc, minlength=s.K).max() > s.n_a:
         bad.append("14e")
-    if np.any(np.linalg.norm(xy - inp.prev_xy, axis=1) > s.v_max * s.dt + 1e-6):
+    if np.any(np.linalg.norm(xy - inp.prev_xy_m, axis=1) > s.v_max * s.dt + 1e-6):
         bad.append("14h")
     for i in range(s.M):
         for j in range(i + 1, s.M):
             if np.linalg.norm(xy[i] - xy[j]) < s.d_safe - 1e-6:
                 bad.append("14i")
-    if np.any(np.linalg.norm(xy - inp.x_pred[:2], axis=1) < s.d_safe - 1e-6):
+    if np.any(np.linalg.norm(xy - inp.target_state_pred[:2], axis=1) < s.d_safe - 1e-6):
         bad.append("14j")
     return bad
 

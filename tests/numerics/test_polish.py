@@ -6,7 +6,7 @@
   with the other fixed, and the share);
 - a slot where the SCA stops short is polished to the grid's optimum;
 - a slot whose best basin gives the band to another UAV (bench/quality.py's worst slot before
-  planning/basins.py) reaches the SLSQP multistart's optimum;
+  planning/per_slot.py) reaches the SLSQP multistart's optimum;
 - a capped solve, and an answer the exact check rejects, keep the SCA plan and say so in the
   report;
 - every plan of a simulate trace (paper.yaml, polish on) passes the independent 14a-14j, N_a
@@ -25,8 +25,9 @@ import pytest
 from isac_mission.config import Scenario, load_scenario, parse_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
 from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
-from isac_mission.planning import basins
+from isac_mission.planning import per_slot
 from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.per_slot import polish_nlp
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import PlanningObjective
 from tests.numerics.test_planner import _independent_violations
@@ -46,7 +47,7 @@ def _slot_inputs(s: Scenario, seed: int = 3) -> tuple[SolverKit, list[SlotInput]
 
 
 def _constraints(s: Scenario, inp: SlotInput, assoc: np.ndarray) -> SlotConstraints:
-    return SlotConstraints(inp.prev_xy, s.bs_xy[assoc], s.bs_xy, inp.x_pred[:2], s)
+    return SlotConstraints(inp.prev_xy_m, s.bs_xy[assoc], s.bs_xy, inp.target_state_pred[:2], s)
 
 
 def test_nlp_objective_gradient_and_hessian_match_finite_differences() -> None:
@@ -54,9 +55,9 @@ def test_nlp_objective_gradient_and_hessian_match_finite_differences() -> None:
     kit, inputs = _slot_inputs(s)
     inp = inputs[10]
     plan = plan_slot(inp, kit, "proposed-sca")
-    objective = PlanningObjective(inp.J_pred, inp.x_pred, kit.sensing)
+    objective = PlanningObjective(inp.prior_information, inp.target_state_pred, kit.sensing)
     cons = _constraints(s, inp, plan.bs_of_uav)
-    nlp = kit.polish
+    nlp = polish_nlp(kit)
     x, p = nlp.pack(plan.uav_xy_m, plan.bandwidth_share, objective, cons)
     f = float(nlp.objective(x, p))
     assert f == pytest.approx(plan.pcrb_trace, rel=1e-10)
@@ -92,9 +93,11 @@ def _grid_best_one(
     s: Scenario, inp: SlotInput, plan_xy: np.ndarray, eta: np.ndarray, m: int, n: int
 ) -> float:
     """The best feasible f over a grid of UAV m's disk, the others at plan_xy."""
-    objective = PlanningObjective(inp.J_pred, inp.x_pred, SolverKit(s).sensing)
+    objective = PlanningObjective(
+        inp.prior_information, inp.target_state_pred, SolverKit(s).sensing
+    )
     cons = _constraints(s, inp, np.asarray(_assoc(s, inp, plan_xy)))
-    cands = _disk_grid(inp.prev_xy[m], s.v_max * s.dt, n)
+    cands = _disk_grid(inp.prev_xy_m[m], s.v_max * s.dt, n)
     ok = cons.feasible_moving_one(plan_xy, eta, m, cands)
     return float(objective.values_moving_one(plan_xy, eta, m, cands[ok]).min())
 
@@ -125,7 +128,7 @@ def test_polished_plan_matches_the_grid_at_m2() -> None:
             best = _grid_best_one(s, inp, plan.uav_xy_m, plan.bandwidth_share, m, 300)
             assert plan.pcrb_trace <= best * (1 + 1e-5)
         # The share: a grid over eta_0 in (0, 1), positions fixed.
-        objective = PlanningObjective(inp.J_pred, inp.x_pred, kit.sensing)
+        objective = PlanningObjective(inp.prior_information, inp.target_state_pred, kit.sensing)
         cons = _constraints(s, inp, plan.bs_of_uav)
         e0 = np.linspace(1e-4, 1 - 1e-4, 4001)
         etas = np.stack([e0, 1 - e0], axis=1)
@@ -216,7 +219,7 @@ def test_an_answer_the_exact_check_rejects_keeps_the_sca_plan(
     kit, inputs = _slot_inputs(s)
     inp = inputs[10]
     sca = plan_slot(inp, kit, "proposed-sca")
-    nlp = kit.polish
+    nlp = polish_nlp(kit)
     unpack = nlp.unpack
 
     def too_far(x: np.ndarray, cons: SlotConstraints) -> tuple[np.ndarray, np.ndarray]:
@@ -235,14 +238,14 @@ def test_an_answer_the_exact_check_rejects_keeps_the_sca_plan(
 def test_a_slot_whose_best_basin_has_another_leader_is_polished_to_the_multistart_optimum(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    # bench/quality.py's worst M = 3 slot before planning/basins.py (seed 2, slot 36: +26.8 %):
+    # bench/quality.py's worst M = 3 slot before planning/per_slot.py (seed 2, slot 36: +26.8 %):
     # the proposed closed loop without the leader screen, replayed. Algorithm 2 and the polish
     # from its point keep last slot's leading UAV; the best plan gives the band to another one.
     # The paper's per-slot problem (bench/quality.py's multistart keeps D_s at slot instants).
     paper = load_scenario("paper")
     s = paper.with_changes(planner=paper.planner.model_copy(update={"safety_margin": "none"}))
     kit = SolverKit(s)
-    monkeypatch.setattr(basins, "SCREEN_RATIO", 0.0)
+    monkeypatch.setattr(per_slot, "SCREEN_RATIO", 0.0)
     inp = record_slot_inputs(s, "proposed", draw_run_noise(s, s.seed + 1), kit)[1][35]
     one_basin = plan_slot(inp, kit, "proposed")
     monkeypatch.undo()

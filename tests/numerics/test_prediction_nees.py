@@ -13,7 +13,7 @@ flying the UAVs) over RUNS runs and every slot n = 1..N-L:
    the variance of one value (Cauchy-Schwarz), so this interval is conservative (never too narrow)
    for the grand mean. Bar-Shalom's check per slot (the run-averaged NEES of each slot inside
    chi2_{4R} / R's interval) is printed beside it.
-2. Constraint breaks: the 14j rule (planning/safety.py) keeps the planned point q at
+2. Constraint breaks: the 14j rule (planning/margins.py) keeps the planned point q at
    target_clearance_m(P) = D_s + k sigma_max + e from the predicted target; a point at exactly that
    clearance in the worst direction (the eigenvector of the largest eigenvalue of the predicted
    position covariance, both signs) is broken when the true target comes within D_s of it.
@@ -44,7 +44,7 @@ from isac_mission.experiment.closed_loop import (
     run_closed_loop,
 )
 from isac_mission.model.kinematics import process_noise, transition_matrix
-from isac_mission.planning.safety import target_clearance_m
+from isac_mission.planning.margins import target_clearance_m
 from isac_mission.planning.slot import SolverKit
 from isac_mission.types import FloatArray
 

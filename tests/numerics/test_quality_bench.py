@@ -44,14 +44,14 @@ def _variants(s: Scenario, inp: SlotInput, rng: np.random.Generator) -> list[Slo
     from two UAVs."""
     velocity = rng.normal(0, 10, size=(s.M, 2))
     velocity[0] = [-400.0, 5.0]
-    prev = inp.prev_xy.copy()
+    prev = inp.prev_xy_m.copy()
     prev[0, 0] = 10.0
     phi = rng.uniform(0, 2 * np.pi, 2)
-    keep_out = inp.prev_xy[:2] + 45.0 * np.column_stack([np.cos(phi), np.sin(phi)])
+    keep_out = inp.prev_xy_m[:2] + 45.0 * np.column_stack([np.cos(phi), np.sin(phi)])
     return [
         inp,
-        dataclasses.replace(inp, prev_xy=prev, prev_velocity=velocity),
-        dataclasses.replace(inp, keep_out_xy=keep_out),
+        dataclasses.replace(inp, prev_xy_m=prev, prev_velocity_mps=velocity),
+        dataclasses.replace(inp, keep_out_xy_m=keep_out),
     ]
 
 
@@ -96,7 +96,9 @@ def test_slsqp_answers_are_feasible_and_a_failed_plan_is_a_miss(
     inp = inputs[5]
     plan = plan_slot(inp, kit, "proposed")
     p = qb.exact_problem(s, inp, plan)
-    objective = PlanningObjective(inp.J_pred, inp.x_pred, SensingParams.from_scenario(s))
+    objective = PlanningObjective(
+        inp.prior_information, inp.target_state_pred, SensingParams.from_scenario(s)
+    )
     start = qb.random_start(p, np.random.default_rng(1))
     assert start is not None
     answer, _ = qb.slsqp(p, objective, *start)

@@ -1,4 +1,4 @@
-"""The safety rule (planning/safety.py, planning/legs.py; docs/model.md, "Safety").
+"""The safety rule (planning/margins.py, planning/legs.py; docs/model.md, "Safety").
 
 - the clearance: D_s with "none", D_s + k sigma + e with the rule, sigma over the slot's leg
   samples against a forward prediction computed here;
@@ -43,7 +43,7 @@ from isac_mission.planning.legs import (
     target_leg_points,
     uav_leg_points,
 )
-from isac_mission.planning.safety import SafetyMargins, slot_sigma_max_m, target_clearance_m
+from isac_mission.planning.margins import SafetyMargins, slot_sigma_max_m, target_clearance_m
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord, read_trace
 from tests.support.independent.constraints import check_constraints

@@ -56,13 +56,15 @@ def test_a_vehicle_model_plan_is_a_flyable_mean_velocity_leg(
     plan = plan_slot(inp, SolverKit(s), "proposed")
     assert plan.report.status == "ok", plan.report.reason
     assert plan.uav_velocity_mps is not None
-    np.testing.assert_allclose(plan.uav_velocity_mps, (plan.uav_xy_m - inp.prev_xy) / s.dt)
-    off = np.linalg.norm(plan.uav_xy_m - (inp.prev_xy + v * s.dt), axis=1)
+    np.testing.assert_allclose(plan.uav_velocity_mps, (plan.uav_xy_m - inp.prev_xy_m) / s.dt)
+    off = np.linalg.norm(plan.uav_xy_m - (inp.prev_xy_m + v * s.dt), axis=1)
     assert np.all(off <= s.a_max * s.dt**2 / 4 + 1e-9)
     assert off.max() > 2.0 * s.dt**2 / 4 + 0.1, "the reach is a_max's, not accel_limit's"
-    peak = _sampled_peak_accel(model, inp.prev_xy, v, plan.uav_xy_m, plan.uav_velocity_mps)
+    peak = _sampled_peak_accel(model, inp.prev_xy_m, v, plan.uav_xy_m, plan.uav_velocity_mps)
     assert np.all(peak <= s.a_max * (1 + 1e-9))
-    assert bool(np.all(model.check_leg(inp.prev_xy, v, plan.uav_xy_m).accel_mps2 <= s.a_max + 1e-9))
+    assert bool(
+        np.all(model.check_leg(inp.prev_xy_m, v, plan.uav_xy_m).accel_mps2 <= s.a_max + 1e-9)
+    )
 
 
 def test_without_the_vehicle_model_plans_carry_no_velocity(paper: Scenario) -> None:

@@ -45,12 +45,12 @@ def test_a_kept_answer_has_no_fallback(paper: Scenario, tmp_path: Path) -> None:
 
 def slot_input(s: Scenario) -> SlotInput:
     return SlotInput(
-        prev_xy=s.uav_start_xy,
-        prev_eta=np.full(s.M, 1.0 / s.M),
-        prev_assoc=None,
-        x_pred=s.x0,
-        J_pred=np.asarray(np.linalg.inv(s.P0), dtype=float),
-        prev_velocity=np.zeros((s.M, 2)),
+        prev_xy_m=s.uav_start_xy,
+        prev_bandwidth_share=np.full(s.M, 1.0 / s.M),
+        prev_bs_of_uav=None,
+        target_state_pred=s.x0,
+        prior_information=np.asarray(np.linalg.inv(s.P0), dtype=float),
+        prev_velocity_mps=np.zeros((s.M, 2)),
         target_cov_pred=s.P0,
     )
 

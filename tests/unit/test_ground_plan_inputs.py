@@ -105,7 +105,7 @@ def test_prev_plan_is_none_after_a_change_of_the_active_fleet_and_over_it_after(
     assert prev.horizon.uav_velocity_mps is not None
     np.testing.assert_array_equal(prev.horizon.uav_velocity_mps[1], prev.uav_velocity_mps)
     np.testing.assert_allclose(prev.horizon.bandwidth_share.sum(axis=1), 1.0)
-    assert prev.uav_xy_m.shape == (2, 2) and len(rec.inputs[2].prev_xy) == 2
+    assert prev.uav_xy_m.shape == (2, 2) and len(rec.inputs[2].prev_xy_m) == 2
 
 
 def test_widened_plan_holds_the_excluded_vehicle_in_every_field(paper: Scenario) -> None:

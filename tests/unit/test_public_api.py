@@ -38,12 +38,14 @@ def test_the_version_has_one_source() -> None:
 def test_first_slot_input_starts_at_the_start_points() -> None:
     s = load_scenario("paper")
     inp = api.first_slot_input(s)
-    assert np.array_equal(inp.prev_xy, s.uav_start_xy)
-    assert inp.prev_eta.shape == (s.M,) and inp.prev_eta.sum() == pytest.approx(1.0)
-    assert inp.prev_assoc is None
-    assert inp.x_pred.shape == (4,) and inp.J_pred.shape == (4, 4)
+    assert np.array_equal(inp.prev_xy_m, s.uav_start_xy)
+    assert inp.prev_bandwidth_share.shape == (
+        s.M,
+    ) and inp.prev_bandwidth_share.sum() == pytest.approx(1.0)
+    assert inp.prev_bs_of_uav is None
+    assert inp.target_state_pred.shape == (4,) and inp.prior_information.shape == (4, 4)
     # One slot of the constant-velocity model from x0.
-    assert np.allclose(inp.x_pred[:2], s.x0[:2] + s.dt * s.x0[2:])
+    assert np.allclose(inp.target_state_pred[:2], s.x0[:2] + s.dt * s.x0[2:])
 
 
 def test_plan_slot_is_the_planner_on_the_first_slot_input() -> None:

@@ -35,7 +35,8 @@ from pydantic import BaseModel
 
 from isac_mission.config import Scenario, ScenarioFile, parse_scenario, read_scenario_data
 from isac_mission.errors import ConfigError
-from isac_mission.planning.slot import METHODS, Method
+from isac_mission.planning.registry import METHODS
+from isac_mission.planning.slot import Method
 
 RESERVED_KEYS = ("methods", "runs", "seed", "slots")
 UAV_COUNT_PATH = "uavs.count"

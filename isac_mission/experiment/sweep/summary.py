@@ -18,7 +18,7 @@ from rich.table import Table
 
 from isac_mission.experiment.sweep.grid import GridPoint, Value, fmt_value
 from isac_mission.experiment.sweep.runs import TaskRow
-from isac_mission.planning.slot import METHODS
+from isac_mission.planning.registry import METHODS
 
 
 @dataclass(frozen=True)

@@ -5,10 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import ClassVar
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from isac_mission.config.validation import Settings
 from isac_mission.planning.fleet import Planner
+from isac_mission.planning.registry import check_method
 from isac_mission.planning.slot import Method, plan_slot
 
 
@@ -60,3 +61,8 @@ class GroundSettings(Settings):
     stall_gap_s: float = Field(1.0, gt=0.0)
     stall_settle_s: float = Field(0.3, ge=0.0)
     planner: Planner = plan_slot
+
+    @field_validator("method")
+    @classmethod
+    def _registered_method(cls, method: str) -> str:
+        return check_method(method)

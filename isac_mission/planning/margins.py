@@ -1,9 +1,10 @@
-"""The safety rule (docs/model.md, "Safety"): distances the plan keeps so that the true ones hold.
+"""Every margin the planner keeps, with its reason, in one place (docs/model.md, "Safety").
 
-The paper keeps D_s between the *planned* UAV positions and the *predicted* target (14j) and
-between planned UAVs (14i). The true target is off its prediction by the tracker's prediction
-error, and a vehicle is off its planned leg by its tracking error, so with planner.safety_margin
-= "covariance" the plan keeps:
+The safety rule: distances the plan keeps so that the true ones hold. The paper keeps D_s
+between the *planned* UAV positions and the *predicted* target (14j) and between planned UAVs
+(14i). The true target is off its prediction by the tracker's prediction error, and a vehicle is
+off its planned leg by its tracking error, so with planner.safety_margin = "covariance" the plan
+keeps:
 
 - 14j: D_s + k sigma_max + e from the predicted target, with sigma_max^2 the largest eigenvalue
   of the predicted position covariance over the slot (at each sampled instant of the leg,
@@ -13,7 +14,15 @@ error, and a vehicle is off its planned leg by its tracking error, so with plann
 - 14i: D_s + 2 e between planned UAVs (and D_s + 2 e from keep-out points);
 - 14a and 14b: the rate and the control range at a distance e farther from the BS.
 
-With "none" every margin is 0 and D_s is the paper's. Pure: numpy only.
+With "none" every margin is 0 and D_s is the paper's.
+
+The numerical margins, so that a solver's answer within its own tolerance passes the exact check
+(planning/feasibility.py) unchanged: SOLVER_MARGIN_M (distances in the convex subproblem and the
+NLPs), RATE_MARGIN (14a in the NLPs), MIN_SHARE (shares off 0 in the NLPs), SHARE_MARGIN (the
+bandwidth subproblem's floor), LEG_LIMIT_TOLERANCE (the horizon's leg limits). The chord and sag
+margins between leg samples are `chord_point_clearance_m` (planning/legs.py) plus `sag_m`.
+
+Pure: numpy only.
 """
 
 from __future__ import annotations
@@ -26,6 +35,32 @@ from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.legs import leg_fractions
 from isac_mission.types import FloatArray
+
+SOLVER_MARGIN_M = 1e-3
+"""Distance constraints of the convex subproblem (P1.1.2) and of the NLPs are tightened by this
+much (m), so that a solver answer within its own tolerance still satisfies the original
+constraints exactly."""
+
+RATE_MARGIN = 1e-7
+"""The NLPs' rate rows are eta R~ / R_th - 1 >= RATE_MARGIN (relative), so that a solution within
+IPOPT's tolerance still passes the exact 14a check (relative tolerance 1e-12)."""
+
+MIN_SHARE = 1e-9
+"""The NLPs' shares stay at least this far from 0 (a_m is quadratic in eta: 0 is a stationary
+point)."""
+
+SHARE_MARGIN = 1e-9
+"""The bandwidth subproblem keeps each share this much (relative) above the 14a floor eta_min."""
+
+LEG_LIMIT_TOLERANCE = 1e-6
+"""Relative slack of the horizon's exact leg checks against a_max and V_max (IPOPT's constraint
+tolerance is 1e-8)."""
+
+
+def sag_m(a_max_mps2: float, gap_s: float) -> float:
+    """The most a leg of acceleration at most a_max_mps2 strays from its chord between two
+    samples gap_s apart (the sagitta a h^2 / 8), m."""
+    return a_max_mps2 * gap_s**2 / 8
 
 
 @dataclass(frozen=True)

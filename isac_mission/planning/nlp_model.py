@@ -1,5 +1,8 @@
-"""Pieces shared by the CasADi NLPs (planning/polish.py, planning/horizon_nlp.py): constraint
-rows, the 14a row, 4 x 4 inverses of symbols, and the solve lock's type."""
+"""The model as CasADi expressions, shared by the NLPs (planning/polish.py, planning/horizon_nlp.py).
+
+Eq. 8's information terms (`information_terms`, from model/radar.SensingParams, the same code the
+numpy objective runs), the constraint rows and their bounds (`NlpRows`, the 14a row
+`relative_rate`), 4 x 4 inverses of symbols, and the solve lock's type."""
 
 from __future__ import annotations
 
@@ -10,6 +13,7 @@ import casadi as ca
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.model.radar import SensingParams
 from isac_mission.types import FloatArray
 
 SolveLock = AbstractContextManager[Any]
@@ -68,3 +72,21 @@ def _inverse_2x2(A: ca.SX) -> ca.SX:
     det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
     adj = ca.vertcat(ca.horzcat(A[1, 1], -A[0, 1]), ca.horzcat(-A[1, 0], A[0, 0]))
     return adj / det
+
+
+def information_terms(q: ca.SX, eta: ca.SX, x_pred: ca.SX, sensing: SensingParams) -> ca.SX:
+    """J_M's terms [4, 4] of one UAV at q [2] with share eta (eq. 8 and 12, as
+    tracking/pcrb.PlanningObjective): a g g^T + b k k^T with g, k the rows of H (eq. 10) and
+    a, b eq. 8's information (SensingParams)."""
+    r = x_pred[:2] - q
+    d2 = ca.sumsqr(r)
+    d = ca.sqrt(d2)
+    u = r / d
+    w = x_pred[2:]
+    v_r = ca.dot(u, w)
+    g = ca.vertcat(u, 0.0, 0.0)
+    k = ca.vertcat((w - v_r * u) / d, u)
+    a = sensing.range_information(d, eta)
+    b = sensing.velocity_information(d)
+    terms: ca.SX = a * (g @ g.T) + b * (k @ k.T)
+    return terms

@@ -1,0 +1,114 @@
+"""The fallback policy: what a slot flies when a method cannot plan, and the reason it says.
+
+Every plan's report names its fallback (SolveReport.fallback, the trace's `fallback`; the
+summaries count them), from most to least planned:
+
+| fallback | when | what flies | where |
+|---|---|---|---|
+| "" | the method planned | its plan | the method |
+| `horizon: <why>` | the horizon's answer is not kept (IPOPT failed, the answer breaks the exact check or the leg limits, the per-slot plan is infeasible) | the per-slot plan (`per_slot_instead`) | planning/horizon.py |
+| `infeasible` | no plan meets 14a-14j (the link cannot reach R_th, or the search ends infeasible) | `best_effort`: the link-optimal waypoints (or the coasting point), away from the target first | planning/per_slot.py, planning/benchmarks.py |
+| `solver error` | the planner raised | the communication-optimal plan, else `hold_plan` | planning/fleet.py |
+| `timeout`, `no vehicles` | the live budget passed; nothing can follow a plan | `hold_plan`: every vehicle holds where it is | service/ground/loop.py, planning/fleet.py |
+| `late` | a plan is published after its slot's end | that plan, marked | service/ground/loop.py |
+
+Pure: no clock, no RNG, no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.model.radar import SensingParams
+from isac_mission.planning.association import association_costs, optimal_assignment
+from isac_mission.planning.problem import SlotProblem
+from isac_mission.tracking.pcrb import PlanningObjective
+from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
+
+NO_BS = -1
+"""bs_of_uav of a vehicle outside the plan."""
+
+
+def evade_target(
+    planned_xy: FloatArray, prev_xy: FloatArray, target_xy: FloatArray, d_safe: float, step: float
+) -> FloatArray:
+    """Best-effort waypoints [M, 2]: a UAV whose planned waypoint is closer than D_s to the
+    predicted target moves straight away from it by `step` instead (14j before communication)."""
+    out = np.array(planned_xy, dtype=float)
+    for m in np.flatnonzero(np.linalg.norm(out - target_xy, axis=1) < d_safe):
+        away = prev_xy[m] - target_xy
+        norm = float(np.linalg.norm(away))
+        direction = away / norm if norm > 1e-9 else np.array([1.0, 0.0])
+        out[m] = prev_xy[m] + direction * step * (1 - 1e-12)
+    return out
+
+
+def best_effort(problem: SlotProblem, reason: str) -> SlotPlan:
+    """The plan of a slot no method can solve (status and fallback "infeasible"): the
+    link-optimal waypoints, or where the vehicles coast to when the planner respects their
+    dynamics; either way away from the target first, inside the operating area."""
+    cons = problem.constraints
+    comm = problem.communication
+    best = comm.uav_xy if problem.ballistic_xy_m is None else problem.ballistic_xy_m
+    inp = problem.inp
+    xy = evade_target(
+        best, inp.prev_xy_m, inp.target_state_pred[:2], cons.clearance_m, problem.max_step_m
+    )
+    xy = np.clip(xy, *cons.area_bounds())  # the vehicles' geofence would clamp it anyway
+    report = SolveReport("infeasible", reason, solve_s=problem.elapsed_s(), fallback="infeasible")
+    return problem.plan(xy, comm.eta, report)
+
+
+def per_slot_instead(base: SlotPlan, method: str, why: str, kind: str, solve_s: float) -> SlotPlan:
+    """`base` (a per-slot plan, already feasible or already the best effort) flown instead of
+    `method`'s answer, saying why; kind: the short fallback kind the summaries count."""
+    report = replace(
+        base.report,
+        reason=f"{method}: {why}; per-slot plan"
+        + (f"; {base.report.reason}" * bool(base.report.reason)),
+        solve_s=solve_s,
+        fallback=base.report.fallback or f"{method}: {kind}",
+    )
+    return replace(base, report=report)
+
+
+def hold_plan(
+    s: Scenario,
+    sensing: SensingParams,
+    uav_xy_m: FloatArray,
+    prev_bandwidth_share: FloatArray,
+    prev_bs_of_uav: IntArray | None,
+    excluded: tuple[int, ...],
+    prior_information: FloatArray,
+    target_state_pred: FloatArray,
+    reason: str,
+    status: str,
+    solve_s: float = 0.0,
+) -> SlotPlan:
+    """Every vehicle holds where it is (uav_xy_m [M, 2]), with last slot's shares and association
+    (a plan that needs no solver; its bound is evaluated for the record). Without a last
+    association (a hold at the first slot) each vehicle gets the communication-optimal BS for
+    where it is (the exact assignment, no LP), and a vehicle outside the plan (`excluded`) none."""
+    M = s.M
+    eta = np.array(prev_bandwidth_share, dtype=float)
+    eta[list(excluded)] = 0.0
+    eta = eta / eta.sum() if eta.sum() > 0 else np.full(M, 1.0 / M)
+    if prev_bs_of_uav is not None:
+        assoc = np.array(prev_bs_of_uav, dtype=np.int64)
+    else:
+        costs = association_costs(uav_xy_m, s.bs_xy, dH=s.dH, rho0=s.rho0, B=s.B)
+        assoc = optimal_assignment(costs, s.n_a)
+        assoc[list(excluded)] = NO_BS
+    objective = PlanningObjective(prior_information, target_state_pred, sensing)
+    with np.errstate(divide="ignore"):
+        pcrb = float(objective.value(uav_xy_m, np.maximum(eta, 1e-12)))
+    return SlotPlan(
+        np.array(uav_xy_m, dtype=float),
+        assoc,
+        eta,
+        pcrb,
+        SolveReport(status, reason, solve_s=solve_s, fallback=status),
+    )

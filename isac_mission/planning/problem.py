@@ -1,0 +1,287 @@
+"""The slot problem: what every planning method needs, built once from the slot's input.
+
+`build_slot_problem` turns a `SlotInput` (what the planner knows at the start of slot n) and the
+scenario's kit into a `SlotProblem`: the association, the reach of each vehicle (the coasting
+point and the acceleration disk), the exact constraint set with its clearances and margins
+(planning/feasibility.py, planning/margins.py), the communication-optimal plan of Section III-A
+and the objective. The methods (planning/registry.py) differ only in what they do with it.
+Pure: no clock but the plan's own timer, no RNG, no I/O.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.model.vehicle import VehicleModel
+from isac_mission.planning.association import associate
+from isac_mission.planning.communication import CommunicationPlan, communication_optimal
+from isac_mission.planning.feasibility import SlotConstraints, operating_area
+from isac_mission.planning.margins import target_clearance_m
+from isac_mission.tracking.pcrb import PlanningObjective
+from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
+
+if TYPE_CHECKING:
+    from isac_mission.planning.slot import SolverKit
+
+
+@dataclass(frozen=True, init=False)
+class SlotInput:
+    """What the planner knows at the start of slot n (positions in the scenario's planar frame).
+
+    prev_xy_m [M, 2]: where the UAVs are (q_{n-1}), m; prev_bandwidth_share [M]: last slot's
+    shares; prev_bs_of_uav [M] or None: last slot's BS per UAV; target_state_pred [4]: the
+    predicted target state (x_m, y_m, vx_mps, vy_mps); prior_information [4, 4]: the bound's
+    prior information at this slot (J_pred, in the units of the state's inverse squared);
+    prev_velocity_mps [M, 2] or None: the vehicles' velocities now (used when
+    planner.accel_limit_mps2 or planner.vehicle_model is set); keep_out_xy_m [L, 2] or None:
+    vehicles outside this plan that every planned UAV keeps D_s from (the kit must be built with
+    n_keep_out = L); target_cov_pred [4, 4] or None: the tracker's predicted covariance of the
+    target (the safety rule; None: prior_information^-1); prev_plan: last slot's plan (the
+    horizon's warm start), None at the first slot.
+
+    The names before units were added (prev_xy, prev_eta, prev_assoc, x_pred, J_pred,
+    prev_velocity, keep_out_xy) are accepted as keywords and readable as attributes, with a
+    DeprecationWarning; they go in the next release.
+    """
+
+    prev_xy_m: FloatArray
+    prev_bandwidth_share: FloatArray
+    prev_bs_of_uav: IntArray | None
+    target_state_pred: FloatArray
+    prior_information: FloatArray
+    prev_velocity_mps: FloatArray | None = None
+    keep_out_xy_m: FloatArray | None = None
+    target_cov_pred: FloatArray | None = None
+    prev_plan: SlotPlan | None = None
+
+    def __init__(
+        self,
+        prev_xy_m: FloatArray | None = None,
+        prev_bandwidth_share: FloatArray | None = None,
+        prev_bs_of_uav: IntArray | None = None,
+        target_state_pred: FloatArray | None = None,
+        prior_information: FloatArray | None = None,
+        prev_velocity_mps: FloatArray | None = None,
+        keep_out_xy_m: FloatArray | None = None,
+        target_cov_pred: FloatArray | None = None,
+        prev_plan: SlotPlan | None = None,
+        **deprecated: object,
+    ) -> None:
+        given = {
+            "prev_xy_m": prev_xy_m,
+            "prev_bandwidth_share": prev_bandwidth_share,
+            "prev_bs_of_uav": prev_bs_of_uav,
+            "target_state_pred": target_state_pred,
+            "prior_information": prior_information,
+            "prev_velocity_mps": prev_velocity_mps,
+            "keep_out_xy_m": keep_out_xy_m,
+        }
+        for old, value in deprecated.items():
+            new = _RENAMED.get(old)
+            if new is None:
+                raise TypeError(f"SlotInput got an unexpected keyword argument {old!r}")
+            _warn_renamed(old, new)
+            if given[new] is not None:
+                raise TypeError(f"SlotInput got both {new!r} and its old name {old!r}")
+            given[new] = value  # type: ignore[assignment]
+        for name in ("prev_xy_m", "prev_bandwidth_share", "target_state_pred", "prior_information"):
+            if given[name] is None:
+                raise TypeError(f"SlotInput missing required argument {name!r}")
+        for name, value in given.items():
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "target_cov_pred", target_cov_pred)
+        object.__setattr__(self, "prev_plan", prev_plan)
+
+    def __getattr__(self, name: str) -> object:
+        """The deprecated field names (called only for names that are not attributes)."""
+        new = _RENAMED.get(name)
+        if new is None:
+            raise AttributeError(f"'SlotInput' object has no attribute {name!r}")
+        _warn_renamed(name, new)
+        return getattr(self, new)
+
+
+_RENAMED: dict[str, str] = {
+    "prev_xy": "prev_xy_m",
+    "prev_eta": "prev_bandwidth_share",
+    "prev_assoc": "prev_bs_of_uav",
+    "x_pred": "target_state_pred",
+    "J_pred": "prior_information",
+    "prev_velocity": "prev_velocity_mps",
+    "keep_out_xy": "keep_out_xy_m",
+}
+"""SlotInput's deprecated field names and the names with units that replace them."""
+
+
+def _warn_renamed(old: str, new: str) -> None:
+    import warnings
+
+    warnings.warn(
+        f"SlotInput.{old} is deprecated: use SlotInput.{new}", DeprecationWarning, stacklevel=3
+    )
+
+
+@dataclass(frozen=True)
+class SlotProblem:
+    """One slot's problem, shared by every method.
+
+    inp: the slot's input; scenario; bs_of_uav [M]: the association (P1-F.1, or last slot's with
+    planner.association = "keep"); ballistic_xy_m [M, 2] or None: where the vehicles coast to
+    (inside the 14h disk and the operating area) when a dynamics limit is set; constraints: the
+    exact 14a-14j set with the slot's clearance; max_step_m: V_max dt, or 0 for a method that does
+    not move the UAVs; communication: the communication-optimal plan at that step;
+    objective: tr(PCRB) at the predicted state (measurement_only for the CRB-criterion);
+    started_s: the perf_counter time planning began (for SolveReport.solve_s).
+    """
+
+    inp: SlotInput
+    scenario: Scenario
+    bs_of_uav: IntArray
+    ballistic_xy_m: FloatArray | None
+    constraints: SlotConstraints
+    max_step_m: float
+    communication: CommunicationPlan
+    objective: PlanningObjective
+    started_s: float = field(default_factory=time.perf_counter)
+
+    def elapsed_s(self) -> float:
+        """Wall time since planning of this slot began, s."""
+        return time.perf_counter() - self.started_s
+
+    def plan(self, xy: FloatArray, eta: FloatArray, report: SolveReport) -> SlotPlan:
+        """The SlotPlan of waypoints xy [M, 2] and shares eta [M], its bound by the full
+        objective (prior included, also for the CRB-criterion)."""
+        o = self.objective
+        full = PlanningObjective(o.J_pred, o.x_pred, o.sensing)
+        return SlotPlan(
+            uav_xy_m=xy,
+            bs_of_uav=self.bs_of_uav,
+            bandwidth_share=eta,
+            pcrb_trace=full.value(xy, eta),
+            report=report,
+        )
+
+    def link_infeasible_reason(self) -> str | None:
+        """Why no plan can meet 14a (the communication-optimal worst rate below R_th), or None."""
+        s = self.scenario
+        comm = self.communication
+        if comm.worst_rate_bps >= s.r_th:
+            return None
+        return (
+            f"infeasible: communication-optimal worst rate R_c* = {comm.worst_rate_bps / 1e6:.3f} "
+            f"Mbit/s < R_th = {s.r_th / 1e6:.3f} Mbit/s"
+        )
+
+
+def build_slot_problem(
+    inp: SlotInput, kit: SolverKit, *, moves: bool = True, measurement_only: bool = False
+) -> SlotProblem:
+    """The slot's problem for a method that moves the UAVs (moves) or keeps them where they are,
+    with the objective tr((J_pred + J_M)^-1), or tr(J_M^-1) with measurement_only."""
+    started_s = time.perf_counter()
+    s = kit.scenario
+    cfg = s.planner
+    n_keep_out = 0 if inp.keep_out_xy_m is None else len(inp.keep_out_xy_m)
+    if n_keep_out != kit.n_keep_out:
+        raise ValueError(f"{n_keep_out} keep-out points, but the kit is built for {kit.n_keep_out}")
+    if cfg.association == "keep" and inp.prev_bs_of_uav is not None:
+        assoc = inp.prev_bs_of_uav
+    else:
+        assoc = associate(
+            inp.prev_xy_m, s.bs_xy, capacity=s.n_a, dH=s.dH, rho0=s.rho0, B=s.B, lp=kit.association
+        )
+    serving = s.bs_xy[assoc]
+    ballistic = None
+    reach_m = VehicleModel.of(s).reach_radius_m if cfg.vehicle_model else np.inf
+    if not cfg.vehicle_model and cfg.accel_limit_mps2 is not None:
+        reach_m = cfg.accel_limit_mps2 * s.dt**2 / 4
+    if np.isfinite(reach_m) and inp.prev_velocity_mps is not None:
+        # Where the vehicles coast to, pulled inside the 14h disk: a vehicle a little faster than
+        # the planner's V_max has to slow down anyway.
+        coast = inp.prev_velocity_mps * s.dt
+        norm = np.linalg.norm(coast, axis=1, keepdims=True)
+        coast = coast * np.minimum(1.0, s.v_max * s.dt * (1 - 1e-9) / np.maximum(norm, 1e-12))
+        # ... and inside the operating area: a vehicle heading out at the edge must stop too.
+        ballistic = np.clip(inp.prev_xy_m + coast, *operating_area(s))
+    x_pred = inp.target_state_pred
+    cons = SlotConstraints(
+        inp.prev_xy_m,
+        serving,
+        s.bs_xy,
+        x_pred[:2],
+        s,
+        ballistic_xy=ballistic,
+        accel_radius_m=reach_m if ballistic is not None else np.inf,
+        keep_out_xy=inp.keep_out_xy_m if n_keep_out else None,
+        target_clearance_m=slot_clearance_m(inp, s),
+        target_velocity_mps=x_pred[2:4],
+        start_velocity_mps=inp.prev_velocity_mps,
+    )
+    step = s.v_max * s.dt if moves else 0.0
+    comm = communication_optimal(
+        inp.prev_xy_m, serving, max_step_m=step, dH=s.dH, rho0=s.rho0, B=s.B
+    )
+    objective = PlanningObjective(
+        inp.prior_information, x_pred, kit.sensing, measurement_only=measurement_only
+    )
+    return SlotProblem(
+        inp=inp,
+        scenario=s,
+        bs_of_uav=assoc,
+        ballistic_xy_m=ballistic,
+        constraints=cons,
+        max_step_m=step,
+        communication=comm,
+        objective=objective,
+        started_s=started_s,
+    )
+
+
+def with_end_velocity(plan: SlotPlan, inp: SlotInput, s: Scenario) -> SlotPlan:
+    """The plan with, under planner.vehicle_model, the mean-velocity leg's end velocity
+    (q_n - q_{n-1}) / dt as uav_velocity_mps [M, 2] when the method gave none (docs/model.md,
+    "Vehicle model")."""
+    if not s.planner.vehicle_model or plan.uav_velocity_mps is not None:
+        return plan
+    end_v = VehicleModel.of(s).end_velocity(inp.prev_xy_m, plan.uav_xy_m)
+    return dataclasses.replace(plan, uav_velocity_mps=end_v)
+
+
+def slot_clearance_m(inp: SlotInput, s: Scenario) -> float:
+    """The slot's 14j clearance (planning/margins.py) from the tracker's predicted covariance,
+    or prior_information^-1 when the input has none."""
+    cov = inp.target_cov_pred
+    if cov is None and s.planner.safety_margin != "none":
+        cov = np.asarray(np.linalg.inv(inp.prior_information), dtype=float)
+    return target_clearance_m(s, cov)
+
+
+def warm_up_input(kit: SolverKit) -> SlotInput:
+    """A slot input at the scenario's start (keep-out points far outside the area: present for
+    the solvers' shapes, never binding), for planning once before the first real slot."""
+    s = kit.scenario
+    return SlotInput(
+        prev_xy_m=s.uav_start_xy,
+        prev_bandwidth_share=np.full(s.M, 1.0 / s.M),
+        prev_bs_of_uav=None,
+        target_state_pred=s.x0,
+        prior_information=np.asarray(np.linalg.inv(s.P0), dtype=float),
+        keep_out_xy_m=np.full((kit.n_keep_out, 2), -1e6) if kit.n_keep_out else None,
+    )
+
+
+class PlansOnceToWarmUp:
+    """A planner whose `prepare` plans one slot from `warm_up_input`: every problem it uses is
+    then built and solved once, so the first real slot does not pay for compilation."""
+
+    def plan(self, inp: SlotInput, kit: SolverKit) -> SlotPlan:
+        raise NotImplementedError
+
+    def prepare(self, kit: SolverKit) -> None:
+        self.plan(warm_up_input(kit), kit)

@@ -1,0 +1,122 @@
+"""The planning methods: one protocol, one registry.
+
+Every place that lists or validates method names (`simulate`, `sweep`, `run`, `serve`, the
+ground settings, the CLI help, the report labels) reads `REGISTRY`. A new method is one module
+with a class that has the protocol's two methods, and one line in `REGISTRY`
+(docs/architecture.md, "Adding a planning method"). The registry itself imports no solver: a
+method's module is imported when the method is first asked for, so the CLI's help and
+validation stay light.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from functools import cache
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:
+    from isac_mission.planning.problem import SlotInput
+    from isac_mission.planning.slot import SolverKit
+    from isac_mission.types import SlotPlan
+
+
+class SlotPlanner(Protocol):
+    """A planning method.
+
+    `plan` plans one slot (pure: no clock but the plan's timer, no RNG, no I/O; an infeasible
+    slot returns its best effort with report.status "infeasible", planning/fallback.py);
+    `prepare` builds and solves once whatever `plan` needs, so that no real slot pays for a
+    build (SolverKit.warm_up; planning/problem.PlansOnceToWarmUp plans one slot).
+    """
+
+    def plan(self, inp: SlotInput, kit: SolverKit) -> SlotPlan: ...
+
+    def prepare(self, kit: SolverKit) -> None: ...
+
+
+@dataclass(frozen=True)
+class Registered:
+    """One method: name (configs, the CLI, traces), label (reports), summary (help), and where
+    its SlotPlanner class is ("module:Class")."""
+
+    name: str
+    label: str
+    summary: str
+    where: str
+
+
+REGISTRY: tuple[Registered, ...] = (
+    Registered(
+        "proposed",
+        "Proposed",
+        "Algorithm 2, the exact problem polished by IPOPT, the leader screen",
+        "isac_mission.planning.per_slot:Proposed",
+    ),
+    Registered(
+        "proposed-sca",
+        "Proposed (SCA only)",
+        "Algorithm 2 alone, as printed",
+        "isac_mission.planning.per_slot:ProposedSca",
+    ),
+    Registered(
+        "sd",
+        "SD",
+        "static deployment: the UAVs stay, the shares optimised",
+        "isac_mission.planning.benchmarks:StaticDeployment",
+    ),
+    Registered(
+        "aba",
+        "ABA",
+        "average bandwidth: equal shares, the positions by Algorithm 1",
+        "isac_mission.planning.benchmarks:AverageBandwidth",
+    ),
+    Registered(
+        "crb",
+        "CRB-criterion",
+        "Algorithm 2 on the measurement-only CRB tr(J_M^-1)",
+        "isac_mission.planning.benchmarks:CrbCriterion",
+    ),
+    Registered(
+        "comm",
+        "Comm-optimal",
+        "the communication-optimal plan of Section III-A",
+        "isac_mission.planning.benchmarks:CommunicationOptimal",
+    ),
+    Registered(
+        "horizon",
+        "Horizon",
+        "receding horizon: L slots planned together on the bound, the first flown",
+        "isac_mission.planning.horizon:Horizon",
+    ),
+)
+"""Every method, in the order reports list them."""
+
+METHODS: tuple[str, ...] = tuple(r.name for r in REGISTRY)
+"""The registered method names."""
+
+LABELS: dict[str, str] = {r.name: r.label for r in REGISTRY}
+"""Each method's name in reports."""
+
+
+def methods_help() -> str:
+    """The registered names, comma-separated (the CLI's help)."""
+    return ", ".join(METHODS)
+
+
+def check_method(name: str) -> str:
+    """name if it is registered; ValueError naming the choices otherwise."""
+    if name not in METHODS:
+        raise ValueError(f"unknown planning method {name!r}; choose from {methods_help()}")
+    return name
+
+
+@cache
+def planner(name: str) -> SlotPlanner:
+    """The registered method `name` (its module imported on first use); ValueError naming the
+    choices otherwise."""
+    entry = REGISTRY[METHODS.index(check_method(name))]
+    module, cls = entry.where.split(":")
+    planner_type = getattr(importlib.import_module(module), cls)
+    found: SlotPlanner = planner_type()
+    return found
