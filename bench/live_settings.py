@@ -112,7 +112,7 @@ def main() -> None:
                 viol.update(x.constraint for x in check_constraints(trace, tol_m=LIVE_TOL_M))
                 for r in trace.slots:
                     if r.target_true is not None:
-                        d = np.linalg.norm(np.asarray(r.uav_xy) - r.target_true[:2], axis=1)
+                        d = np.linalg.norm(np.asarray(r.uav_xy_m) - r.target_true[:2], axis=1)
                         nearest = min(nearest, float(d.min()))
             f = trace_figures(traces)
             row = (

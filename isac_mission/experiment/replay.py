@@ -189,7 +189,10 @@ def _live_job(
     else:
         belief = Gaussian(np.asarray(prev.target_est), np.asarray(prev.P))
         bound = Bound.from_information(np.asarray(prev.J))
-        eta, assoc = np.asarray(prev.eta, dtype=float), np.asarray(prev.assoc, dtype=np.int64)
+        eta, assoc = (
+            np.asarray(prev.bandwidth_share, dtype=float),
+            np.asarray(prev.assoc, dtype=np.int64),
+        )
     predicted = predict(model, TrackState(belief, bound))
     excluded = tuple(sorted(int(m) for m in rec.extra.get("planned_around", [])))
     active = tuple(m for m in range(s.M) if m not in excluded)
@@ -219,7 +222,7 @@ def _offline_start(prev: SlotRecord | None, s: Scenario) -> tuple[FloatArray, Fl
     if prev is None:
         return np.array(s.uav_start_xy, dtype=float), np.zeros((s.M, 2))
     if prev.plan_xy is None:
-        return np.array(prev.uav_xy, dtype=float), np.zeros((s.M, 2))
+        return np.array(prev.uav_xy_m, dtype=float), np.zeros((s.M, 2))
     xy = np.array(prev.plan_xy, dtype=float)
     if prev.plan_velocity is not None:
         return xy, np.array(prev.plan_velocity, dtype=float)

@@ -80,7 +80,7 @@ def _steps(slots: Sequence[SlotRecord]) -> tuple[FloatArray, FloatArray]:
     for prev, rec in itertools.pairwise(slots):
         if rec.slot != prev.slot + 1:
             continue
-        d = np.linalg.norm(np.asarray(rec.uav_xy) - np.asarray(prev.uav_xy), axis=1)
+        d = np.linalg.norm(np.asarray(rec.uav_xy_m) - np.asarray(prev.uav_xy_m), axis=1)
         known = d[np.isfinite(d)]
         steps.extend(known.tolist())
         ends.extend([rec.slot] * known.size)

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.deprecation import renamed_fields
 from isac_mission.model.vehicle import VehicleModel
 from isac_mission.planning.association import associate
 from isac_mission.planning.communication import CommunicationPlan, communication_optimal
@@ -30,7 +31,16 @@ if TYPE_CHECKING:
     from isac_mission.planning.slot import SolverKit
 
 
-@dataclass(frozen=True, init=False)
+@renamed_fields(
+    prev_xy="prev_xy_m",
+    prev_eta="prev_bandwidth_share",
+    prev_assoc="prev_bs_of_uav",
+    x_pred="target_state_pred",
+    J_pred="prior_information",
+    prev_velocity="prev_velocity_mps",
+    keep_out_xy="keep_out_xy_m",
+)
+@dataclass(frozen=True)
 class SlotInput:
     """What the planner knows at the start of slot n (positions in the scenario's planar frame).
 
@@ -59,72 +69,6 @@ class SlotInput:
     keep_out_xy_m: FloatArray | None = None
     target_cov_pred: FloatArray | None = None
     prev_plan: SlotPlan | None = None
-
-    def __init__(
-        self,
-        prev_xy_m: FloatArray | None = None,
-        prev_bandwidth_share: FloatArray | None = None,
-        prev_bs_of_uav: IntArray | None = None,
-        target_state_pred: FloatArray | None = None,
-        prior_information: FloatArray | None = None,
-        prev_velocity_mps: FloatArray | None = None,
-        keep_out_xy_m: FloatArray | None = None,
-        target_cov_pred: FloatArray | None = None,
-        prev_plan: SlotPlan | None = None,
-        **deprecated: object,
-    ) -> None:
-        given = {
-            "prev_xy_m": prev_xy_m,
-            "prev_bandwidth_share": prev_bandwidth_share,
-            "prev_bs_of_uav": prev_bs_of_uav,
-            "target_state_pred": target_state_pred,
-            "prior_information": prior_information,
-            "prev_velocity_mps": prev_velocity_mps,
-            "keep_out_xy_m": keep_out_xy_m,
-        }
-        for old, value in deprecated.items():
-            new = _RENAMED.get(old)
-            if new is None:
-                raise TypeError(f"SlotInput got an unexpected keyword argument {old!r}")
-            _warn_renamed(old, new)
-            if given[new] is not None:
-                raise TypeError(f"SlotInput got both {new!r} and its old name {old!r}")
-            given[new] = value  # type: ignore[assignment]
-        for name in ("prev_xy_m", "prev_bandwidth_share", "target_state_pred", "prior_information"):
-            if given[name] is None:
-                raise TypeError(f"SlotInput missing required argument {name!r}")
-        for name, value in given.items():
-            object.__setattr__(self, name, value)
-        object.__setattr__(self, "target_cov_pred", target_cov_pred)
-        object.__setattr__(self, "prev_plan", prev_plan)
-
-    def __getattr__(self, name: str) -> object:
-        """The deprecated field names (called only for names that are not attributes)."""
-        new = _RENAMED.get(name)
-        if new is None:
-            raise AttributeError(f"'SlotInput' object has no attribute {name!r}")
-        _warn_renamed(name, new)
-        return getattr(self, new)
-
-
-_RENAMED: dict[str, str] = {
-    "prev_xy": "prev_xy_m",
-    "prev_eta": "prev_bandwidth_share",
-    "prev_assoc": "prev_bs_of_uav",
-    "x_pred": "target_state_pred",
-    "J_pred": "prior_information",
-    "prev_velocity": "prev_velocity_mps",
-    "keep_out_xy": "keep_out_xy_m",
-}
-"""SlotInput's deprecated field names and the names with units that replace them."""
-
-
-def _warn_renamed(old: str, new: str) -> None:
-    import warnings
-
-    warnings.warn(
-        f"SlotInput.{old} is deprecated: use SlotInput.{new}", DeprecationWarning, stacklevel=3
-    )
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """Trace records in memory: one slot's `SlotRecord` and a whole `Trace` (format: docs/trace.md).
 
-Shapes: M UAVs; uav_xy, plan_xy, plan_start_xy [M, 2] m; plan_velocity, plan_start_velocity
-[M, 2] m/s; eta [M]; assoc [M] 0-based BS index (-1 = none);
+Shapes: M UAVs; uav_xy_m (trace: uav_xy), plan_xy, plan_start_xy [M, 2] m; plan_velocity,
+plan_start_velocity [M, 2] m/s; bandwidth_share (trace: eta) [M]; assoc [M] 0-based BS index (-1 = none);
 target_* [4] = [x, y, vx, vy] in m and m/s; r_diag [2M] = range variances (m^2) then
 radial-velocity variances (m^2/s^2), NaN for a measurement that did not arrive; P, J [4, 4].
 """
@@ -15,6 +15,7 @@ from typing import Any, Final
 
 import numpy as np
 
+from isac_mission.deprecation import renamed_fields
 from isac_mission.errors import MessageError
 from isac_mission.records.fields import as_float, as_int, as_str, float_array, int_array
 from isac_mission.records.jsonlines import to_jsonable
@@ -54,15 +55,19 @@ _PER_UAV_XY: Final[frozenset[str]] = frozenset(
 )
 """The optional [M, 2] fields (`Trace.stack` fills a slot without one with NaN)."""
 
+_ATTRIBUTE: Final[dict[str, str]] = {"uav_xy": "uav_xy_m", "eta": "bandwidth_share"}
+"""SlotRecord's attribute for a trace field whose name differs."""
+
 _RESERVED: Final[frozenset[str]] = frozenset((*CONTRACT_KEYS, *OPTIONAL_KEYS, "config"))
 
 
+@renamed_fields(uav_xy="uav_xy_m", eta="bandwidth_share")
 @dataclass(frozen=True, eq=False)
 class SlotRecord:
     """One slot of a run, as logged (docs/trace.md). Arrays are read-only numpy copies.
 
     slot: slot index n; method: planning method; status: "ok", "infeasible", ...;
-    uav_xy [M, 2] m: where this slot's measurements were taken; eta [M]: bandwidth shares;
+    uav_xy_m [M, 2]: where this slot's measurements were taken; bandwidth_share [M]: the shares;
     assoc [M]: 0-based BS index per UAV (-1 = none); target_true [4] or None (unknown);
     target_est [4]: EKF posterior mean; target_pred [4]: EKF prediction (the bound's
     linearisation point); r_diag [2M]: measurement variances used for the bound (m^2 then
@@ -76,14 +81,16 @@ class SlotRecord:
     input, experiment/replay.py); extra: further JSON-ready fields, written at the top level.
 
     Construction checks shapes and types and raises MessageError naming the field. Two records
-    are equal when their JSON forms are (so NaN equals NaN).
+    are equal when their JSON forms are (so NaN equals NaN). The trace's names of uav_xy_m and
+    bandwidth_share are "uav_xy" and "eta" (docs/trace.md); the attributes of those names are
+    deprecated aliases.
     """
 
     slot: int
     method: str
     status: str
-    uav_xy: FloatArray
-    eta: FloatArray
+    uav_xy_m: FloatArray
+    bandwidth_share: FloatArray
     assoc: IntArray
     target_true: FloatArray | None
     target_est: FloatArray
@@ -107,10 +114,10 @@ class SlotRecord:
         put(self, "slot", as_int(self.slot, "slot"))
         put(self, "method", as_str(self.method, "method"))
         put(self, "status", as_str(self.status, "status"))
-        uav_xy = float_array(self.uav_xy, "uav_xy", (None, 2))
+        uav_xy = float_array(self.uav_xy_m, "uav_xy", (None, 2))
         m = uav_xy.shape[0]
-        put(self, "uav_xy", uav_xy)
-        put(self, "eta", float_array(self.eta, "eta", (m,)))
+        put(self, "uav_xy_m", uav_xy)
+        put(self, "bandwidth_share", float_array(self.bandwidth_share, "eta", (m,)))
         assoc = int_array(self.assoc, "assoc")
         if assoc.shape != (m,):
             raise MessageError(f"assoc: expected {m} BS indices (one per UAV), got {assoc.size}")
@@ -147,11 +154,13 @@ class SlotRecord:
     @property
     def n_uavs(self) -> int:
         """M, the number of UAVs."""
-        return int(self.uav_xy.shape[0])
+        return int(self.uav_xy_m.shape[0])
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON-ready line: contract fields in docs/trace.md order, set optionals, then extras."""
-        out: dict[str, Any] = {key: to_jsonable(getattr(self, key), key) for key in CONTRACT_KEYS}
+        out: dict[str, Any] = {
+            key: to_jsonable(getattr(self, _ATTRIBUTE.get(key, key)), key) for key in CONTRACT_KEYS
+        }
         for key in OPTIONAL_KEYS:
             value = getattr(self, key)
             if value is not None:
@@ -169,7 +178,7 @@ class SlotRecord:
             raise MessageError(f"missing fields {missing}")
         if "config" in data:
             raise MessageError("a second config object after line 1")
-        named = {key: data[key] for key in CONTRACT_KEYS}
+        named = {_ATTRIBUTE.get(key, key): data[key] for key in CONTRACT_KEYS}
         optional = {key: data[key] for key in OPTIONAL_KEYS if data.get(key) is not None}
         extra = {key: value for key, value in data.items() if key not in _RESERVED}
         return cls(**named, **optional, extra=extra)
@@ -207,7 +216,7 @@ class Trace:
 
         Fields that are None in a slot (target_true, plan_xy) become NaN of the right shape.
         """
-        values = [getattr(rec, name) for rec in self.slots]
+        values = [getattr(rec, _ATTRIBUTE.get(name, name)) for rec in self.slots]
         default: tuple[int, ...] = ()
         if name == "target_true":
             default = (4,)

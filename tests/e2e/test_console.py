@@ -266,7 +266,7 @@ async def test_view_replays_simulate_traces_side_by_side(tmp_path: Path) -> None
             for layer, path in zip(drawn, traces, strict=True):
                 trace = read_trace(path)
                 assert layer["label"] == trace.method
-                expected = trace.slots[29].uav_xy
+                expected = trace.slots[29].uav_xy_m
                 for xy, want in zip(layer["uavs"], expected, strict=True):
                     assert xy == pytest.approx(list(want), abs=1e-9)
             await page.click("#play")

@@ -89,7 +89,7 @@ async def test_ground_loop_flies_every_slot_and_traces_it(
     assert all(r.target_true is not None for r in trace.slots)
     assert compare_pcrb(trace) == []
     # Measurements were taken where the vehicles are: the start points (nobody flies them).
-    np.testing.assert_allclose(trace.slots[-1].uav_xy, paper.uav_start_xy, atol=0.5)
+    np.testing.assert_allclose(trace.slots[-1].uav_xy_m, paper.uav_start_xy, atol=0.5)
     err = np.linalg.norm(trace.slots[-1].target_est[:2] - trace.slots[-1].target_true[:2])
     assert err < 5 * np.sqrt(np.trace(np.asarray(trace.slots[-1].P)[:2, :2]))
 

@@ -294,9 +294,9 @@ def test_every_plan_of_a_simulate_trace_passes_the_independent_check_with_the_cl
     # The check can fail: the proposed plan's UAV 0 moved onto the paper's D_s at one slot.
     trace = read_trace(trace_path(tmp_path, "proposed", 0))
     rec = trace.slots[10]
-    away = rec.uav_xy[0] - rec.target_pred[:2]
+    away = rec.uav_xy_m[0] - rec.target_pred[:2]
     moved = rec.target_pred[:2] + s.d_safe * 1.01 * away / np.linalg.norm(away)
-    xy = rec.uav_xy.copy()
+    xy = rec.uav_xy_m.copy()
     xy[0] = moved
     broken = type(trace)(
         config=trace.config,
@@ -307,7 +307,7 @@ def test_every_plan_of_a_simulate_trace_passes_the_independent_check_with_the_cl
 
 
 def _replace_xy(rec: SlotRecord, xy: np.ndarray) -> SlotRecord:
-    return replace(rec, uav_xy=xy)
+    return replace(rec, uav_xy_m=xy)
 
 
 @pytest.mark.parametrize("vehicle_model", [False, True])

@@ -82,12 +82,12 @@ async def test_vehicle_link_loss_mid_mission_is_planned_around_and_readmitted(
     assert len(back) >= 5
     # During the exclusion: no bandwidth and no BS for it; the others share the whole band.
     # (Slot n's record carries plan n's shares, which were decided at the end of slot n-1.)
-    planned_without = [r for r in trace.slots if r.eta[LOST] == 0.0]
+    planned_without = [r for r in trace.slots if r.bandwidth_share[LOST] == 0.0]
     assert planned_without, "no plan left the lost vehicle out"
     for r in planned_without:
         assert r.assoc[LOST] == -1
-        assert abs(sum(r.eta) - 1.0) < 1e-9
-        assert all(r.eta[m] > 0 for m in range(s.M) if m != LOST)
+        assert abs(sum(r.bandwidth_share) - 1.0) < 1e-9
+        assert all(r.bandwidth_share[m] > 0 for m in range(s.M) if m != LOST)
     # It held. Without setpoints for COM_OF_LOSS_T the vehicle enters HOLD at its stopping
     # point, braking at braking_fraction x a_max from at most V_max; from then until its radio
     # is back it stays there. The slots are chosen by simulation time, not by the ground loop's
@@ -95,13 +95,13 @@ async def test_vehicle_link_loss_mid_mission_is_planned_around_and_readmitted(
     brake_s = s.v_max / (VehicleLimits().braking_fraction * s.a_max)
     held_from_s = OUTAGE_START_S + AutopilotSettings().offboard_loss_timeout_s + brake_s
     held = np.array(
-        [r.uav_xy[LOST] for r in trace.slots if held_from_s <= r.slot * s.dt <= OUTAGE_END_S]
+        [r.uav_xy_m[LOST] for r in trace.slots if held_from_s <= r.slot * s.dt <= OUTAGE_END_S]
     )
     assert len(held) >= 2, held_from_s
     assert np.max(np.linalg.norm(np.diff(held, axis=0), axis=1)) < HOLD_TOL_M, held
     # Once back it is planned and flies again: a share, a BS, and it moves.
-    assert back[-1].eta[LOST] > 0 and back[-1].assoc[LOST] >= 0
-    moved = np.linalg.norm(np.asarray(back[-1].uav_xy[LOST]) - np.asarray(back[0].uav_xy[LOST]))
+    assert back[-1].bandwidth_share[LOST] > 0 and back[-1].assoc[LOST] >= 0
+    moved = np.linalg.norm(np.asarray(back[-1].uav_xy_m[LOST]) - np.asarray(back[0].uav_xy_m[LOST]))
     assert moved > 10.0
     # The original constraints hold on telemetry positions, the lost vehicle included for the
     # separations (14i); a vehicle without a link has no rate or BS to check (14a, 14f/g).

@@ -57,8 +57,8 @@ def _record(n: int, m: int = 3) -> SlotRecord:
         slot=n,
         method="proposed",
         status="ok",
-        uav_xy=rng.uniform(0, 3000, size=(m, 2)),
-        eta=np.full(m, 1 / m),
+        uav_xy_m=rng.uniform(0, 3000, size=(m, 2)),
+        bandwidth_share=np.full(m, 1 / m),
         assoc=np.arange(m) % 2,
         target_true=rng.uniform(0, 3000, size=4),
         target_est=rng.uniform(0, 3000, size=4),
@@ -106,7 +106,7 @@ def _assert_continues_from(trace: Trace, last: SlotRecord, dt: float, kappa: flo
     np.testing.assert_allclose(nxt.target_pred, x_pred, rtol=1e-9, atol=1e-9)
     P_pred = F @ np.asarray(last.P) @ F.T + W
     r = np.asarray(nxt.r_diag)
-    H = jacobian(np.asarray(nxt.target_pred), np.asarray(nxt.uav_xy))
+    H = jacobian(np.asarray(nxt.target_pred), np.asarray(nxt.uav_xy_m))
     keep = np.isfinite(r)
     info = np.linalg.inv(P_pred) + H[keep].T @ np.diag(1.0 / r[keep]) @ H[keep]
     # A one-iteration EKF's posterior information is the prediction's plus H^T R^-1 H.
@@ -180,7 +180,7 @@ def test_resumed_ground_loop_starts_from_the_last_complete_slot(
         np.testing.assert_array_equal(st.belief.x, last.target_est)
         np.testing.assert_array_equal(st.belief.P, last.P)
         np.testing.assert_allclose(st.bound.J, last.J, rtol=1e-12)
-        np.testing.assert_array_equal(st.eta, last.eta)
+        np.testing.assert_array_equal(st.eta, last.bandwidth_share)
         np.testing.assert_array_equal(st.assoc, last.assoc)
     finally:
         assert loop.writer is not None
@@ -340,7 +340,7 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(
     assert trace.slots[0].status == "ok"
     for r in trace.slots[last.slot :]:
         if r.status == "unobserved":
-            assert r.extra.get("received") == 0 and np.isnan(np.asarray(r.uav_xy)).all()
+            assert r.extra.get("received") == 0 and np.isnan(np.asarray(r.uav_xy_m)).all()
     skipped = [n for n, st in statuses.items() if st in ("unobserved", "held")]
     if skipped:  # none when the new `serve` was up before the world's lockstep timeout
         assert skipped == list(range(last.slot + 1, skipped[-1] + 1)), statuses

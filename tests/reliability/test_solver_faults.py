@@ -128,7 +128,7 @@ async def test_solver_error_timeout_and_infeasible_slots_fall_back_and_recover(
     assert status[SLOW_SLOT] == "timeout"
     assert "budget" in (by_slot[SLOW_SLOT].reason or "")
     hold = by_slot[SLOW_SLOT]
-    np.testing.assert_allclose(hold.plan_xy, by_slot[SLOW_SLOT - 1].uav_xy, atol=1e-6)
+    np.testing.assert_allclose(hold.plan_xy, by_slot[SLOW_SLOT - 1].uav_xy_m, atol=1e-6)
     assert status[SLOW_SLOT + 1] == "ok"
     # R_th raised: infeasible slots that say why; after the restore, ok again to the end.
     infeasible = [n for n, st in status.items() if st == "infeasible"]

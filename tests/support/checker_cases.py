@@ -54,8 +54,8 @@ def record(slot: int, uav_xy: list[list[float]], target_pred: list[float], **kw:
         "slot": slot,
         "method": "proposed",
         "status": "ok",
-        "uav_xy": np.array(uav_xy),
-        "eta": np.array([0.5, 0.5]),
+        "uav_xy_m": np.array(uav_xy),
+        "bandwidth_share": np.array([0.5, 0.5]),
         "assoc": np.array([0, 1]),
         "target_true": np.array(target_pred) + 1.0,
         "target_est": np.array(target_pred) + 0.5,
@@ -67,7 +67,7 @@ def record(slot: int, uav_xy: list[list[float]], target_pred: list[float], **kw:
         "J": np.eye(4),
     }
     fields.update(kw)
-    return SlotRecord(**fields)
+    return SlotRecord(**fields)  # type: ignore[arg-type]
 
 
 def valid_trace(config: dict[str, Any] | None = None) -> Trace:

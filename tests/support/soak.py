@@ -209,7 +209,7 @@ async def run_soak(
         distance = (
             math.nan
             if truth is None
-            else float(np.min(np.linalg.norm(np.asarray(rec.uav_xy) - truth[:2], axis=1)))
+            else float(np.min(np.linalg.norm(np.asarray(rec.uav_xy_m) - truth[:2], axis=1)))
         )
         sample = SoakSample(
             rec.slot,

@@ -130,7 +130,7 @@ def test_slots_run_without_a_plan_are_held_with_real_positions_or_unobserved_wit
     assert list(gate.slots_to_skip(state, t0 + 2.0 * paper.dt, t0)) == [1, 2]
     compute_xy = paper.uav_start_xy
     rec1 = skip_slot(state, 1, {}, compute_xy, "resume")
-    assert rec1.status == "unobserved" and np.isnan(np.asarray(rec1.uav_xy)).all()
+    assert rec1.status == "unobserved" and np.isnan(np.asarray(rec1.uav_xy_m)).all()
     assert np.isnan(np.asarray(rec1.r_diag)).all()
     where = np.array([1234.0, 987.0])
     det = DetectionMsg(
@@ -143,7 +143,7 @@ def test_slots_run_without_a_plan_are_held_with_real_positions_or_unobserved_wit
         bandwidth_share=0.5,
     )
     rec2 = skip_slot(state, 2, {1: det}, compute_xy, "resume")
-    xy = np.asarray(rec2.uav_xy)
+    xy = np.asarray(rec2.uav_xy_m)
     assert rec2.status == "held" and state.slot == 2
     np.testing.assert_array_equal(xy[1], where)
     assert np.isnan(xy[[0, 2]]).all()

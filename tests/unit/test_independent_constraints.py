@@ -35,18 +35,20 @@ def test_valid_trace_has_no_violation() -> None:
 
 def test_14a_low_share_breaks_the_rate_alone() -> None:
     # UAV 1 is 618 m from BS 1: full-band rate about 217 Mbit/s, so 1 % of the band is ~2 Mbit/s.
-    got = flagged(mutate(valid_trace(), 0, eta=np.array([0.99, 0.01])))
+    got = flagged(mutate(valid_trace(), 0, bandwidth_share=np.array([0.99, 0.01])))
     assert got == {("14a", 1, (1,))}
 
 
 def test_14a_uses_a_relative_tolerance_of_1e_9() -> None:
     trace = valid_trace()
-    q1 = trace.slots[0].uav_xy[1]
+    q1 = trace.slots[0].uav_xy_m[1]
     full = uplink_rate_bps(1.0, math.dist(q1, (1000.0, 0.0)), trace.config)
     exact = 10e6 / full  # the share that meets R_th exactly
-    at_limit = mutate(trace, 0, eta=np.array([1.0 - exact, exact]))
+    at_limit = mutate(trace, 0, bandwidth_share=np.array([1.0 - exact, exact]))
     assert flagged(at_limit) == set()
-    below = mutate(trace, 0, eta=np.array([1.0 - exact * (1 - 1e-7), exact * (1 - 1e-7)]))
+    below = mutate(
+        trace, 0, bandwidth_share=np.array([1.0 - exact * (1 - 1e-7), exact * (1 - 1e-7)])
+    )
     assert flagged(below) == {("14a", 1, (1,))}
 
 
@@ -58,13 +60,13 @@ def test_14b_control_range_breaks_alone() -> None:
 
 
 def test_14c_shares_not_summing_to_one_break_alone() -> None:
-    got = flagged(mutate(valid_trace(), 1, eta=np.array([0.5, 0.4])))
+    got = flagged(mutate(valid_trace(), 1, bandwidth_share=np.array([0.5, 0.4])))
     assert got == {("14c", 2, (0, 1))}
 
 
 def test_14d_share_outside_unit_interval_breaks_alone() -> None:
     # sum is still 1; the negative share's rate is not checked (reported under 14d instead)
-    got = flagged(mutate(valid_trace(), 0, eta=np.array([1.25, -0.25])))
+    got = flagged(mutate(valid_trace(), 0, bandwidth_share=np.array([1.25, -0.25])))
     assert got == {("14d", 1, (0,)), ("14d", 1, (1,))}
 
 
@@ -82,25 +84,27 @@ def test_14fg_invalid_bs_index_breaks_alone(bad: int) -> None:
 
 def test_a_vehicle_outside_the_plan_is_exempt_from_14a_and_14fg_only() -> None:
     """BS -1 with share 0 marks a vehicle planned around (link lost): no link to check."""
-    out = mutate(valid_trace(), 0, assoc=np.array([0, -1]), eta=np.array([1.0, 0.0]))
+    out = mutate(valid_trace(), 0, assoc=np.array([0, -1]), bandwidth_share=np.array([1.0, 0.0]))
     assert flagged(out) == set()
     # ... but a share with no BS is still an invalid association,
-    with_share = mutate(valid_trace(), 0, assoc=np.array([0, -1]), eta=np.array([0.5, 0.5]))
+    with_share = mutate(
+        valid_trace(), 0, assoc=np.array([0, -1]), bandwidth_share=np.array([0.5, 0.5])
+    )
     assert flagged(with_share) == {("14f/g", 1, (1,))}
     # and separations still count: move it onto UAV 0.
     close = mutate(
         valid_trace(),
         0,
         assoc=np.array([0, -1]),
-        eta=np.array([1.0, 0.0]),
-        uav_xy=np.array([[400.0, 300.0], [410.0, 300.0]]),
+        bandwidth_share=np.array([1.0, 0.0]),
+        uav_xy_m=np.array([[400.0, 300.0], [410.0, 300.0]]),
     )
     assert ("14i", 1, (0, 1)) in flagged(close)
 
 
 def test_14h_too_fast_breaks_alone() -> None:
     # UAV 0 moves 30 m west in slot 2 (limit 25 m); it stays 80 m from UAV 1
-    got = flagged(mutate(valid_trace(), 1, uav_xy=np.array([[370.0, 300.0], [450.0, 300.0]])))
+    got = flagged(mutate(valid_trace(), 1, uav_xy_m=np.array([[370.0, 300.0], [450.0, 300.0]])))
     assert got == {("14h", 2, (0,))}
 
 
@@ -136,7 +140,7 @@ def test_distance_tolerance_is_tol_m_and_status_is_reported() -> None:
 
 
 def test_non_finite_position_is_a_violation() -> None:
-    trace = mutate(valid_trace(), 1, uav_xy=np.array([[np.nan, 300.0], [450.0, 300.0]]))
+    trace = mutate(valid_trace(), 1, uav_xy_m=np.array([[np.nan, 300.0], [450.0, 300.0]]))
     assert {"14a", "14b", "14h", "14i", "14j"} <= {v.constraint for v in check_constraints(trace)}
 
 
@@ -145,18 +149,18 @@ def test_an_unobserved_position_is_skipped_and_14h_spans_the_gap(status: str) ->
     """A null position in a slot the ground did not plan is not a violation; the next known
     position is held to V_max dt per slot since the last known one (2 slots: 50 m)."""
     trace = valid_trace()
-    gap = replace(trace.slots[1], slot=2, status=status, uav_xy=np.full((2, 2), np.nan))
+    gap = replace(trace.slots[1], slot=2, status=status, uav_xy_m=np.full((2, 2), np.nan))
     # 40 m in the two slots since slot 1: within 2 x 25 m, beyond 25 m
-    third = replace(trace.slots[1], slot=3, uav_xy=np.array([[440.0, 300.0], [500.0, 300.0]]))
+    third = replace(trace.slots[1], slot=3, uav_xy_m=np.array([[440.0, 300.0], [500.0, 300.0]]))
     assert check_constraints(Trace(trace.config, [trace.slots[0], gap, third])) == []
     # 60 m (UAV 0) in those two slots: over 50 m, flagged at slot 3 against slot 1
-    far = replace(third, uav_xy=np.array([[460.0, 300.0], [500.0, 300.0]]))
+    far = replace(third, uav_xy_m=np.array([[460.0, 300.0], [500.0, 300.0]]))
     got = flagged(Trace(trace.config, [trace.slots[0], gap, far]))
     assert got == {("14h", 3, (0,))}
 
 
 def test_a_null_position_in_a_planned_slot_is_still_a_violation() -> None:
-    trace = mutate(valid_trace(), 1, uav_xy=np.array([[np.nan, np.nan], [450.0, 300.0]]))
+    trace = mutate(valid_trace(), 1, uav_xy_m=np.array([[np.nan, np.nan], [450.0, 300.0]]))
     assert {"14b", "14h", "14j"} <= {v.constraint for v in check_constraints(trace)}
 
 
@@ -168,7 +172,7 @@ def test_missing_config_key_is_named() -> None:
 
 
 def test_checker_reads_a_trace_file(tmp_path: Path) -> None:
-    trace = mutate(valid_trace(), 1, eta=np.array([0.5, 0.4]))
+    trace = mutate(valid_trace(), 1, bandwidth_share=np.array([0.5, 0.4]))
     path = tmp_path / "run.jsonl"
     with TraceWriter(path, trace.config) as writer:
         for rec in trace.slots:

@@ -62,8 +62,8 @@ def slot_trace(r_diag: np.ndarray, config: dict[str, Any] | None = None) -> Trac
         slot=1,
         method="proposed",
         status="ok",
-        uav_xy=UAVS,
-        eta=np.full(3, 1 / 3),
+        uav_xy_m=UAVS,
+        bandwidth_share=np.full(3, 1 / 3),
         assoc=np.array([0, 1, 1]),
         target_true=None,
         target_est=X,
@@ -143,8 +143,8 @@ def test_missing_measurement_carries_no_information() -> None:
         slots=[
             replace(
                 slot_trace(np.ones(6)).slots[0],
-                uav_xy=UAVS[[0, 2]],
-                eta=np.array([0.5, 0.5]),
+                uav_xy_m=UAVS[[0, 2]],
+                bandwidth_share=np.array([0.5, 0.5]),
                 assoc=np.array([0, 1]),
                 r_diag=np.array([4.0, 2.0, 0.01, 0.02]),
             )
@@ -171,7 +171,7 @@ def logged_trace(n_slots: int, r: np.ndarray) -> Trace:
             replace(
                 base,
                 slot=n,
-                uav_xy=uav,
+                uav_xy_m=uav,
                 target_pred=x,
                 pcrb_trace=float(np.trace(np.linalg.inv(J))),
                 J=J,

@@ -40,8 +40,8 @@ def make_record(slot: int, **changes: object) -> SlotRecord:
         "slot": slot,
         "method": "proposed",
         "status": "ok",
-        "uav_xy": rng.uniform(0, 3000, size=(M, 2)),
-        "eta": np.array([0.2, 0.3, 0.5]),
+        "uav_xy_m": rng.uniform(0, 3000, size=(M, 2)),
+        "bandwidth_share": np.array([0.2, 0.3, 0.5]),
         "assoc": np.array([0, 1, 1]),
         "target_true": rng.uniform(0, 3000, size=4),
         "target_est": rng.uniform(0, 3000, size=4),
@@ -171,7 +171,9 @@ def test_out_of_order_slot_is_refused_by_writer_and_reader(tmp_path: Path) -> No
 
 
 def test_record_with_other_m_than_config_is_refused(tmp_path: Path) -> None:
-    rec = make_record(1, uav_xy=np.zeros((2, 2)), eta=[0.5, 0.5], assoc=[0, 1], r_diag=np.ones(4))
+    rec = make_record(
+        1, uav_xy_m=np.zeros((2, 2)), bandwidth_share=[0.5, 0.5], assoc=[0, 1], r_diag=np.ones(4)
+    )
     with (
         TraceWriter(tmp_path / "run.jsonl", make_config()) as writer,
         pytest.raises(MessageError, match="config M is 3"),
@@ -182,10 +184,10 @@ def test_record_with_other_m_than_config_is_refused(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        ({"eta": [0.5, 0.5]}, r"eta: expected shape \[3\]"),
+        ({"bandwidth_share": [0.5, 0.5]}, r"eta: expected shape \[3\]"),
         ({"assoc": [0, 1.5, 1]}, r"assoc\[1\]: expected an integer"),
         ({"r_diag": np.ones(3)}, r"r_diag: expected shape \[6\]"),
-        ({"uav_xy": [[1, 2], [3, "x"], [5, 6]]}, r"uav_xy: expected numbers"),
+        ({"uav_xy_m": [[1, 2], [3, "x"], [5, 6]]}, r"uav_xy: expected numbers"),
         ({"extra": {"J": 1}}, r"extra: keys \['J'\] are reserved"),
         ({"status": 3}, r"status: expected a string"),
         ({"pcrb_trace": "1"}, r"pcrb_trace: expected a number or null"),

@@ -61,7 +61,7 @@ def test_steps_and_the_tracking_phase_from_the_positions(paper: Scenario, tmp_pa
     unknown = xy.copy()
     unknown[5, 1] = np.nan  # UAV 1 unknown in slot 6: its steps into and out of slot 6 go
     slots = [
-        dataclasses.replace(r, uav_xy=unknown[i]) if i == 5 else r
+        dataclasses.replace(r, uav_xy_m=unknown[i]) if i == 5 else r
         for i, r in enumerate(trace.slots)
     ]
     part = trace_figures([dataclasses.replace(trace, slots=slots)])

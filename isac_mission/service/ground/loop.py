@@ -226,7 +226,7 @@ class GroundLoop:
             if last is not None:
                 fallback = last
             elif self.report.records:
-                fallback = np.asarray(self.report.records[-1].uav_xy)
+                fallback = np.asarray(self.report.records[-1].uav_xy_m)
             else:
                 fallback = self.s.uav_start_xy
             xy = np.where(np.isfinite(xy), xy, fallback)

@@ -113,7 +113,7 @@ class MissionState:
         state = cls(s, kit, method, Gaussian(np.asarray(last.target_est), np.asarray(last.P)))
         state.bound = Bound.from_information(np.asarray(last.J))
         state.slot = last.slot
-        state.eta = np.asarray(last.eta, dtype=float)
+        state.eta = np.asarray(last.bandwidth_share, dtype=float)
         state.assoc = np.asarray(last.assoc, dtype=np.int64)
         return state
 
@@ -259,8 +259,8 @@ class MissionState:
             slot=det.slot,
             method=self.method,
             status=rep.status,
-            uav_xy=uav_xy,
-            eta=np.asarray(eta_used, dtype=float),
+            uav_xy_m=uav_xy,
+            bandwidth_share=np.asarray(eta_used, dtype=float),
             assoc=assoc,
             target_true=None,
             target_est=self.belief.x,

@@ -171,8 +171,8 @@ def _check_slot(
     P_prev: Array | None = None,
 ) -> list[Violation]:
     n, status = int(rec.slot), str(rec.status)
-    q = np.asarray(rec.uav_xy, dtype=float).reshape(-1, 2)
-    eta = np.asarray(rec.eta, dtype=float).reshape(-1)
+    q = np.asarray(rec.uav_xy_m, dtype=float).reshape(-1, 2)
+    eta = np.asarray(rec.bandwidth_share, dtype=float).reshape(-1)
     assoc = list(np.asarray(rec.assoc).reshape(-1))
     n_uav, n_bs = q.shape[0], lim.bs_xy.shape[0]
     out: list[Violation] = []
@@ -314,7 +314,7 @@ def check_constraints(
     P_prev = None if lim.safety is None else lim.safety.P0
     for rec in tr.slots:
         n = int(rec.slot)
-        q = np.asarray(rec.uav_xy, dtype=float).reshape(-1, 2)
+        q = np.asarray(rec.uav_xy_m, dtype=float).reshape(-1, 2)
         elapsed = np.maximum(1.0, n - prev_slot) if first else n - prev_slot
         out += _check_slot(
             rec, tr.config, lim, prev_xy, elapsed, tol_m, rate_rtol, share_tol, P_prev

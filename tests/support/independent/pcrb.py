@@ -108,7 +108,7 @@ def _recompute(trace: TraceLike) -> list[tuple[PcrbPoint, Array]]:
     out: list[tuple[PcrbPoint, Array]] = []
     for rec in trace.slots:
         x = np.asarray(rec.target_pred, dtype=float).reshape(4)
-        h = jacobian(x, np.asarray(rec.uav_xy, dtype=float))
+        h = jacobian(x, np.asarray(rec.uav_xy_m, dtype=float))
         try:
             c, j = bound_update(c, f, w, h, np.asarray(rec.r_diag, dtype=float))
         except (np.linalg.LinAlgError, ValueError):
