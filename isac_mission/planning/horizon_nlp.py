@@ -38,17 +38,18 @@ from isac_mission.model.vehicle import end_accelerations, hermite_position, velo
 from isac_mission.planning.legs import chord_point_clearance_m
 from isac_mission.planning.margins import (
     MIN_SHARE,
-    RATE_MARGIN,
-    SOLVER_MARGIN_M,
     SafetyMargins,
     sag_m,
 )
 from isac_mission.planning.nlp_model import (
     NlpRows,
     SolveLock,
+    add_clearance_row,
+    add_uav_rows,
     information_terms,
-    relative_rate,
+    predicted_target_point,
     scaled_inverse_sx,
+    straight_leg_point,
 )
 from isac_mission.tracking.pcrb import SensingParams, measurement_information, scaled_inverse
 from isac_mission.types import FloatArray
@@ -170,7 +171,7 @@ class HorizonNLP:
             if self.vehicle_model:
                 leg = hermite_position(q(h - 1, m), v(h - 1, m), q(h, m), v(h, m), dt, frac)
                 return ca.SX(leg)
-            return q(h - 1, m) + frac * (q(h, m) - q(h - 1, m))
+            return straight_leg_point(q(h - 1, m), q(h, m), frac)
 
         def sq(d: ca.SX) -> ca.SX:
             return ca.sumsqr(d) / S**2
@@ -178,9 +179,7 @@ class HorizonNLP:
         rows = NlpRows()
         add = rows.add
 
-        inf = float("inf")
         e = margins.link_m
-        d_ctrl2 = (max(s.d_th - e - SOLVER_MARGIN_M, 0.0) / S) ** 2
         # Between two samples a leg may come closer than at either (docs/model.md, "Safety"):
         # the samples keep the chord's distance, plus the curve's sag off its chord.
         gap_s = dt / K
@@ -199,28 +198,29 @@ class HorizonNLP:
                 qm = q(h, m)
                 em = eta[h * M + m]
                 J = J + information_terms(qm, em, x_l, self._sensing)
-                rate = relative_rate(qm, serving[2 * m : 2 * m + 2], em, s, e)
-                add(rate, RATE_MARGIN, inf)
-                add(sq(qm - control[2 * m : 2 * m + 2]), -inf, d_ctrl2)
+                limits = []
                 if self.vehicle_model:
                     legs = (q(h - 1, m), v(h - 1, m), q(h, m), v(h, m), dt)
-                    for acc in end_accelerations(*legs):
-                        add(ca.sumsqr(acc) / s.a_max**2, -inf, 1.0)
-                    for vc in velocity_control_points(*legs)[1:]:
-                        add(ca.sumsqr(vc) / s.v_max**2, -inf, 1.0)
+                    limits += [ca.sumsqr(acc) / s.a_max**2 for acc in end_accelerations(*legs)]
+                    limits += [
+                        ca.sumsqr(vc) / s.v_max**2 for vc in velocity_control_points(*legs)[1:]
+                    ]
                 # 14h also on the vehicle model: a vehicle faster than V_max now (the live
                 # planner's V_max is 0.9 of the vehicles') would otherwise cover more than
                 # V_max dt in its first slot.
-                add(sq(qm - q(h - 1, m)), -inf, ((S - SOLVER_MARGIN_M) / S) ** 2)
+                step2 = sq(qm - q(h - 1, m))
+                bs = slice(2 * m, 2 * m + 2)
+                add_uav_rows(rows, s, qm, em, serving[bs], control[bs], step2, e, S, limits)
                 for frac in fracs:
-                    p = x_pred[:2] + (h - 1 + frac) * dt * x_pred[2:]
-                    add(sq(along(h, m, frac) - p) - (clearance[h] / S) ** 2, 0.0, inf)
+                    p = predicted_target_point(x_pred, (h - 1 + frac) * dt)
+                    add_clearance_row(rows, along(h, m, frac) - p, (clearance[h] / S) ** 2, S)
                     for k in range(n_keep_out):
-                        add(sq(along(h, m, frac) - keep_out[2 * k : 2 * k + 2]), keep2, inf)
+                        gap = along(h, m, frac) - keep_out[2 * k : 2 * k + 2]
+                        add_clearance_row(rows, gap, keep2, S)
             for i in range(M):
                 for j in range(i + 1, M):
                     for frac in fracs:
-                        add(sq(along(h, i, frac) - along(h, j, frac)), pair2, inf)
+                        add_clearance_row(rows, along(h, i, frac) - along(h, j, frac), pair2, S)
             add(ca.sum1(eta[h * M : (h + 1) * M]), 1.0, 1.0)
             C = scaled_inverse_sx(0.5 * (J + J.T), scale_j[4 * h : 4 * h + 4])
             objective = objective + weights[h] * ca.trace(C)

@@ -6,6 +6,7 @@ numpy objective runs), the constraint rows and their bounds (`NlpRows`, the 14a 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from contextlib import AbstractContextManager
 from typing import Any
 
@@ -14,6 +15,7 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.model.radar import SensingParams
+from isac_mission.planning.margins import RATE_MARGIN, SOLVER_MARGIN_M
 from isac_mission.types import FloatArray
 
 SolveLock = AbstractContextManager[Any]
@@ -90,3 +92,55 @@ def information_terms(q: ca.SX, eta: ca.SX, x_pred: ca.SX, sensing: SensingParam
     b = sensing.velocity_information(d)
     terms: ca.SX = a * (g @ g.T) + b * (k @ k.T)
     return terms
+
+
+def straight_leg_point(q0: ca.SX, q1: ca.SX, tau: float) -> ca.SX:
+    """The point at fraction tau of the straight leg q0 -> q1."""
+    point: ca.SX = tau * q1 + (1.0 - tau) * q0
+    return point
+
+
+def predicted_target_point(x_pred: ca.SX, t_s: float) -> ca.SX:
+    """The constant-velocity target [2] t_s after the instant of its predicted state x_pred [4]."""
+    point: ca.SX = x_pred[:2] + t_s * x_pred[2:]
+    return point
+
+
+def add_uav_rows(
+    rows: NlpRows,
+    s: Scenario,
+    q: ca.SX,
+    eta: ca.SX,
+    serving: ca.SX,
+    control: ca.SX,
+    step2: ca.SX,
+    link_m: float,
+    scale_m: float,
+    leg_limits: Sequence[ca.SX] = (),
+    reach: Sequence[ca.SX] = (),
+) -> None:
+    """One UAV's rows of one slot, distances in units of scale_m: 14a on the serving BS and 14b
+    to the control BS, both link_m farther away (the safety rule's e); `leg_limits` (rows <= 1:
+    the vehicle model's accelerations and velocities); 14h on step2, the slot's squared step in
+    units of scale_m^2; `reach` (rows <= 0: the dynamics disk). Every distance is tightened by
+    SOLVER_MARGIN_M, the rate by RATE_MARGIN (planning/margins.py)."""
+    inf = float("inf")
+    rows.add(relative_rate(q, serving, eta, s, link_m), RATE_MARGIN, inf)
+    control2 = (max(s.d_th - link_m - SOLVER_MARGIN_M, 0.0) / scale_m) ** 2
+    rows.add(ca.sumsqr(q - control) / scale_m**2, -inf, control2)
+    for limit in leg_limits:
+        rows.add(limit, -inf, 1.0)
+    rows.add(step2, -inf, ((scale_m - SOLVER_MARGIN_M) / scale_m) ** 2)
+    for limit in reach:
+        rows.add(limit, -inf, 0.0)
+
+
+def add_clearance_row(rows: NlpRows, gap: ca.SX, clearance2: ca.SX | float, scale_m: float) -> None:
+    """14i/14j at one leg sample: |gap|^2 / scale_m^2 >= clearance2, gap [2] the offset between
+    the two parties there; clearance2 a number (the row's bound), or a parameter (the row is
+    then the difference >= 0)."""
+    d2 = ca.sumsqr(gap) / scale_m**2
+    if isinstance(clearance2, float):
+        rows.add(d2, clearance2, float("inf"))
+    else:
+        rows.add(d2 - clearance2, 0.0, float("inf"))

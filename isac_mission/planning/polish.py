@@ -43,13 +43,20 @@ from isac_mission.model.radar import SensingParams
 from isac_mission.planning.feasibility import SlotConstraints
 from isac_mission.planning.margins import (
     MIN_SHARE,
-    RATE_MARGIN,
     SOLVER_MARGIN_M,
     SafetyMargins,
     leg_samples,
     rule_on,
 )
-from isac_mission.planning.nlp_model import NlpRows, SolveLock, information_terms, relative_rate
+from isac_mission.planning.nlp_model import (
+    NlpRows,
+    SolveLock,
+    add_clearance_row,
+    add_uav_rows,
+    information_terms,
+    predicted_target_point,
+    straight_leg_point,
+)
 from isac_mission.tracking.pcrb import PlanningObjective
 from isac_mission.types import FloatArray
 
@@ -141,53 +148,22 @@ class PolishNLP:
         f_true = ca.dot(scale**2, ca.diag(inv))
         objective = f_true / f_scale
 
-        def sq(v: ca.SX) -> ca.SX:
-            return ca.sumsqr(v) / L**2
-
-        g: list[ca.SX] = []
-        lbg: list[float] = []
-        ubg: list[float] = []
-        big = ca.inf
         self.n_samples = leg_samples(s)
-        if self.safety:
-            g, lbg, ubg = self._safety_constraints(
-                q, z, eta, prev, serving, control, ballistic, accel_r2, keep_out, x_pred, clear2
-            )
-        else:
-            d_safe2 = ((s.d_safe + SOLVER_MARGIN_M) / L) ** 2 if s.d_safe > 0 else 0.0
-            for m in range(M):
-                qm = q[m, :]
-                rate = (
-                    eta[m] * s.B * ca.log1p(s.rho0 / (ca.sumsqr(qm - serving[m, :]) + s.dH**2))
-                ) / (np.log(2.0) * s.r_th) - 1.0
-                g += [rate]
-                lbg += [RATE_MARGIN]
-                ubg += [big]
-                g += [sq(qm - control[m, :])]
-                lbg += [-big]
-                ubg += [(max(s.d_th - SOLVER_MARGIN_M, 0.0) / L) ** 2]
-                g += [ca.sumsqr(z[m, :])]
-                lbg += [-big]
-                ubg += [((L - SOLVER_MARGIN_M) / L) ** 2]
-                g += [sq(qm - x_pred[:2].T)]
-                lbg += [d_safe2]
-                ubg += [big]
-                g += [sq(qm - ballistic[m, :]) - accel_r2]
-                lbg += [-big]
-                ubg += [0.0]
-                for k in range(n_keep_out):
-                    g += [sq(qm - keep_out[k, :])]
-                    lbg += [d_safe2]
-                    ubg += [big]
-            for i in range(M):
-                for j in range(i + 1, M):
-                    g += [sq(q[i, :] - q[j, :])]
-                    lbg += [d_safe2]
-                    ubg += [big]
-
-        g += [ca.sum1(eta)]
-        lbg += [1.0]
-        ubg += [1.0]
+        rows = self._constraints(
+            q,
+            z,
+            eta,
+            prev,
+            serving,
+            control,
+            ballistic,
+            accel_r2,
+            keep_out,
+            x_pred,
+            clear2 if self.safety else None,
+        )
+        rows.add(ca.sum1(eta), 1.0, 1.0)
+        g, lbg, ubg = rows.rows, rows.lower, rows.upper
 
         x = ca.vertcat(ca.reshape(z, 2 * M, 1), eta)
         p = ca.vertcat(*[ca.reshape(v, -1, 1) for v in params])
@@ -207,7 +183,7 @@ class PolishNLP:
         self.hessian = ca.Function("d2f", [x, p], [ca.hessian(f_true, x)[0]])
         self.constraints = ca.Function("g", [x, p], [ca.vertcat(*g)])
 
-    def _safety_constraints(
+    def _constraints(
         self,
         q: ca.SX,
         z: ca.SX,
@@ -219,49 +195,46 @@ class PolishNLP:
         accel_r2: ca.SX,
         keep_out: ca.SX,
         x_pred: ca.SX,
-        clear2: ca.SX,
-    ) -> tuple[list[ca.SX], list[float], list[float]]:
-        """The constraints (g, lbg, ubg) with the safety rule: 14a and 14b at e = link margin
-        farther from the BS, 14j and 14i at every leg sample tau of the straight legs against
-        the constant-velocity target (planning/legs.py), at the distances clear2 (`pack`)."""
+        clear2: ca.SX | None,
+    ) -> NlpRows:
+        """The slot's rows (planning/nlp_model.py): per UAV 14a, 14b, 14h and the dynamics disk,
+        then 14j and 14i to the keep-out points at every leg sample tau of the straight legs
+        against the constant-velocity target, then 14i between UAVs. With the safety rule the
+        distances are the parameters clear2 (`pack`: per sample and row) and 14a/14b hold
+        e = the link margin farther from the BS; without it, D_s at the slot instant."""
         s = self.scenario
         M, L = s.M, self.step_m
         e = SafetyMargins.of(s).link_m
-        big = ca.inf
         fractions = [(i + 1) / self.n_samples for i in range(self.n_samples)]
-
-        def sq(v: ca.SX) -> ca.SX:
-            return ca.sumsqr(v) / L**2
-
-        def at(m: int, tau: float) -> ca.SX:
-            return tau * q[m, :] + (1.0 - tau) * prev[m, :]
-
-        rows = NlpRows()
-        add = rows.add
         K = self.n_keep_out
         per_sample = M * (1 + K) + M * (M - 1) // 2
+        d_safe2 = ((s.d_safe + SOLVER_MARGIN_M) / L) ** 2 if s.d_safe > 0 else 0.0
 
-        def bound(f: int, row: int) -> ca.SX:
-            return clear2[f * per_sample + row]
+        def bound(f: int, row: int) -> ca.SX | float:
+            return d_safe2 if clear2 is None else clear2[f * per_sample + row]
 
+        def at(m: int, tau: float) -> ca.SX:
+            return straight_leg_point(prev[m, :], q[m, :], tau)
+
+        rows = NlpRows()
         for m in range(M):
             qm = q[m, :]
-            add(relative_rate(qm, serving[m, :], eta[m], s, e), RATE_MARGIN, big)
-            add(sq(qm - control[m, :]), -big, (max(s.d_th - e - SOLVER_MARGIN_M, 0.0) / L) ** 2)
-            add(ca.sumsqr(z[m, :]), -big, ((L - SOLVER_MARGIN_M) / L) ** 2)
-            add(sq(qm - ballistic[m, :]) - accel_r2, -big, 0.0)
+            reach = [ca.sumsqr(qm - ballistic[m, :]) / L**2 - accel_r2]
+            step2 = ca.sumsqr(z[m, :])
+            add_uav_rows(rows, s, qm, eta[m], serving[m, :], control[m, :], step2, e, L, (), reach)
             for f, tau in enumerate(fractions):
-                target = x_pred[:2].T - (1.0 - tau) * s.dt * x_pred[2:].T
-                add(sq(at(m, tau) - target) - bound(f, m), 0.0, big)
+                target = predicted_target_point(x_pred, (tau - 1.0) * s.dt).T
+                add_clearance_row(rows, at(m, tau) - target, bound(f, m), L)
                 for k in range(K):
-                    add(sq(at(m, tau) - keep_out[k, :]) - bound(f, M + m * K + k), 0.0, big)
+                    add_clearance_row(rows, at(m, tau) - keep_out[k, :], bound(f, M + m * K + k), L)
         pair = 0
         for i in range(M):
             for j in range(i + 1, M):
                 for f, tau in enumerate(fractions):
-                    add(sq(at(i, tau) - at(j, tau)) - bound(f, M * (1 + K) + pair), 0.0, big)
+                    gap = at(i, tau) - at(j, tau)
+                    add_clearance_row(rows, gap, bound(f, M * (1 + K) + pair), L)
                 pair += 1
-        return rows.rows, rows.lower, rows.upper
+        return rows
 
     def pack(
         self, xy: FloatArray, eta: FloatArray, objective: PlanningObjective, cons: SlotConstraints
