@@ -139,3 +139,37 @@ def test_the_old_field_names_still_work_and_warn(paper: Scenario) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert rec.uav_xy_m.tolist() == [[0.0, 0.0]]
+
+
+def _documented_blocks() -> list[str]:
+    """The python blocks of docs/architecture.md's "Adding a planning method"."""
+    text = (Path(__file__).parents[2] / "docs" / "architecture.md").read_text()
+    section = text.split("### Adding a planning method", 1)[1].split("\n## ", 1)[0]
+    return [block.split("```", 1)[0] for block in section.split("```python\n")[1:]]
+
+
+def test_the_documented_example_method_plans(
+    paper: Scenario, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import types
+
+    from isac_mission.planning import registry
+
+    module_code, registry_line = _documented_blocks()
+    module = types.ModuleType("isac_mission.planning.chase")
+    exec(compile(module_code, "docs/architecture.md", "exec"), module.__dict__)
+    monkeypatch.setitem(__import__("sys").modules, "isac_mission.planning.chase", module)
+    line = next(ln for ln in registry_line.splitlines() if ln.strip().startswith("Registered("))
+    entry = eval(line.strip().rstrip(","), vars(registry))
+    monkeypatch.setattr(registry, "REGISTRY", (*registry.REGISTRY, entry))
+    monkeypatch.setattr(registry, "METHODS", (*registry.METHODS, entry.name))
+    registry.planner.cache_clear()
+    try:
+        kit = SolverKit(paper)
+        kit.warm_up("chase")
+        plan = plan_slot(warm_up_input(kit), kit, "chase")
+    finally:
+        registry.planner.cache_clear()
+    assert plan.report.status in ("ok", "infeasible")
+    step = np.linalg.norm(plan.uav_xy_m - paper.uav_start_xy, axis=1)
+    assert np.all(step <= paper.v_max * paper.dt + 1e-9) and np.all(step > 0)
