@@ -91,15 +91,25 @@ def measure(x: FloatArray, uav_xy: FloatArray) -> FloatArray:
     return np.concatenate([d, v])
 
 
-def measurement_jacobian(x: FloatArray, uav_xy: FloatArray) -> FloatArray:
-    """H [2M, 4] = dh/dx at x [4] (eq. 10): rows d_1..d_M then v_1..v_M."""
+def measurement_directions(
+    x: FloatArray, uav_xy: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(g [M, 4], k [M, 4], d [M]): range and radial-velocity gradients d(d_m)/dx, d(v_m)/dx and
+    the ranges, at target state x [4] seen from uav_xy [M, 2] (the rows of H in eq. 10)."""
     r = x[None, :2] - uav_xy
     d = np.linalg.norm(r, axis=1)
     u = r / d[:, None]
     v_r = u @ x[2:]
     m = uav_xy.shape[0]
-    H = np.zeros((2 * m, 4))
-    H[:m, :2] = u
-    H[m:, :2] = (x[None, 2:] - v_r[:, None] * u) / d[:, None]
-    H[m:, 2:] = u
-    return H
+    g = np.zeros((m, 4))
+    g[:, :2] = u
+    k = np.empty((m, 4))
+    k[:, :2] = (x[None, 2:] - v_r[:, None] * u) / d[:, None]
+    k[:, 2:] = u
+    return g, k, d
+
+
+def measurement_jacobian(x: FloatArray, uav_xy: FloatArray) -> FloatArray:
+    """H [2M, 4] = dh/dx at x [4] (eq. 10): rows d_1..d_M then v_1..v_M."""
+    g, k, _ = measurement_directions(x, uav_xy)
+    return np.vstack([g, k])

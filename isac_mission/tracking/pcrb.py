@@ -15,10 +15,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from isac_mission.model.radar import SensingParams
+from isac_mission.model.radar import SensingParams, measurement_directions
 from isac_mission.types import FloatArray
 
-__all__ = ["Bound", "PlanningObjective", "SensingParams", "scaled_inverse"]
+__all__ = [
+    "Bound",
+    "PlanningObjective",
+    "SensingParams",
+    "measurement_directions",
+    "scaled_inverse",
+]
 
 
 def scaled_inverse(A: FloatArray) -> FloatArray:
@@ -79,24 +85,6 @@ def _trace_inverse(J: FloatArray) -> FloatArray:
 def predict_information(prev: Bound, F: FloatArray, W: FloatArray) -> FloatArray:
     """J_pred [4, 4] = (F J_{n-1}^-1 F^T + W)^-1: the prior information at slot n."""
     return scaled_inverse(F @ prev.C @ F.T + W)
-
-
-def measurement_directions(
-    x: FloatArray, uav_xy: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """(g [M, 4], k [M, 4], d [M]): range and radial-velocity gradients d(d_m)/dx, d(v_m)/dx and
-    the ranges, at target state x [4] seen from uav_xy [M, 2] (the rows of H in eq. 10)."""
-    r = x[None, :2] - uav_xy
-    d = np.linalg.norm(r, axis=1)
-    u = r / d[:, None]
-    v_r = u @ x[2:]
-    m = uav_xy.shape[0]
-    g = np.zeros((m, 4))
-    g[:, :2] = u
-    k = np.empty((m, 4))
-    k[:, :2] = (x[None, 2:] - v_r[:, None] * u) / d[:, None]
-    k[:, 2:] = u
-    return g, k, d
 
 
 def measurement_information(x: FloatArray, uav_xy: FloatArray, r_diag: FloatArray) -> FloatArray:
