@@ -27,7 +27,7 @@ from isac_mission.records import read_trace
 from tests.support.independent.constraints import check_constraints
 from tests.support.live_cli import ROOT, serve_argv, sim_argv, start
 from tests.support.mavproxy import MavProxy
-from tests.support.ports import free_port_block, sitl_ports
+from tests.support.ports import free_port_block, sitl_ports, sitl_ports_and_blocks
 from tests.support.pty_pair import PtyCable
 
 pytestmark = pytest.mark.timeout(600)
@@ -70,8 +70,9 @@ def _check_mission(serve_out: str, out: Path) -> None:
 
 def test_serve_flies_a_mission_through_mavproxy_as_a_router(tmp_path: Path) -> None:
     config = _short_config(tmp_path)
-    ports = sitl_ports(3)  # sim: offboard links to ports.offboard_base + m (nobody there)
-    service_base = free_port_block(3)  # serve: bridge m on service_base + m
+    # sim: offboard links to ports.offboard_base + m (nobody there); serve: bridge m on
+    # service_base + m (a block disjoint from the vehicles' and the router's ports).
+    ports, (service_base,) = sitl_ports_and_blocks(3, (3,))
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
     outs = [f"udp:127.0.0.1:{service_base + m}" for m in range(3)]
     out = tmp_path / "serve"

@@ -11,7 +11,9 @@ binds it, so callers that can retry on `OSError` should.
   uses base + m: MAVLink vehicle ports, ground-station ports).
 - `sitl_ports(n)`: a `SitlPorts`, PX4 SITL's four port families (offboard and ground-station
   destinations, and the vehicles' local ports) on free ports, as `WorldOptions` / `LiveOptions`
-  keyword arguments (`world_kwargs()`) or CLI options (`cli_args()`).
+  keyword arguments (`world_kwargs()`) or CLI options (`cli_args()`);
+  `sitl_ports_and_blocks(n, sizes)` with further blocks none of which overlaps another
+  (`disjoint_port_blocks`).
 - `udp_sinks(n)`: n consecutive UDP ports bound (and so kept) for the duration of a `with` block,
   for a test that must receive what vehicles send to base + m; yields the base.
 """
@@ -167,26 +169,40 @@ class SitlPorts:
         ]
 
 
-def sitl_ports(n: int, tries: int = 50) -> SitlPorts:
-    """Free, non-overlapping UDP ports for a fleet of n vehicles in PX4 SITL's layout (three blocks
-    of n and one single port, all probed bound at once). RuntimeError after `tries` attempts."""
+def disjoint_port_blocks(sizes: tuple[int, ...], tries: int = 50) -> list[int]:
+    """Bases of UDP blocks of the given sizes in BLOCK_PORTS (below the ephemeral range), that
+    do not overlap and were all free at once a moment ago. RuntimeError after `tries` attempts."""
     for _ in range(tries):
-        bases = [free_port_block(n) for _ in range(3)]
+        bases = [free_port_block(n) for n in sizes]
         socks: list[socket.socket] = []
         try:
-            for base in bases:
+            for base, n in zip(bases, sizes, strict=True):
                 for port in range(base, base + n):
                     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
                     socks.append(s)
                     s.bind((LOOPBACK, port))
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            socks.append(s)
-            s.bind((LOOPBACK, 0))
-            gcs = int(s.getsockname()[1])
         except OSError:  # two blocks overlap, or a port was taken meanwhile
             continue
         finally:
             for s in socks:
                 s.close()
-        return SitlPorts(bases[0], bases[1], gcs, bases[2])
-    raise RuntimeError(f"no free SITL port layout for {n} vehicles")
+        return bases
+    raise RuntimeError(f"no {len(sizes)} disjoint free UDP port blocks of sizes {sizes}")
+
+
+def sitl_ports(n: int, tries: int = 50) -> SitlPorts:
+    """Free, non-overlapping UDP ports for a fleet of n vehicles in PX4 SITL's layout (three blocks
+    of n and one single port, all probed bound at once, all below the ephemeral range).
+    RuntimeError after `tries` attempts."""
+    return sitl_ports_and_blocks(n, (), tries)[0]
+
+
+def sitl_ports_and_blocks(
+    n: int, sizes: tuple[int, ...], tries: int = 50
+) -> tuple[SitlPorts, list[int]]:
+    """`sitl_ports(n)` and further blocks of `sizes` (e.g. a service's own bridge ports), none
+    overlapping another."""
+    offboard, offboard_local, gcs_local, gcs, *more = disjoint_port_blocks(
+        (n, n, n, 1, *sizes), tries
+    )
+    return SitlPorts(offboard, offboard_local, gcs, gcs_local), more
