@@ -20,21 +20,25 @@ Run: python bench/polish_solvers.py [--seeds 2] [--slots 20]
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 import warnings
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 from scipy import optimize
 
-from bench.planner import scenario as ring_scenario
-from isac_mission.config import Scenario, load_scenario
-from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
-from isac_mission.planning.feasibility import SlotConstraints, operating_area
-from isac_mission.planning.polish import MIN_SHARE, RATE_MARGIN
-from isac_mission.planning.positions import SOLVER_MARGIN_M
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
-from isac_mission.tracking.pcrb import PlanningObjective
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.planner import scenario as ring_scenario  # noqa: E402
+from isac_mission.config import Scenario, load_scenario  # noqa: E402
+from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs  # noqa: E402
+from isac_mission.planning.feasibility import SlotConstraints, operating_area  # noqa: E402
+from isac_mission.planning.margins import MIN_SHARE, RATE_MARGIN, SOLVER_MARGIN_M  # noqa: E402
+from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot  # noqa: E402
+from isac_mission.tracking.pcrb import PlanningObjective  # noqa: E402
 
 Solve = Callable[[np.ndarray, np.ndarray, PlanningObjective, SlotConstraints], np.ndarray]
 
