@@ -37,6 +37,7 @@ from isac_mission.config import Scenario, load_scenario  # noqa: E402
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs  # noqa: E402
 from isac_mission.planning.feasibility import SlotConstraints, operating_area  # noqa: E402
 from isac_mission.planning.margins import MIN_SHARE, RATE_MARGIN, SOLVER_MARGIN_M  # noqa: E402
+from isac_mission.planning.per_slot import polish_nlp  # noqa: E402
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot  # noqa: E402
 from isac_mission.tracking.pcrb import PlanningObjective  # noqa: E402
 
@@ -207,7 +208,7 @@ def ipopt(kit_of: dict[int, SolverKit]) -> Solve:
     def solve(
         xy0: np.ndarray, eta0: np.ndarray, obj: PlanningObjective, cons: SlotConstraints
     ) -> np.ndarray:
-        nlp = kit_of[cons.scenario.M].polish
+        nlp = polish_nlp(kit_of[cons.scenario.M])
         r = nlp.polish(xy0, eta0, obj, cons)
         return np.concatenate([r.uav_xy_m.ravel(), r.bandwidth_share])
 
