@@ -26,7 +26,7 @@ from isac_mission.planning.legs import (
     target_leg_points,
     uav_leg_points,
 )
-from isac_mission.planning.margins import SafetyMargins, leg_samples, rule_on
+from isac_mission.planning.margins import SafetyMargins, hermite_bulge_m, leg_samples, rule_on
 from isac_mission.types import BoolArray, FloatArray, IntArray
 
 
@@ -106,7 +106,7 @@ class SlotConstraints:
         h = s.dt / n
         bulge = 0.0
         if s.planner.vehicle_model and self.start_velocity_mps is not None:
-            bulge = s.a_max * (s.dt**2 / 27 + h**2 / 8)
+            bulge = hermite_bulge_m(s.a_max, s.dt, h)
         v_t = self.target_velocity_mps
         speed_t = 0.0 if v_t is None else float(np.linalg.norm(v_t))
         prev = self.prev_xy

@@ -20,7 +20,8 @@ The numerical margins, so that a solver's answer within its own tolerance passes
 (planning/feasibility.py) unchanged: SOLVER_MARGIN_M (distances in the convex subproblem and the
 NLPs), RATE_MARGIN (14a in the NLPs), MIN_SHARE (shares off 0 in the NLPs), SHARE_MARGIN (the
 bandwidth subproblem's floor), LEG_LIMIT_TOLERANCE (the horizon's leg limits). The chord and sag
-margins between leg samples are `chord_point_clearance_m` (planning/legs.py) plus `sag_m`.
+margins between leg samples are `chord_point_clearance_m` (planning/legs.py) plus `sag_m`, and
+a Hermite leg's bulge off its straight plan `hermite_bulge_m`.
 
 Pure: numpy only.
 """
@@ -55,6 +56,13 @@ SHARE_MARGIN = 1e-9
 LEG_LIMIT_TOLERANCE = 1e-6
 """Relative slack of the horizon's exact leg checks against a_max and V_max (IPOPT's constraint
 tolerance is 1e-8)."""
+
+
+def hermite_bulge_m(a_max_mps2: float, dt_s: float, gap_s: float) -> float:
+    """How much farther (m) the SCA subproblem and the polish keep a vehicle whose leg is the
+    vehicle model's Hermite curve rather than the straight leg they plan: its bulge off the
+    straight leg, at most (4/27) a_max dt^2 / 4, and the sagitta between samples gap_s apart."""
+    return a_max_mps2 * (dt_s**2 / 27 + gap_s**2 / 8)
 
 
 def sag_m(a_max_mps2: float, gap_s: float) -> float:
