@@ -95,9 +95,10 @@ def information_terms(q: ca.SX, eta: ca.SX, x_pred: ca.SX, sensing: SensingParam
 
 
 def straight_leg_point(q0: ca.SX, q1: ca.SX, tau: float) -> ca.SX:
-    """The point at fraction tau of the straight leg q0 -> q1 (the exact check's formula,
-    planning/legs.uav_leg_points)."""
-    point: ca.SX = q0 + tau * (q1 - q0)
+    """The point at fraction tau of the straight leg q0 -> q1, in the polish's form (the
+    horizon's former q0 + tau (q1 - q0) differs by round-off; which path moved is measured in
+    docs/model.md, "The polish")."""
+    point: ca.SX = tau * q1 + (1.0 - tau) * q0
     return point
 
 
