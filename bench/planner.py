@@ -31,7 +31,7 @@ one run. --methods-only times just those cells (no solver, reference or polish c
 
 Run: python bench/planner.py [--slots 20] [--slots-24 6] [--quick] [--methods proposed,horizon]
      python bench/planner.py --methods-only [--methods ...]   (the per-method table alone)
-     python bench/planner.py --compare-tree DIR [--rounds 3]   (before/after, docs/performance.md)
+     python bench/planner.py --compare-tree DIR [--rounds 3] [--methods ...]   (before/after)
      python bench/planner.py --profile M                       (cProfile of the proposed method)
 """
 
@@ -155,26 +155,33 @@ from isac_mission.config import parse_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
 from isac_mission.planning.slot import SolverKit
 m, k, n_a, slots = map(int, sys.argv[1:5])
+method = sys.argv[5]
 angles = np.linspace(0, 2 * np.pi, m, endpoint=False) + 0.3
 start = 1500 + 700 * np.stack([np.cos(angles), np.sin(angles)], axis=1)
 s = parse_scenario({"timing": {"duration_s": slots, "slot_s": 1.0},
                     "radio": {"bs_capacity": n_a}, "base_stations": {"count": k},
                     "uavs": {"start_xy_m": start.round(1).tolist()}}, "bench")
 kit = SolverKit(s)
-kit.warm_up()
-print(json.dumps(run_closed_loop(s, "proposed", draw_run_noise(s, 100), kit).solve_s.tolist()))
+kit.warm_up(method)
+print(json.dumps(run_closed_loop(s, method, draw_run_noise(s, 100), kit).solve_s.tolist()))
 """
 
 
-def compare_trees(old_tree: str, rounds: int, slots: int, slots_24: int) -> None:
-    """Proposed method, M = 3 and 24: the package in old_tree against this tree, interleaved in
-    subprocesses (old, new, old, new, ...) so that both see the same machine load."""
+def compare_trees(
+    old_tree: str, rounds: int, slots: int, slots_24: int, methods: tuple[str, ...] = ("proposed",)
+) -> None:
+    """Each method at M = 3, and `proposed` also at M = 24: the package in old_tree against this
+    tree, interleaved in subprocesses (old, new, old, new, ...) so that both see the same load."""
     new_tree = str(Path(__file__).resolve().parent.parent)
     print(f"before = {old_tree}, after = {new_tree}; {rounds} interleaved rounds")
     print(
-        f"{'M':>3} {'slots':>5} {'before ms':>9} {'p95':>7} {'after ms':>9} {'p95':>7} {'speed-up':>8}"
+        f"{'method':>9} {'M':>3} {'slots':>5} {'before ms':>9} {'p95':>7} {'after ms':>9} "
+        f"{'p95':>7} {'speed-up':>8}"
     )
-    for m, k in (SIZES[0], SIZES[-1]):
+    cells = [(method, SIZES[0]) for method in methods]
+    if "proposed" in methods:
+        cells.append(("proposed", SIZES[-1]))
+    for method, (m, k) in cells:
         n = slots_24 if m >= 24 else slots
         times: dict[str, list[float]] = {old_tree: [], new_tree: []}
         for _ in range(rounds):
@@ -188,6 +195,7 @@ def compare_trees(old_tree: str, rounds: int, slots: int, slots_24: int) -> None
                         str(k),
                         str(math.ceil(m / k) + 1),
                         str(n),
+                        method,
                     ],
                     cwd=tree,
                     env={**os.environ, "PYTHONPATH": tree},
@@ -198,7 +206,8 @@ def compare_trees(old_tree: str, rounds: int, slots: int, slots_24: int) -> None
                 times[tree] += json.loads(out.stdout.strip().splitlines()[-1])
         before, after = (np.array(times[old_tree]) * 1e3, np.array(times[new_tree]) * 1e3)
         print(
-            f"{m:>3} {len(after):>5} {np.median(before):>9.1f} {np.percentile(before, 95):>7.1f} "
+            f"{method:>9} {m:>3} {len(after):>5} {np.median(before):>9.1f} "
+            f"{np.percentile(before, 95):>7.1f} "
             f"{np.median(after):>9.1f} {np.percentile(after, 95):>7.1f} "
             f"{np.median(before) / np.median(after):>8.2f}"
         )
@@ -281,7 +290,11 @@ def main() -> None:
         return
     if args.compare_tree:
         compare_trees(
-            str(Path(args.compare_tree).resolve()), args.rounds, args.slots, args.slots_24
+            str(Path(args.compare_tree).resolve()),
+            args.rounds,
+            args.slots,
+            args.slots_24,
+            tuple(parse_methods(args.methods)) if args.methods else ("proposed",),
         )
         return
     methods = parse_methods(args.methods)
