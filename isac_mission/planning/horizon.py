@@ -116,28 +116,27 @@ def _shifted(
 
 def horizon_slot_data(
     s: Scenario,
-    prev_xy: FloatArray,
-    prev_velocity: FloatArray,
-    keep_out_xy: FloatArray | None,
-    x_pred: FloatArray,
-    J_pred: FloatArray,
+    inp: SlotInput,
+    start_velocity_mps: FloatArray,
     target_cov_pred: FloatArray,
     base: SlotPlan,
     length: int,
 ) -> HorizonSlotData:
     """The horizon NLP's data for this slot: the per-slot plan's association kept (serving BS),
-    the BS nearest its waypoints as the control BS (14b), the clearances along the horizon."""
+    the BS nearest its waypoints as the control BS (14b), the clearances along the horizon;
+    start_velocity_mps [M, 2]: what the first legs start with (`planned_start_velocity`)."""
     nearest = np.argmin(np.linalg.norm(base.uav_xy_m[:, None, :] - s.bs_xy[None], axis=-1), axis=1)
+    keep_out, x_pred = inp.keep_out_xy_m, inp.target_state_pred
     return HorizonSlotData(
-        prev_xy=np.asarray(prev_xy, dtype=float),
-        prev_velocity=np.asarray(prev_velocity, dtype=float)
+        prev_xy=np.asarray(inp.prev_xy_m, dtype=float),
+        prev_velocity=np.asarray(start_velocity_mps, dtype=float)
         if s.planner.vehicle_model
         else np.zeros((s.M, 2)),
         serving_xy=s.bs_xy[base.bs_of_uav],
         control_xy=s.bs_xy[nearest],
-        keep_out_xy=np.zeros((0, 2)) if keep_out_xy is None else np.asarray(keep_out_xy),
+        keep_out_xy=np.zeros((0, 2)) if keep_out is None else np.asarray(keep_out),
         x_pred=np.asarray(x_pred, dtype=float),
-        J_pred=np.asarray(J_pred, dtype=float),
+        J_pred=np.asarray(inp.prior_information, dtype=float),
         clearance_m=sample_clearances(s, predicted_clearances(s, target_cov_pred, length), x_pred),
     )
 
@@ -201,28 +200,21 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
     started (for solve_s)."""
     nlp = horizon_nlp(kit)
     sensing = kit.sensing
-    inp_prev_xy = inp.prev_xy_m
-    inp_prev_velocity = inp.prev_velocity_mps
-    inp_keep_out = inp.keep_out_xy_m
-    x_pred = inp.target_state_pred
-    J_pred = inp.prior_information
+    x_pred, J_pred, prev_plan = inp.target_state_pred, inp.prior_information, inp.prev_plan
     cov = inp.target_cov_pred
     target_cov_pred = scaled_inverse(J_pred) if cov is None else cov
-    prev_plan = inp.prev_plan
-    t0 = started_s
     s = nlp.scenario
     M, L, dt = s.M, nlp.length, s.dt
-    prev_v = np.zeros((M, 2)) if inp_prev_velocity is None else np.asarray(inp_prev_velocity)
-    prev_v = planned_start_velocity(s, inp_prev_xy, prev_v, prev_plan)
+    v = inp.prev_velocity_mps
+    prev_v = np.zeros((M, 2)) if v is None else np.asarray(v)
+    prev_v = planned_start_velocity(s, inp.prev_xy_m, prev_v, prev_plan)
 
     def fall_back(why: str, kind: str) -> SlotPlan:
-        return per_slot_instead(base, "horizon", why, kind, time.perf_counter() - t0)
+        return per_slot_instead(base, "horizon", why, kind, time.perf_counter() - started_s)
 
     if base.report.status != "ok":
         return fall_back("the per-slot plan is infeasible", "per-slot plan infeasible")
-    data = horizon_slot_data(
-        s, inp_prev_xy, prev_v, inp_keep_out, x_pred, J_pred, target_cov_pred, base, L
-    )
+    data = horizon_slot_data(s, inp, prev_v, target_cov_pred, base, L)
     serving = data.serving_xy
     v1 = (
         base.uav_velocity_mps
@@ -271,7 +263,7 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
         s.bs_xy,
         data.x_pred[:2],
         s,
-        keep_out_xy=inp_keep_out,
+        keep_out_xy=inp.keep_out_xy_m,
         target_clearance_m=float(predicted_clearances(s, target_cov_pred, 1)[0]),
         target_velocity_mps=data.x_pred[2:4],
     )
@@ -287,7 +279,7 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
     report = replace(
         base.report,
         reason="",
-        solve_s=time.perf_counter() - t0,
+        solve_s=time.perf_counter() - started_s,
         polish=f"horizon: {note}, objective {start_value:.6g} -> {float(weights @ traces):.6g}",
         objective_history=(*base.report.objective_history, float(traces[0])),
     )

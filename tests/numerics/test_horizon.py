@@ -154,17 +154,8 @@ def test_horizon_plans_carry_their_horizon_and_beat_the_per_slot_start() -> None
         cfg = s.planner.horizon
         w = horizon_weights(L, cfg.discount, cfg.terminal_weight)
         assert inp.target_cov_pred is not None
-        data = horizon_slot_data(
-            s,
-            inp.prev_xy_m,
-            np.zeros((s.M, 2)),
-            None,
-            inp.target_state_pred,
-            inp.prior_information,
-            inp.target_cov_pred,
-            base,
-            L,
-        )
+        assert inp.keep_out_xy_m is None
+        data = horizon_slot_data(s, inp, np.zeros((s.M, 2)), inp.target_cov_pred, base, L)
         if horizon_nlp(kit).satisfies(cont, None, eta, data):
             compared += 1
             start = w @ horizon_bound_traces(
