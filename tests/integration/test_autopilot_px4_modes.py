@@ -174,10 +174,13 @@ def test_vfr_hud_matches_the_position_telemetry(fly) -> None:
         20.0,
         "steady velocity",
     )
+    # Messages sent while accelerating may still sit in the socket buffer: anchor on a
+    # GLOBAL_POSITION_INT stamped after the steady state, then take a VFR_HUD sent after it
+    # (one socket, in order, so every VFR_HUD queued before that GPI is dropped).
+    steady_ms = ap.state.time_s * 1000.0
+    gpi = client.recv("GLOBAL_POSITION_INT", lambda m: m.time_boot_ms >= steady_ms)
     client.clear("VFR_HUD")
-    client.clear("GLOBAL_POSITION_INT")
     hud = client.recv("VFR_HUD")
-    gpi = client.recv("GLOBAL_POSITION_INT")
     assert hud.groundspeed == pytest.approx(5.0, abs=0.05)
     assert hud.airspeed == pytest.approx(hud.groundspeed)
     assert hud.climb == pytest.approx(1.0, abs=0.05)
