@@ -18,9 +18,16 @@ with w_l = discount^(l-1) (times terminal_weight on the last slot). The derivati
 positions and velocities, the serving and control BSs, the keep-out points, the predicted state,
 the prior information, the clearances c_l and the objective's scale.
 
-Scaling: q_lm = q_m,n-1 + S z_lm with S = V_max dt; v_lm = V_max u_lm; every J is Jacobi-scaled
-symbolically before it is inverted; the objective is divided by its value at the start point.
-Distances are constrained squared in units of S^2, tightened by SOLVER_MARGIN_M.
+Lifted: what IPOPT solves has, per horizon slot l, the scaled covariance Ct_l and (but on the last
+slot) the scaled next prior information Jh_l as variables, with the bilinear equalities
+(D_l J_l D_l) Ct_l = I and (E_l P_l+1 E_l) Jh_l = I, P_l+1 = F D_l Ct_l D_l F^T + W, J_l+1 built
+on E_l Jh_l E_l, and the objective sum_l w_l tr(D_l Ct_l D_l): the same problem, whose Hessian
+is sparse (docs/model.md, "Receding horizon"). `objective` and `gradient` are the eliminated form.
+
+Scaling: q_lm = q_m,n-1 + S z_lm with S = V_max dt; v_lm = V_max u_lm; D_l = diag(1 / sqrt(diag
+J_l)) and E_l = diag(1 / sqrt(diag P_l+1)) taken at the start point (parameters); the objective
+is divided by its value at the start point. Distances are constrained squared in units of S^2,
+tightened by SOLVER_MARGIN_M.
 """
 
 from __future__ import annotations
@@ -189,15 +196,28 @@ class HorizonNLP:
         pair2 = ((float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag) / S) ** 2
         fracs = [(k + 1) / K for k in range(K)]
         weights = horizon_weights(L, cfg.discount, cfg.terminal_weight)
+        # The bound's recursion lifted (docs/model.md, "Receding horizon"): per slot h the
+        # scaled covariance Ct_h = (D_h J_h D_h)^-1 and, but on the last, the scaled prior
+        # information Jh_h = (E_h P_h+1 E_h)^-1 are variables, tied by the bilinear equalities
+        # (D J D) Ct = I and (E P E) Jh = I. Eliminated, every tr(C_l) depends on all earlier
+        # slots through nested inverses: a dense Hessian that took 60 % of IPOPT's time and
+        # most of the build; lifted, each row couples one slot's UAVs with 32 numbers.
+        lift = ca.SX.sym("lift", 16 * (2 * L - 1))
+        n_lift = int(lift.numel())
+        eye4 = ca.DM.eye(4)
+        lifted_rows: list[ca.SX] = []
+        lifted_objective = ca.SX(0.0)
         objective = ca.SX(0.0)
         J_prior = j_pred
+        J_prior_lifted = j_pred
         for h in range(L):
             x_l = ca.mtimes(ca.DM(np.linalg.matrix_power(F, h)), x_pred)
             J = J_prior
+            J_info = ca.SX.zeros(4, 4)
             for m in range(M):
                 qm = q(h, m)
                 em = eta[h * M + m]
-                J = J + information_terms(qm, em, x_l, self._sensing)
+                J_info = J_info + information_terms(qm, em, x_l, self._sensing)
                 limits = []
                 if self.vehicle_model:
                     legs = (q(h - 1, m), v(h - 1, m), q(h, m), v(h, m), dt)
@@ -222,18 +242,44 @@ class HorizonNLP:
                     for frac in fracs:
                         add_clearance_row(rows, along(h, i, frac) - along(h, j, frac), pair2, S)
             add(ca.sum1(eta[h * M : (h + 1) * M]), 1.0, 1.0)
-            C = scaled_inverse_sx(0.5 * (J + J.T), scale_j[4 * h : 4 * h + 4])
+            J = J + J_info
+            dj, dp = scale_j[4 * h : 4 * h + 4], scale_p[4 * h : 4 * h + 4]
+            C = scaled_inverse_sx(0.5 * (J + J.T), dj)
             objective = objective + weights[h] * ca.trace(C)
+            Ct = ca.reshape(lift[16 * h : 16 * h + 16], 4, 4)
+            J_lifted = J_prior_lifted + J_info
+            D = ca.diag(dj)
+            lifted_rows.append(ca.vec(ca.mtimes(ca.mtimes(ca.mtimes(D, J_lifted), D), Ct) - eye4))
+            lifted_objective = lifted_objective + weights[h] * ca.dot(dj**2, ca.diag(Ct))
             if h + 1 < L:
                 P = ca.mtimes(ca.mtimes(ca.DM(F), C), ca.DM(F.T)) + ca.DM(W)
-                J_prior = scaled_inverse_sx(0.5 * (P + P.T), scale_p[4 * h : 4 * h + 4])
+                J_prior = scaled_inverse_sx(0.5 * (P + P.T), dp)
+                E = ca.diag(dp)
+                C_lifted = ca.mtimes(ca.mtimes(D, Ct), D)
+                P_lifted = ca.mtimes(ca.mtimes(ca.DM(F), C_lifted), ca.DM(F.T)) + ca.DM(W)
+                off = 16 * (L + h)
+                Jh = ca.reshape(lift[off : off + 16], 4, 4)
+                lifted_rows.append(
+                    ca.vec(ca.mtimes(ca.mtimes(ca.mtimes(E, P_lifted), E), Jh) - eye4)
+                )
+                J_prior_lifted = ca.mtimes(ca.mtimes(E, Jh), E)
 
         x = ca.vertcat(z, u, eta)
         p = ca.vertcat(*params)
         self.n_x = int(x.numel())
+        self.n_lift = n_lift
         self._lbg, self._ubg = rows.bounds()
         g = ca.vertcat(*rows.rows)
-        nlp = {"x": x, "p": p, "f": objective / f_scale, "g": g}
+        g_lifted = ca.vertcat(*lifted_rows)
+        n_eq = int(g_lifted.numel())
+        self._solver_lbg = np.concatenate([self._lbg, np.zeros(n_eq)])
+        self._solver_ubg = np.concatenate([self._ubg, np.zeros(n_eq)])
+        nlp = {
+            "x": ca.vertcat(x, lift),
+            "p": p,
+            "f": lifted_objective / f_scale,
+            "g": ca.vertcat(g, g_lifted),
+        }
         opts: dict[str, Any] = {
             "print_time": False,
             "ipopt": {**IPOPT_OPTIONS, "max_iter": cfg.max_iterations},
@@ -245,6 +291,10 @@ class HorizonNLP:
         self.objective = ca.Function("f", [x, p], [objective])
         self.gradient = ca.Function("df", [x, p], [ca.gradient(objective, x)])
         self.constraints = ca.Function("g", [x, p], [g])
+        # The lifted objective and equalities (the solver's, before the division by f_scale).
+        self.lifted_problem = ca.Function(
+            "lifted", [x, lift, p], [lifted_objective, g_lifted], ["x", "lift", "p"], ["f", "g"]
+        )
 
     @property
     def lbg(self) -> FloatArray:
@@ -281,7 +331,7 @@ class HorizonNLP:
             data.x_pred,
             np.asarray(data.J_pred, dtype=float).reshape(-1, order="F"),
             data.clearance_m,
-            *self._scales(np.asarray(xy, dtype=float), np.asarray(eta, dtype=float), data),
+            *self._along(np.asarray(xy, dtype=float), np.asarray(eta, dtype=float), data)[:2],
             np.array([f_scale]),
         ]
         p = np.concatenate([np.asarray(val, dtype=float).reshape(-1) for val in values])
@@ -289,28 +339,54 @@ class HorizonNLP:
             raise ValueError(f"{len(p)} parameters, the NLP has {sum(self._param_sizes)}")
         return x, p
 
-    def _scales(
-        self, xy: FloatArray, eta: FloatArray, data: HorizonSlotData
-    ) -> tuple[FloatArray, FloatArray]:
-        """(scale_j [4 L], scale_p [4 L]): 1 / sqrt of the diagonals of J_l and of the next
-        slot's predicted covariance along the plan (xy [L, M, 2], eta [L, M]); the last scale_p
-        is unused (ones)."""
+    def _along(
+        self,
+        xy: FloatArray,
+        eta: FloatArray,
+        data: HorizonSlotData,
+        scales: tuple[FloatArray, FloatArray] | None = None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The bound's recursion along the plan (xy [L, M, 2], eta [L, M]): (scale_j [4 L],
+        scale_p [4 L], lift [16 (2 L - 1)]). The scales are 1 / sqrt of the diagonals of J_l and
+        of the next slot's predicted covariance P_l+1 (the last scale_p unused: ones), or the
+        given ones; lift the lifted variables there in those scales, (D_l J_l D_l)^-1 then
+        (E_l P_l+1 E_l)^-1, each column-major."""
         s = self.scenario
         F = transition_matrix(s.dt)
         W = process_noise(s.dt, s.kappa)
         x = np.asarray(data.x_pred, dtype=float)
         prior = np.asarray(data.J_pred, dtype=float)
-        scale_j, scale_p = np.ones((self.length, 4)), np.ones((self.length, 4))
-        for h in range(self.length):
+        L = self.length
+        scale_j, scale_p = np.ones((L, 4)), np.ones((L, 4))
+        if scales is not None:
+            scale_j, scale_p = scales[0].reshape(L, 4), scales[1].reshape(L, 4)
+        covariances, priors = [], []
+        for h in range(L):
             d = np.linalg.norm(x[None, :2] - xy[h], axis=1)
             J = prior + measurement_information(x, xy[h], self._sensing.variances(d, eta[h]))
-            scale_j[h] = 1.0 / np.sqrt(np.maximum(np.diag(J), 1e-300))
-            if h + 1 < self.length:
+            if scales is None:
+                scale_j[h] = 1.0 / np.sqrt(np.maximum(np.diag(J), 1e-300))
+            covariances.append(np.linalg.inv(scale_j[h][:, None] * J * scale_j[h][None]))
+            if h + 1 < L:
                 P = F @ scaled_inverse(0.5 * (J + J.T)) @ F.T + W
-                scale_p[h] = 1.0 / np.sqrt(np.diag(P))
+                if scales is None:
+                    scale_p[h] = 1.0 / np.sqrt(np.diag(P))
+                priors.append(np.linalg.inv(scale_p[h][:, None] * P * scale_p[h][None]))
                 prior = scaled_inverse(0.5 * (P + P.T))
             x = F @ x
-        return scale_j.reshape(-1), scale_p.reshape(-1)
+        lift = np.concatenate([m.reshape(-1, order="F") for m in (*covariances, *priors)])
+        return scale_j.reshape(-1), scale_p.reshape(-1), lift
+
+    def lifted(
+        self, xy: FloatArray, eta: FloatArray, data: HorizonSlotData, p: FloatArray
+    ) -> FloatArray:
+        """The lifted variables [16 (2 L - 1)] of the plan (xy [L, M, 2], eta [L, M]) in the
+        scales of the parameters p (from `pack`)."""
+        sizes = np.cumsum([0, *self._param_sizes])
+        n_scale_j = len(self._param_sizes) - 3  # ..., scale_j, scale_p, f_scale
+        scale_j = p[sizes[n_scale_j] : sizes[n_scale_j + 1]]
+        scale_p = p[sizes[n_scale_j + 1] : sizes[n_scale_j + 2]]
+        return self._along(xy, eta, data, (scale_j, scale_p))[2]
 
     def unpack(
         self, x: FloatArray, data: HorizonSlotData
@@ -379,10 +455,21 @@ class HorizonNLP:
         x0, p = self.pack(xy0, velocity0, eta0, data, f0 if np.isfinite(f0) and f0 > 0 else 1.0)
         lbx, ubx = self.bounds(data)
         x0 = np.clip(x0, lbx, ubx)
+        xy0, _, eta0 = self.unpack(x0, data)
+        lift0 = self.lifted(xy0, eta0, data, p)
+        free = np.full(self.n_lift, np.inf)
         with self.lock:
-            sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg)
+            sol = self.solver(
+                x0=np.concatenate([x0, lift0]),
+                p=p,
+                lbx=np.concatenate([lbx, -free]),
+                ubx=np.concatenate([ubx, free]),
+                lbg=self._solver_lbg,
+                ubg=self._solver_ubg,
+            )
             stats = self.solver.stats()
-        xy, velocity, eta = self.unpack(np.asarray(sol["x"], dtype=float).ravel(), data)
+        x_opt = np.asarray(sol["x"], dtype=float).ravel()[: self.n_x]
+        xy, velocity, eta = self.unpack(x_opt, data)
         eta = np.maximum(eta, 0.0)
         eta = eta / eta.sum(axis=1, keepdims=True)
         return HorizonSolution(

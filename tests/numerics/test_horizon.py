@@ -120,6 +120,48 @@ def test_horizon_objective_is_the_bound_recursion_recomputed_independently() -> 
     np.testing.assert_allclose(ours, traces, rtol=1e-8)
 
 
+@pytest.mark.parametrize("vehicle_model", [False, True])
+def test_the_lifted_recursion_is_the_bound_at_the_start_and_at_the_answer(
+    vehicle_model: bool,
+) -> None:
+    s = _scenario()
+    if vehicle_model:
+        s = _vehicle(s)
+    L = s.planner.horizon.length
+    nlp = horizon_nlp(SolverKit(s))
+    inp = _inputs(s, "proposed")[12]
+    data = _data(s, inp, L)
+    xy, velocity, eta = _random_horizon(s, inp, L, np.random.default_rng(11))
+    velocity_or_none = velocity if vehicle_model else None
+    x, p = nlp.pack(xy, velocity_or_none, eta, data)
+    lift = nlp.lifted(xy, eta, data, p)
+    out = nlp.lifted_problem(x=x, lift=lift, p=p)
+    # At the start the lifted equalities hold and the lifted objective is the eliminated one,
+    # and the independently recomputed bound (the numpy recursion).
+    assert np.max(np.abs(np.asarray(out["g"]))) < 1e-9
+    sensing = SensingParams.from_scenario(s)
+    traces = horizon_bound_traces(s, inp.prior_information, inp.target_state_pred, xy, eta, sensing)
+    w = horizon_weights(L, s.planner.horizon.discount, s.planner.horizon.terminal_weight)
+    assert float(out["f"]) == pytest.approx(float(nlp.objective(x, p)), rel=1e-10)
+    assert float(out["f"]) == pytest.approx(float(w @ traces), rel=1e-8)
+    # A lift off the recursion breaks the equalities (the rows can fail).
+    assert np.max(np.abs(np.asarray(nlp.lifted_problem(x, 1.01 * lift, p)[1]))) > 1e-3
+    # Minimising the lifted form lowers the bound itself (recomputed on the answer's plan), from
+    # a feasible start: hovering where they are, from rest, equal shares.
+    hover = replace(data, prev_velocity=np.zeros((s.M, 2)))
+    xy0 = np.repeat(inp.prev_xy_m[None], L, axis=0)
+    v0 = np.zeros((L, s.M, 2)) if vehicle_model else None
+    eta0 = np.full((L, s.M), 1.0 / s.M)
+    assert nlp.satisfies(xy0, v0, eta0, hover)
+    sol = nlp.solve(xy0, v0, eta0, hover)
+    assert sol.success
+    start, answer = (
+        w @ horizon_bound_traces(s, inp.prior_information, inp.target_state_pred, q, e, sensing)
+        for q, e in ((xy0, eta0), (sol.uav_xy_m, sol.bandwidth_share))
+    )
+    assert answer < 0.99 * start
+
+
 def test_every_horizon_plan_of_a_simulate_trace_passes_the_independent_check(
     tmp_path: Path,
 ) -> None:

@@ -1,0 +1,186 @@
+"""The receding horizon beside `proposed` on fleets of M = 3 .. 48 UAVs (docs/performance.md,
+"The receding horizon at fleet scale").
+
+Fleet of M: the UAVs on a jittered grid over the area (jitter +-60 m, seeded by M), K = max(5,
+M // 2) random BSs, N_a = ceil(M / K) + 1, the paper's bandwidth per UAV (B = 20 MHz x M / 3),
+planned with the live settings (vehicle model on). Each cell is one closed-loop mission per
+method and seed (the same noise for both methods), run in a subprocess of its own.
+
+Per M and method: build (SolverKit.warm_up, cold: there is no disk cache), median and p95 of the
+plan time (report.solve_s), and for `horizon` IPOPT's iterations (median, max) and the slots
+converged (its answer flown), at the iteration cap (the per-slot plan flown instead) and fallen
+back for another reason; the mission-mean tr(PCRB) of each method's own closed loop and their
+ratio. With --compare-tree the package in DIR runs the same cells, interleaved with this tree's
+(old, new per seed), so both see the same load.
+
+Run: python bench/horizon_fleet.py [--sizes 3,6,12] [--slots 60] [--seeds 1,2,3]
+     python bench/horizon_fleet.py --compare-tree DIR [...]   (before/after in one run)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+METHODS = ("proposed", "horizon")
+
+
+def fleet_scenario(m: int, slots: int):  # type: ignore[no-untyped-def]
+    """The live planning scenario of a fleet of m UAVs (module docstring)."""
+    from isac_mission.config import parse_scenario
+    from isac_mission.config.live_settings import LiveSettings
+
+    k = max(5, m // 2)
+    rng = np.random.default_rng(1000 + m)
+    n = math.ceil(math.sqrt(m))
+    grid = (np.arange(n) + 0.5) / n
+    cells = np.array([(x, y) for y in grid for x in grid])[:m]
+    start = 300 + 2400 * cells + rng.uniform(-60, 60, size=(m, 2))
+    s = parse_scenario(
+        {
+            "timing": {"duration_s": slots, "slot_s": 1.0},
+            "radio": {"bs_capacity": math.ceil(m / k) + 1, "bandwidth_hz": 20e6 * m / 3},
+            "base_stations": {"count": k},
+            "uavs": {"start_xy_m": start.round(1).tolist()},
+            "planner": {"polish": True},
+        },
+        f"fleet M={m}",
+    )
+    return LiveSettings().apply(s)
+
+
+def run_cell(m: int, slots: int, seed: int) -> dict[str, dict[str, object]]:
+    """Both methods' closed loops at M = m, seed `seed`: what the table needs, as JSON values."""
+    from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run_closed_loop
+    from isac_mission.planning.slot import SolverKit
+
+    s = fleet_scenario(m, slots)
+    out: dict[str, dict[str, object]] = {}
+    for method in METHODS:
+        kit = SolverKit(s)
+        t0 = time.perf_counter()
+        kit.warm_up(method)
+        build_s = time.perf_counter() - t0
+        outcomes: list[SlotOutcome] = []
+        result = run_closed_loop(s, method, draw_run_noise(s, seed), kit, outcomes.append)
+        reports = [o.plan.report for o in outcomes]
+        notes = [f"fallback {r.fallback}: {r.reason}" if r.fallback else r.polish for r in reports]
+        run = MethodRun(
+            build_s, [float(t) for t in result.solve_s], float(np.mean(result.pcrb)), notes
+        )
+        out[method] = asdict(run)
+    return out
+
+
+def horizon_counts(notes: list[str]) -> tuple[list[int], int, int, int]:
+    """(iterations, converged, at the cap, other fallbacks) from the horizon's slot notes."""
+    iterations = [
+        int(g) for note in notes for g in re.findall(r"IPOPT \w+ (?:in|after) (\d+) it", note)
+    ]
+    capped = sum(note.startswith("fallback horizon: IPOPT Maximum_Iterations") for note in notes)
+    converged = sum(not note.startswith("fallback ") for note in notes)
+    return iterations, converged, capped, len(notes) - converged - capped
+
+
+@dataclass
+class MethodRun:
+    """One method's closed loop in one cell: build (s), plan times [N] (s), mean tr(PCRB), the
+    slot notes (report.polish, or "fallback KIND: REASON")."""
+
+    build_s: float
+    solve_s: list[float]
+    pcrb: float
+    notes: list[str]
+
+
+def collect(tree: str, m: int, slots: int, seed: int) -> dict[str, MethodRun]:
+    """run_cell in a subprocess with the package of `tree`."""
+    out = subprocess.run(
+        [sys.executable, __file__, "--cell", str(m), str(slots), str(seed)],
+        cwd=tree,
+        env={**os.environ, "PYTHONPATH": tree},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    cell = json.loads(out.stdout.strip().splitlines()[-1])
+    return {method: MethodRun(**cell[method]) for method in METHODS}
+
+
+def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
+    """Print one line per (tree, M, method)."""
+    print(
+        f"{'tree':<7} {'M':>3} {'method':<9} {'slots':>5} {'build s':>8} {'median ms':>9} "
+        f"{'p95 ms':>8} {'it med':>6} {'it max':>6} {'conv':>5} {'cap':>4} {'other':>5} "
+        f"{'tr(PCRB)':>10} {'/ prop.':>7} {'t / prop.':>9}"
+    )
+    for tree, m, cells in rows:
+        proposed_pcrb = float(np.mean([c.pcrb for c in cells["proposed"]]))
+        proposed_ms = 1e3 * float(np.median([t for c in cells["proposed"] for t in c.solve_s]))
+        for method in METHODS:
+            runs = cells[method]
+            times = 1e3 * np.array([t for c in runs for t in c.solve_s])
+            pcrb = float(np.mean([c.pcrb for c in runs]))
+            counts = f"{'':>6} {'':>6} {'':>5} {'':>4} {'':>5}"
+            if method == "horizon":
+                its, conv, cap, other = horizon_counts([n for c in runs for n in c.notes])
+                med, top = (f"{np.median(its):.0f}", str(max(its))) if its else ("-", "-")
+                counts = f"{med:>6} {top:>6} {conv:>5d} {cap:>4d} {other:>5d}"
+            print(
+                f"{tree:<7} {m:>3} {method:<9} {len(times):>5} "
+                f"{np.median([c.build_s for c in runs]):>8.1f} {np.median(times):>9.1f} "
+                f"{np.percentile(times, 95):>8.1f} {counts} {pcrb:>10.4g} "
+                f"{pcrb / proposed_pcrb:>7.3f} {np.median(times) / proposed_ms:>9.1f}"
+            )
+    print(
+        "build: SolverKit.warm_up (cold), median over seeds; it: IPOPT's iterations; conv: "
+        "horizon's answer flown; cap: IPOPT at max_iterations, the per-slot plan flown; other: "
+        "fallen back for another reason; tr(PCRB): mission mean of the method's own closed loop, "
+        "mean over seeds; / prop.: against proposed's; t / prop.: median plan time against "
+        "proposed's"
+    )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--sizes", default="3,6,12", help="fleet sizes M (comma-separated)")
+    ap.add_argument("--slots", type=int, default=60, help="slots per mission")
+    ap.add_argument("--seeds", default="1,2,3", help="noise seeds (comma-separated)")
+    ap.add_argument("--compare-tree", metavar="DIR", help="also the isac_mission package in DIR")
+    ap.add_argument("--cell", nargs=3, type=int, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.cell:
+        m, slots, seed = args.cell
+        print(json.dumps(run_cell(m, slots, seed)))
+        return
+    here = str(Path(__file__).resolve().parent.parent)
+    trees = {"after": here}
+    if args.compare_tree:
+        trees = {"before": str(Path(args.compare_tree).resolve()), "after": here}
+    t_start = time.perf_counter()
+    rows = []
+    for m in (int(v) for v in args.sizes.split(",")):
+        cells: dict[str, dict[str, list[MethodRun]]] = {
+            t: {method: [] for method in METHODS} for t in trees
+        }
+        for seed in (int(v) for v in args.seeds.split(",")):
+            for name, tree in trees.items():
+                for method, cell in collect(tree, m, args.slots, seed).items():
+                    cells[name][method].append(cell)
+        rows += [(name, m, cells[name]) for name in trees]
+    table(rows)
+    print(f"\ntotal {time.perf_counter() - t_start:.0f} s; load {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
