@@ -22,13 +22,24 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.model.channel import min_share
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, velocity_control_points
 from isac_mission.planning.fallback import per_slot_instead
 from isac_mission.planning.feasibility import SlotConstraints, operating_area
-from isac_mission.planning.horizon_nlp import HorizonNLP, HorizonSlotData, horizon_weights
+from isac_mission.planning.horizon_nlp import (
+    HorizonNLP,
+    HorizonSlotData,
+    horizon_weights,
+    pairs_can_bind,
+)
 from isac_mission.planning.legs import chord_point_clearance_m
-from isac_mission.planning.margins import LEG_LIMIT_TOLERANCE, sag_m, target_clearance_m
+from isac_mission.planning.margins import (
+    LEG_LIMIT_TOLERANCE,
+    RATE_MARGIN,
+    sag_m,
+    target_clearance_m,
+)
 from isac_mission.planning.per_slot import Proposed
 from isac_mission.planning.problem import PlansOnceToWarmUp, SlotInput, with_end_velocity
 from isac_mission.tracking.pcrb import (
@@ -92,6 +103,30 @@ def _continue(
     xy = np.array([np.clip(xy1 + h * dt * v1, lo, hi) for h in range(length)])
     v = np.repeat(v1[None], length, axis=0)
     return xy, v, np.repeat(eta1[None], length, axis=0)
+
+
+def _shares_meeting_rates(
+    s: Scenario, xy: FloatArray, eta: FloatArray, serving_xy: FloatArray, link_m: float
+) -> FloatArray:
+    """A horizon start's shares eta [L, M] moved, on the slots where some UAV at xy [L, M, 2]
+    misses 14a on its BS at serving_xy [M, 2], to its minimum share (the NLP's rate row, link_m
+    farther away) plus the rest in proportion to the start's surplus over the minimum. A start
+    continued at constant velocity flies the UAVs away from their BSs: its later slots missed
+    the rate by 1-3 %, and IPOPT spent its first iterations restoring it (or all 60 of them)."""
+    out = np.array(eta, dtype=float)
+    d_m = np.linalg.norm(xy - serving_xy[None], axis=-1) + link_m
+    floor = (1 + 2 * RATE_MARGIN) * min_share(d_m, s.r_th, s.dH, s.rho0, s.B)
+    for h in range(len(out)):
+        if np.all(out[h] >= floor[h]) or floor[h].sum() >= 1.0:
+            continue
+        surplus = np.maximum(out[h] - floor[h], 0.0)
+        weights = (
+            surplus / surplus.sum()
+            if surplus.sum() > 0
+            else np.full(len(surplus), 1 / len(surplus))
+        )
+        out[h] = floor[h] + (1.0 - floor[h].sum()) * weights
+    return out
 
 
 def _shifted(
@@ -186,9 +221,13 @@ def legs_ok(
     )
 
 
-def horizon_nlp(kit: SolverKit) -> HorizonNLP:
-    """The kit's receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept."""
-    return kit.built("horizon", lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock))
+def horizon_nlp(kit: SolverKit, pair_rows: bool = True) -> HorizonNLP:
+    """The kit's receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept;
+    pair_rows False: the one without UAV-UAV rows."""
+    return kit.built(
+        "horizon" if pair_rows else "horizon without pairs",
+        lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock, pair_rows),
+    )
 
 
 def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: float) -> SlotPlan:
@@ -198,7 +237,9 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
 
     base: the `proposed` plan of inp; started_s: the perf_counter time the slot's planning
     started (for solve_s)."""
-    nlp = horizon_nlp(kit)
+    # Without the UAV-UAV rows when no pair can come near them inside the horizon (the rows
+    # were 60 % of a solve and 75 % of the build at M = 12, and apart UAVs are the rule).
+    nlp = horizon_nlp(kit, pairs_can_bind(kit.scenario, inp.prev_xy_m))
     sensing = kit.sensing
     x_pred, J_pred, prev_plan = inp.target_state_pred, inp.prior_information, inp.prev_plan
     cov = inp.target_cov_pred
@@ -226,6 +267,8 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
         shifted = _shifted(prev_plan.horizon, L, M, dt, s)
         if shifted is not None:
             starts.append(shifted)
+    link_m = nlp.margins.link_m
+    starts = [(q, v, _shares_meeting_rates(s, q, e, serving, link_m)) for q, v, e in starts]
     weights = horizon_weights(L, s.planner.horizon.discount, s.planner.horizon.terminal_weight)
 
     def value(xy: FloatArray, eta: FloatArray) -> float:
@@ -307,3 +350,10 @@ class Horizon(PlansOnceToWarmUp):
         started_s = time.perf_counter()
         base = with_end_velocity(Proposed().plan(inp, kit), inp, kit.scenario)
         return plan_horizon(inp, base, kit, started_s)
+
+    def prepare(self, kit: SolverKit) -> None:
+        """Both NLPs built (with and without the UAV-UAV rows: a slot may need either), then one
+        slot planned."""
+        horizon_nlp(kit, pair_rows=True)
+        horizon_nlp(kit, pair_rows=False)
+        super().prepare(kit)

@@ -18,11 +18,11 @@ with w_l = discount^(l-1) (times terminal_weight on the last slot). The derivati
 positions and velocities, the serving and control BSs, the keep-out points, the predicted state,
 the prior information, the clearances c_l and the objective's scale.
 
-Lifted: what IPOPT solves has, per horizon slot l, the scaled covariance Ct_l and (but on the last
-slot) the scaled next prior information Jh_l as variables, with the bilinear equalities
-(D_l J_l D_l) Ct_l = I and (E_l P_l+1 E_l) Jh_l = I, P_l+1 = F D_l Ct_l D_l F^T + W, J_l+1 built
-on E_l Jh_l E_l, and the objective sum_l w_l tr(D_l Ct_l D_l): the same problem, whose Hessian
-is sparse (docs/model.md, "Receding horizon"). `objective` and `gradient` are the eliminated form.
+Lifted: what IPOPT solves has the scaled predicted covariance Pt_l = E_l P_l+1 E_l of every horizon
+slot but the last as 16 variables, with the explicit equality Pt_l = E_l (F C_l F^T + W) E_l, and
+slot l + 1 builds its prior on E_l Pt_l^-1 E_l: the same problem (eliminating Pt gives it back),
+whose Hessian has one block per slot instead of one dense block over the horizon (docs/model.md,
+"Receding horizon"). `objective` and `gradient` are the eliminated form.
 
 Scaling: q_lm = q_m,n-1 + S z_lm with S = V_max dt; v_lm = V_max u_lm; D_l = diag(1 / sqrt(diag
 J_l)) and E_l = diag(1 / sqrt(diag P_l+1)) taken at the start point (parameters); the objective
@@ -46,6 +46,7 @@ from isac_mission.planning.legs import chord_point_clearance_m
 from isac_mission.planning.margins import (
     MIN_SHARE,
     SafetyMargins,
+    hermite_bulge_m,
     sag_m,
 )
 from isac_mission.planning.nlp_model import (
@@ -86,6 +87,32 @@ def horizon_weights(length: int, discount: float, terminal_weight: float) -> Flo
     return np.asarray(w)
 
 
+def pair_row_clearance_m(s: Scenario) -> float:
+    """The distance (m) the horizon's UAV-UAV rows keep between two UAVs' leg samples: D_s + 2 e
+    for the chord between samples (both moving at up to V_max) plus both legs' sag."""
+    gap_s = s.dt / s.planner.horizon.leg_samples
+    sag = sag_m(s.a_max, gap_s) if s.planner.vehicle_model else 0.0
+    sep = SafetyMargins.of(s).separation_m if s.d_safe > 0 else 0.0
+    return float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag
+
+
+def pair_reach_m(s: Scenario) -> float:
+    """How far apart (m) two UAVs must be at the horizon's start for none of their UAV-UAV rows
+    to bind anywhere inside it: each UAV's leg points stay within L V_max dt of its start (14h
+    holds on every slot; a straight leg's points are on its chord) plus, on the vehicle model,
+    the Hermite leg's bulge off its chord (at most a_max dt^2 / 27), so two UAVs farther apart
+    than the rows' clearance plus twice that can never meet the rows' bound (docs/model.md)."""
+    bulge = hermite_bulge_m(s.a_max, s.dt, 0.0) if s.planner.vehicle_model else 0.0
+    return pair_row_clearance_m(s) + 2 * (s.planner.horizon.length * s.v_max * s.dt + bulge)
+
+
+def pairs_can_bind(s: Scenario, prev_xy_m: FloatArray) -> bool:
+    """True if some pair of the UAVs at prev_xy_m [M, 2] is within `pair_reach_m`."""
+    xy = np.asarray(prev_xy_m, dtype=float)
+    i, j = np.triu_indices(len(xy), 1)
+    return bool(np.any(np.linalg.norm(xy[i] - xy[j], axis=1) <= pair_reach_m(s)))
+
+
 @dataclass(frozen=True)
 class HorizonSlotData:
     """One slot's parameters of the horizon NLP.
@@ -123,15 +150,22 @@ class HorizonNLP:
     """The horizon problem for the scenario's M UAVs and n_keep_out keep-out points."""
 
     def __init__(
-        self, scenario: Scenario, n_keep_out: int = 0, lock: SolveLock | None = None
+        self,
+        scenario: Scenario,
+        n_keep_out: int = 0,
+        lock: SolveLock | None = None,
+        pair_rows: bool = True,
     ) -> None:
-        """lock: held around IPOPT's construction and every solve (SolverKit.solve_lock)."""
+        """lock: held around IPOPT's construction and every solve (SolverKit.solve_lock);
+        pair_rows: False leaves out the UAV-UAV rows (14i), for slots where no pair can come
+        within them inside the horizon (`pairs_can_bind`)."""
         lock = lock if lock is not None else contextlib.nullcontext()
         s = scenario
         cfg = s.planner.horizon
         M, L, K = s.M, cfg.length, cfg.leg_samples
         self.scenario = s
         self.n_keep_out = n_keep_out
+        self.pair_rows = pair_rows
         self.length = L
         self.vehicle_model = s.planner.vehicle_model
         self.step_m = S = s.v_max * s.dt
@@ -193,18 +227,18 @@ class HorizonNLP:
         sag = sag_m(s.a_max, gap_s) if self.vehicle_model else 0.0
         sep = margins.separation_m if s.d_safe > 0 else 0.0
         keep2 = ((float(chord_point_clearance_m(sep, s.v_max * gap_s)) + sag) / S) ** 2
-        pair2 = ((float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag) / S) ** 2
+        pair2 = (pair_row_clearance_m(s) / S) ** 2
         fracs = [(k + 1) / K for k in range(K)]
         weights = horizon_weights(L, cfg.discount, cfg.terminal_weight)
-        # The bound's recursion lifted (docs/model.md, "Receding horizon"): per slot h the
-        # scaled covariance Ct_h = (D_h J_h D_h)^-1 and, but on the last, the scaled prior
-        # information Jh_h = (E_h P_h+1 E_h)^-1 are variables, tied by the bilinear equalities
-        # (D J D) Ct = I and (E P E) Jh = I. Eliminated, every tr(C_l) depends on all earlier
-        # slots through nested inverses: a dense Hessian that took 60 % of IPOPT's time and
-        # most of the build; lifted, each row couples one slot's UAVs with 32 numbers.
-        lift = ca.SX.sym("lift", 16 * (2 * L - 1))
+        # The bound's recursion lifted (docs/model.md, "Receding horizon"): the scaled predicted
+        # covariance Pt_h = E_h (F C_h F^T + W) E_h of every slot but the last is a variable, tied
+        # by that equality (the covariance's own dynamics, explicit), and slot h + 1 builds on
+        # its inverse. Eliminated, every tr(C_l) depends on all earlier slots through nested
+        # inverses: a dense Hessian that took 53 % of a solve at M = 3 and most of the build;
+        # lifted, each slot's terms couple its own UAVs with 16 numbers.
+        lift = ca.SX.sym("lift", 16 * (L - 1))
         n_lift = int(lift.numel())
-        eye4 = ca.DM.eye(4)
+        ones4 = ca.SX.ones(4)
         lifted_rows: list[ca.SX] = []
         lifted_objective = ca.SX(0.0)
         objective = ca.SX(0.0)
@@ -237,7 +271,7 @@ class HorizonNLP:
                     for k in range(n_keep_out):
                         gap = along(h, m, frac) - keep_out[2 * k : 2 * k + 2]
                         add_clearance_row(rows, gap, keep2, S)
-            for i in range(M):
+            for i in range(M if pair_rows else 0):
                 for j in range(i + 1, M):
                     for frac in fracs:
                         add_clearance_row(rows, along(h, i, frac) - along(h, j, frac), pair2, S)
@@ -246,23 +280,18 @@ class HorizonNLP:
             dj, dp = scale_j[4 * h : 4 * h + 4], scale_p[4 * h : 4 * h + 4]
             C = scaled_inverse_sx(0.5 * (J + J.T), dj)
             objective = objective + weights[h] * ca.trace(C)
-            Ct = ca.reshape(lift[16 * h : 16 * h + 16], 4, 4)
             J_lifted = J_prior_lifted + J_info
-            D = ca.diag(dj)
-            lifted_rows.append(ca.vec(ca.mtimes(ca.mtimes(ca.mtimes(D, J_lifted), D), Ct) - eye4))
-            lifted_objective = lifted_objective + weights[h] * ca.dot(dj**2, ca.diag(Ct))
+            C_lifted = scaled_inverse_sx(0.5 * (J_lifted + J_lifted.T), dj)
+            lifted_objective = lifted_objective + weights[h] * ca.trace(C_lifted)
             if h + 1 < L:
                 P = ca.mtimes(ca.mtimes(ca.DM(F), C), ca.DM(F.T)) + ca.DM(W)
                 J_prior = scaled_inverse_sx(0.5 * (P + P.T), dp)
                 E = ca.diag(dp)
-                C_lifted = ca.mtimes(ca.mtimes(D, Ct), D)
                 P_lifted = ca.mtimes(ca.mtimes(ca.DM(F), C_lifted), ca.DM(F.T)) + ca.DM(W)
-                off = 16 * (L + h)
-                Jh = ca.reshape(lift[off : off + 16], 4, 4)
-                lifted_rows.append(
-                    ca.vec(ca.mtimes(ca.mtimes(ca.mtimes(E, P_lifted), E), Jh) - eye4)
-                )
-                J_prior_lifted = ca.mtimes(ca.mtimes(E, Jh), E)
+                Pt = ca.reshape(lift[16 * h : 16 * h + 16], 4, 4)
+                lifted_rows.append(ca.vec(ca.mtimes(ca.mtimes(E, P_lifted), E) - Pt))
+                Pt_inv = scaled_inverse_sx(0.5 * (Pt + Pt.T), ones4)
+                J_prior_lifted = ca.mtimes(ca.mtimes(E, Pt_inv), E)
 
         x = ca.vertcat(z, u, eta)
         p = ca.vertcat(*params)
@@ -347,10 +376,10 @@ class HorizonNLP:
         scales: tuple[FloatArray, FloatArray] | None = None,
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The bound's recursion along the plan (xy [L, M, 2], eta [L, M]): (scale_j [4 L],
-        scale_p [4 L], lift [16 (2 L - 1)]). The scales are 1 / sqrt of the diagonals of J_l and
+        scale_p [4 L], lift [16 (L - 1)]). The scales are 1 / sqrt of the diagonals of J_l and
         of the next slot's predicted covariance P_l+1 (the last scale_p unused: ones), or the
-        given ones; lift the lifted variables there in those scales, (D_l J_l D_l)^-1 then
-        (E_l P_l+1 E_l)^-1, each column-major."""
+        given ones; lift the lifted variables there in those scales, E_l P_l+1 E_l
+        (l < L - 1), each column-major."""
         s = self.scenario
         F = transition_matrix(s.dt)
         W = process_noise(s.dt, s.kappa)
@@ -360,27 +389,26 @@ class HorizonNLP:
         scale_j, scale_p = np.ones((L, 4)), np.ones((L, 4))
         if scales is not None:
             scale_j, scale_p = scales[0].reshape(L, 4), scales[1].reshape(L, 4)
-        covariances, priors = [], []
+        predicted = []
         for h in range(L):
             d = np.linalg.norm(x[None, :2] - xy[h], axis=1)
             J = prior + measurement_information(x, xy[h], self._sensing.variances(d, eta[h]))
             if scales is None:
                 scale_j[h] = 1.0 / np.sqrt(np.maximum(np.diag(J), 1e-300))
-            covariances.append(np.linalg.inv(scale_j[h][:, None] * J * scale_j[h][None]))
             if h + 1 < L:
                 P = F @ scaled_inverse(0.5 * (J + J.T)) @ F.T + W
                 if scales is None:
                     scale_p[h] = 1.0 / np.sqrt(np.diag(P))
-                priors.append(np.linalg.inv(scale_p[h][:, None] * P * scale_p[h][None]))
+                predicted.append(scale_p[h][:, None] * P * scale_p[h][None])
                 prior = scaled_inverse(0.5 * (P + P.T))
             x = F @ x
-        lift = np.concatenate([m.reshape(-1, order="F") for m in (*covariances, *priors)])
+        lift = np.concatenate([m.reshape(-1, order="F") for m in predicted])
         return scale_j.reshape(-1), scale_p.reshape(-1), lift
 
     def lifted(
         self, xy: FloatArray, eta: FloatArray, data: HorizonSlotData, p: FloatArray
     ) -> FloatArray:
-        """The lifted variables [16 (2 L - 1)] of the plan (xy [L, M, 2], eta [L, M]) in the
+        """The lifted variables [16 (L - 1)] of the plan (xy [L, M, 2], eta [L, M]) in the
         scales of the parameters p (from `pack`)."""
         sizes = np.cumsum([0, *self._param_sizes])
         n_scale_j = len(self._param_sizes) - 3  # ..., scale_j, scale_p, f_scale
