@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -314,17 +315,21 @@ def test_every_ipopt_construction_and_solve_holds_the_kits_solve_lock() -> None:
     assert lock.depth == 0
     seen = lock.entered
     calls = []
-    original = horizon_nlp(kit).solver
 
     class Spy:
+        def __init__(self, original: Any) -> None:
+            self.original = original
+
         def __call__(self, **kw: object) -> object:
             calls.append(lock.depth)
-            return original(**kw)
+            return self.original(**kw)
 
         def stats(self) -> dict[str, object]:
-            return dict(original.stats())
+            return dict(self.original.stats())
 
-    horizon_nlp(kit).solver = Spy()
+    for pair_rows in (True, False):  # the slot solves one of the two
+        nlp = horizon_nlp(kit, pair_rows)
+        nlp.solver = Spy(nlp.solver)
     plan_slot(inp, kit, "horizon")
     assert calls and all(depth == 1 for depth in calls)
     assert lock.entered > seen
