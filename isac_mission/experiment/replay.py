@@ -126,7 +126,7 @@ def replay_trace(
             "the scenario is not the one the trace was planned with: " + "; ".join(diff)
         )
     method = _method(trace)
-    kits = KitCache(kit if kit is not None else SolverKit(s))
+    kits = KitCache(kit if kit is not None else SolverKit(s), method)
     model = CycleModel.from_scenario(s)
     wanted = None if slots is None else set(slots)
     records = {r.slot: r for r in trace.slots}

@@ -20,6 +20,7 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.planning.fallback import NO_BS, hold_plan
+from isac_mission.planning.registry import planner
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.types import FloatArray, Gaussian, HorizonPlan, IntArray, SlotPlan
 
@@ -27,10 +28,14 @@ Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
 
 
 class KitCache:
-    """Solver kits per set of active vehicles (the full fleet's kit is given)."""
+    """Solver kits per set of active vehicles (the full fleet's kit is given). Kits of the same
+    size share their IPOPT problems (they depend on the fleet's size and the number of keep-out
+    points, not on which vehicles), kept in the full kit so that renewed kits keep them too."""
 
-    def __init__(self, full: SolverKit) -> None:
+    def __init__(self, full: SolverKit, method: Method = "proposed") -> None:
+        """method: what the kits are warmed up for (the mission's planning method)."""
         self.full = full
+        self.method: Method = method
         self._kits: dict[tuple[int, ...], SolverKit] = {}
 
     @property
@@ -39,22 +44,34 @@ class KitCache:
 
     def for_active(self, active: tuple[int, ...]) -> SolverKit:
         """The kit planning `active` (sorted vehicle indices) with the others as keep-out points.
-        Built and warmed up on first use (a few hundred ms), then reused."""
+        Warmed up on first use (one plan; its IPOPT problems built then unless `build_ahead`
+        built them for this size), then reused."""
         s = self.full.scenario
         if len(active) == s.M:
             return self.full
         kit = self._kits.get(active)
         if kit is None:
-            idx = list(active)
-            sub = s.with_changes(M=len(idx), uav_start_xy=s.uav_start_xy[idx])
-            kit = SolverKit(
-                sub,
-                fast=self.full.fast,
-                n_keep_out=s.M - len(idx),
-                solve_lock=self.full.solve_lock,
-            )
-            kit.warm_up()
+            kit = self._sub_kit(active)
+            kit.warm_up(self.method)
             self._kits[active] = kit
+        return kit
+
+    def build_ahead(self) -> None:
+        """Build the IPOPT problems of the fleet with one vehicle out (an operator's HOLD, a lost
+        link: the size a mission reaches most), so that the first plan without it builds none.
+        Smaller fleets are built on their first plan."""
+        s = self.full.scenario
+        if s.M > 1:
+            planner(self.method).prepare(self._sub_kit(tuple(range(s.M - 1))))
+
+    def _sub_kit(self, active: tuple[int, ...]) -> SolverKit:
+        s = self.full.scenario
+        idx = list(active)
+        sub = s.with_changes(M=len(idx), uav_start_xy=s.uav_start_xy[idx])
+        kit = SolverKit(
+            sub, fast=self.full.fast, n_keep_out=s.M - len(idx), solve_lock=self.full.solve_lock
+        )
+        kit.share_built(self.full.built(f"problems of {len(idx)} of {s.M} vehicles", dict))
         return kit
 
 
@@ -213,3 +230,11 @@ def active_part(plan: SlotPlan, active: tuple[int, ...]) -> SlotPlan:
         None if v is None else v[idx],
         horizon,
     )
+
+
+def prepare_fleet(kit: SolverKit, method: Method) -> None:
+    """Warm the full fleet's kit up for `method` and build, ahead, the problems of the fleet
+    with one vehicle out (KitCache.build_ahead): no plan of the mission then builds an IPOPT
+    problem until a second vehicle leaves the plan."""
+    kit.warm_up(method)
+    KitCache(kit, method).build_ahead()

@@ -352,8 +352,9 @@ class Horizon(PlansOnceToWarmUp):
         return plan_horizon(inp, base, kit, started_s)
 
     def prepare(self, kit: SolverKit) -> None:
-        """Both NLPs built (with and without the UAV-UAV rows: a slot may need either), then one
-        slot planned."""
+        """The per-slot method's problems and both NLPs built (with and without the UAV-UAV rows:
+        a slot may need either), then one slot planned."""
+        Proposed().prepare(kit)
         horizon_nlp(kit, pair_rows=True)
         horizon_nlp(kit, pair_rows=False)
         super().prepare(kit)

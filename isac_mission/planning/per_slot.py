@@ -225,6 +225,13 @@ class Proposed(PlansOnceToWarmUp):
         polish = kit.scenario.planner.polish
         return plan_alternating(inp, kit, Alternation(polish=polish))
 
+    def prepare(self, kit: SolverKit) -> None:
+        """The polish's NLP built (the warm-up slot need not reach the polish), then one slot
+        planned."""
+        if kit.scenario.planner.polish:
+            polish_nlp(kit)
+        super().prepare(kit)
+
 
 class ProposedSca(PlansOnceToWarmUp):
     """`proposed-sca`: Algorithm 2 as printed, never polished."""

@@ -79,6 +79,11 @@ class SolverKit:
             self._built[key] = build()
         return cast(T, self._built[key])
 
+    def share_built(self, problems: dict[str, object]) -> None:
+        """Keep this kit's IPOPT problems in `problems` (shared with other kits of the same
+        fleet size and keep-out count: KitCache)."""
+        self._built = problems
+
     def renewed(self) -> SolverKit:
         """A kit with fresh convex problems (their cvxpy Parameters are per-kit state, which a
         timed-out plan's thread may still be writing) sharing this kit's IPOPT problems (built

@@ -15,6 +15,7 @@ from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inpu
 from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
 from isac_mission.model.channel import full_band_rate, rate, rate_radius
 from isac_mission.model.vehicle import hermite_position
+from isac_mission.planning.fleet import KitCache, PlanningJob, prepare_fleet
 from isac_mission.planning.horizon import (
     _shares_meeting_rates,
     horizon_bound_traces,
@@ -24,6 +25,7 @@ from isac_mission.planning.horizon import (
     planned_start_velocity,
 )
 from isac_mission.planning.horizon_nlp import (
+    HorizonNLP,
     HorizonSlotData,
     horizon_weights,
     pair_reach_m,
@@ -31,8 +33,10 @@ from isac_mission.planning.horizon_nlp import (
     pairs_can_bind,
 )
 from isac_mission.planning.per_slot import polish_nlp
+from isac_mission.planning.polish import PolishNLP
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.pcrb import SensingParams
+from isac_mission.types import Gaussian
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import bound_update, cv_model, jacobian
 
@@ -429,3 +433,44 @@ def test_pairs_farther_than_the_reach_never_come_within_the_pair_rows(vehicle_mo
     if not vehicle_model:
         # The reach is tight: head-on at V_max from 1 % inside it ends within the rows' bound.
         assert 0.99 * reach_m - 2 * L * s.v_max * s.dt < clearance_m
+
+
+@pytest.mark.parametrize("ahead", [True, False])
+def test_a_fleet_size_reached_mid_mission_plans_without_a_build_inside_the_plan(
+    ahead: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    s = _vehicle(load_scenario("paper"))
+    inp = _inputs(s, "proposed")[4]
+    kit = SolverKit(s)
+    if ahead:
+        prepare_fleet(kit, "horizon")
+    else:
+        kit.warm_up("horizon")  # the full fleet only: the control that this test can fail
+    builds: list[str] = []
+    for cls in (HorizonNLP, PolishNLP):
+        init = cls.__init__
+
+        def counted(self: object, *args: Any, _init: Any = init, **kw: Any) -> None:
+            builds.append(type(self).__name__)
+            _init(self, *args, **kw)
+
+        monkeypatch.setattr(cls, "__init__", counted)
+    job = PlanningJob(
+        slot=5,
+        method="horizon",
+        kits=KitCache(kit, "horizon"),
+        uav_xy=inp.prev_xy_m,
+        uav_v=inp.prev_velocity_mps,
+        prev_eta=inp.prev_bandwidth_share,
+        prev_assoc=inp.prev_bs_of_uav,
+        prediction=Gaussian(inp.target_state_pred, np.asarray(inp.target_cov_pred)),
+        J_pred=inp.prior_information,
+        excluded=(1,),  # vehicle 1 leaves the plan (an operator's HOLD)
+    )
+    plan = job.run()
+    assert plan.uav_xy_m.shape == (s.M, 2)
+    if ahead:
+        assert builds == []
+        assert plan.report.status == "ok"
+    else:
+        assert "HorizonNLP" in builds

@@ -102,7 +102,7 @@ class MissionState:
         self.eta: FloatArray = np.full(s.M, 1.0 / s.M)
         self.assoc: IntArray | None = None
         self.pending: PendingSlot | None = None
-        self.kits = KitCache(kit)
+        self.kits = KitCache(kit, method)
         self.last_plan: tuple[int, tuple[int, ...], SlotPlan] | None = None
         """(slot, active vehicles, plan) of the last committed plan: the next job's prev_plan
         when the next slot follows it with the same active vehicles."""
@@ -185,7 +185,7 @@ class MissionState:
             self.kit = self.kit.renewed()
         else:
             self.kit = SolverKit(self.scenario, fast=self.kit.fast, solve_lock=self.kit.solve_lock)
-        self.kits = KitCache(self.kit)
+        self.kits = KitCache(self.kit, self.method)
 
     def set_scenario(self, s: Scenario) -> None:
         """Plan from now on with `s` (e.g. an operator's new R_th); same M and geometry."""
