@@ -31,7 +31,6 @@ from isac_mission.planning.horizon_nlp import (
     HorizonNLP,
     HorizonSlotData,
     horizon_weights,
-    pairs_can_bind,
 )
 from isac_mission.planning.legs import chord_point_clearance_m
 from isac_mission.planning.margins import (
@@ -221,13 +220,9 @@ def legs_ok(
     )
 
 
-def horizon_nlp(kit: SolverKit, pair_rows: bool = True) -> HorizonNLP:
-    """The kit's receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept;
-    pair_rows False: the one without UAV-UAV rows."""
-    return kit.built(
-        "horizon" if pair_rows else "horizon without pairs",
-        lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock, pair_rows),
-    )
+def horizon_nlp(kit: SolverKit) -> HorizonNLP:
+    """The kit's receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept."""
+    return kit.built("horizon", lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock))
 
 
 def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: float) -> SlotPlan:
@@ -237,9 +232,7 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
 
     base: the `proposed` plan of inp; started_s: the perf_counter time the slot's planning
     started (for solve_s)."""
-    # Without the UAV-UAV rows when no pair can come near them inside the horizon (the rows
-    # were 60 % of a solve and 75 % of the build at M = 12, and apart UAVs are the rule).
-    nlp = horizon_nlp(kit, pairs_can_bind(kit.scenario, inp.prev_xy_m))
+    nlp = horizon_nlp(kit)
     sensing = kit.sensing
     x_pred, J_pred, prev_plan = inp.target_state_pred, inp.prior_information, inp.prev_plan
     cov = inp.target_cov_pred
@@ -352,9 +345,7 @@ class Horizon(PlansOnceToWarmUp):
         return plan_horizon(inp, base, kit, started_s)
 
     def prepare(self, kit: SolverKit) -> None:
-        """The per-slot method's problems and both NLPs built (with and without the UAV-UAV rows:
-        a slot may need either), then one slot planned."""
+        """The per-slot method's problems and the NLP built, then one slot planned."""
         Proposed().prepare(kit)
-        horizon_nlp(kit, pair_rows=True)
-        horizon_nlp(kit, pair_rows=False)
+        horizon_nlp(kit)
         super().prepare(kit)

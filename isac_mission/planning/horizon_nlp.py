@@ -46,7 +46,6 @@ from isac_mission.planning.legs import chord_point_clearance_m
 from isac_mission.planning.margins import (
     MIN_SHARE,
     SafetyMargins,
-    hermite_bulge_m,
     sag_m,
 )
 from isac_mission.planning.nlp_model import (
@@ -85,32 +84,6 @@ def horizon_weights(length: int, discount: float, terminal_weight: float) -> Flo
     w = discount ** np.arange(length, dtype=float)
     w[-1] *= terminal_weight
     return np.asarray(w)
-
-
-def pair_row_clearance_m(s: Scenario) -> float:
-    """The distance (m) the horizon's UAV-UAV rows keep between two UAVs' leg samples: D_s + 2 e
-    for the chord between samples (both moving at up to V_max) plus both legs' sag."""
-    gap_s = s.dt / s.planner.horizon.leg_samples
-    sag = sag_m(s.a_max, gap_s) if s.planner.vehicle_model else 0.0
-    sep = SafetyMargins.of(s).separation_m if s.d_safe > 0 else 0.0
-    return float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag
-
-
-def pair_reach_m(s: Scenario) -> float:
-    """How far apart (m) two UAVs must be at the horizon's start for none of their UAV-UAV rows
-    to bind anywhere inside it: each UAV's leg points stay within L V_max dt of its start (14h
-    holds on every slot; a straight leg's points are on its chord) plus, on the vehicle model,
-    the Hermite leg's bulge off its chord (at most a_max dt^2 / 27), so two UAVs farther apart
-    than the rows' clearance plus twice that can never meet the rows' bound (docs/model.md)."""
-    bulge = hermite_bulge_m(s.a_max, s.dt, 0.0) if s.planner.vehicle_model else 0.0
-    return pair_row_clearance_m(s) + 2 * (s.planner.horizon.length * s.v_max * s.dt + bulge)
-
-
-def pairs_can_bind(s: Scenario, prev_xy_m: FloatArray) -> bool:
-    """True if some pair of the UAVs at prev_xy_m [M, 2] is within `pair_reach_m`."""
-    xy = np.asarray(prev_xy_m, dtype=float)
-    i, j = np.triu_indices(len(xy), 1)
-    return bool(np.any(np.linalg.norm(xy[i] - xy[j], axis=1) <= pair_reach_m(s)))
 
 
 @dataclass(frozen=True)
@@ -154,18 +127,14 @@ class HorizonNLP:
         scenario: Scenario,
         n_keep_out: int = 0,
         lock: SolveLock | None = None,
-        pair_rows: bool = True,
     ) -> None:
-        """lock: held around IPOPT's construction and every solve (SolverKit.solve_lock);
-        pair_rows: False leaves out the UAV-UAV rows (14i), for slots where no pair can come
-        within them inside the horizon (`pairs_can_bind`)."""
+        """lock: held around IPOPT's construction and every solve (SolverKit.solve_lock)."""
         lock = lock if lock is not None else contextlib.nullcontext()
         s = scenario
         cfg = s.planner.horizon
         M, L, K = s.M, cfg.length, cfg.leg_samples
         self.scenario = s
         self.n_keep_out = n_keep_out
-        self.pair_rows = pair_rows
         self.length = L
         self.vehicle_model = s.planner.vehicle_model
         self.step_m = S = s.v_max * s.dt
@@ -227,7 +196,7 @@ class HorizonNLP:
         sag = sag_m(s.a_max, gap_s) if self.vehicle_model else 0.0
         sep = margins.separation_m if s.d_safe > 0 else 0.0
         keep2 = ((float(chord_point_clearance_m(sep, s.v_max * gap_s)) + sag) / S) ** 2
-        pair2 = (pair_row_clearance_m(s) / S) ** 2
+        pair2 = ((float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag) / S) ** 2
         fracs = [(k + 1) / K for k in range(K)]
         weights = horizon_weights(L, cfg.discount, cfg.terminal_weight)
         # The bound's recursion lifted (docs/model.md, "Receding horizon"): the scaled predicted
@@ -271,7 +240,7 @@ class HorizonNLP:
                     for k in range(n_keep_out):
                         gap = along(h, m, frac) - keep_out[2 * k : 2 * k + 2]
                         add_clearance_row(rows, gap, keep2, S)
-            for i in range(M if pair_rows else 0):
+            for i in range(M):
                 for j in range(i + 1, M):
                     for frac in fracs:
                         add_clearance_row(rows, along(h, i, frac) - along(h, j, frac), pair2, S)

@@ -14,7 +14,6 @@ from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
 from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
 from isac_mission.model.channel import full_band_rate, rate, rate_radius
-from isac_mission.model.vehicle import hermite_position
 from isac_mission.planning.fleet import KitCache, PlanningJob, prepare_fleet
 from isac_mission.planning.horizon import (
     _shares_meeting_rates,
@@ -28,9 +27,6 @@ from isac_mission.planning.horizon_nlp import (
     HorizonNLP,
     HorizonSlotData,
     horizon_weights,
-    pair_reach_m,
-    pair_row_clearance_m,
-    pairs_can_bind,
 )
 from isac_mission.planning.per_slot import polish_nlp
 from isac_mission.planning.polish import PolishNLP
@@ -331,9 +327,8 @@ def test_every_ipopt_construction_and_solve_holds_the_kits_solve_lock() -> None:
         def stats(self) -> dict[str, object]:
             return dict(self.original.stats())
 
-    for pair_rows in (True, False):  # the slot solves one of the two
-        nlp = horizon_nlp(kit, pair_rows)
-        nlp.solver = Spy(nlp.solver)
+    nlp = horizon_nlp(kit)
+    nlp.solver = Spy(nlp.solver)
     plan_slot(inp, kit, "horizon")
     assert calls and all(depth == 1 for depth in calls)
     assert lock.entered > seen
@@ -375,64 +370,6 @@ def test_a_start_whose_uavs_miss_the_rate_gets_shares_that_meet_it() -> None:
         else:
             assert np.all(rate(out[h], d_m[h], s.dH, s.rho0, s.B) >= s.r_th)
     assert (~met_before & (need.sum(axis=1) < 1.0)).any(), "some slot must have been repaired"
-
-
-def _legs_toward(
-    s: Scenario, q0: np.ndarray, v0: np.ndarray, goal: np.ndarray, L: int, rng: np.random.Generator
-) -> np.ndarray:
-    """Points [L, n, 2] along L random legs from (q0, v0) [2] that keep 14h (step <= V_max dt)
-    and, with the vehicle model, the Hermite limits (a_max, V_max), each leaning toward goal
-    [2]; n dense fractions per leg."""
-    fracs = np.linspace(0.0, 1.0, 41)
-    q, v, out = q0, v0, []
-    for _ in range(L):
-        while True:
-            toward = (goal - q) / max(np.linalg.norm(goal - q), 1e-9)
-            if s.planner.vehicle_model:
-                dv = s.a_max * s.dt * (toward * rng.uniform(0.5, 1) + rng.uniform(-0.5, 0.5, 2))
-                v1 = v + dv
-                v1 *= min(1.0, s.v_max / max(np.linalg.norm(v1), 1e-9))
-                q1 = q + 0.5 * s.dt * (v + v1) + rng.uniform(-1, 1, 2)
-            else:
-                v1 = s.v_max * (toward * rng.uniform(0.8, 1) + rng.uniform(-0.3, 0.3, 2))
-                q1 = q + s.dt * v1
-            ok = np.linalg.norm(q1 - q) <= s.v_max * s.dt
-            if s.planner.vehicle_model:
-                ok = ok and legs_ok(s, q[None], v[None], q1[None], v1[None])
-            if ok:
-                break
-        if s.planner.vehicle_model:
-            out.append(np.array([hermite_position(q, v, q1, v1, s.dt, f) for f in fracs]))
-        else:
-            out.append(q[None] + fracs[:, None] * (q1 - q)[None])
-        q, v = q1, v1
-    return np.array(out)
-
-
-@pytest.mark.parametrize("vehicle_model", [False, True])
-def test_pairs_farther_than_the_reach_never_come_within_the_pair_rows(vehicle_model: bool) -> None:
-    s = load_scenario("paper")
-    if vehicle_model:
-        s = _vehicle(s.with_changes(a_max=8.0, v_max=22.5))
-    L = s.planner.horizon.length
-    reach_m, clearance_m = pair_reach_m(s), pair_row_clearance_m(s)
-    rng = np.random.default_rng(8)
-    closest = np.inf
-    for _ in range(300):  # brute force: random fleets of two, both flying at each other
-        d0 = reach_m * (1 + rng.uniform(0, 0.05))
-        a = rng.uniform(500, 2500, 2)
-        b = a + d0 * np.array([np.cos(t := rng.uniform(0, 2 * np.pi)), np.sin(t)])
-        va, vb = (s.v_max * rng.uniform(0, 1) * (q2 - q1) / d0 for q1, q2 in ((a, b), (b, a)))
-        pa = _legs_toward(s, a, va if vehicle_model else np.zeros(2), b, L, rng)
-        pb = _legs_toward(s, b, vb if vehicle_model else np.zeros(2), a, L, rng)
-        closest = min(closest, float(np.min(np.linalg.norm(pa - pb, axis=-1))))
-    assert closest >= clearance_m, (closest, clearance_m)
-    assert closest < 1.5 * clearance_m + 0.1 * reach_m  # the fleets did come close
-    assert pairs_can_bind(s, np.array([[0.0, 0.0], [0.0, 0.99 * reach_m]]))
-    assert not pairs_can_bind(s, np.array([[0.0, 0.0], [0.0, 1.01 * reach_m], [1.5 * reach_m, 0]]))
-    if not vehicle_model:
-        # The reach is tight: head-on at V_max from 1 % inside it ends within the rows' bound.
-        assert 0.99 * reach_m - 2 * L * s.v_max * s.dt < clearance_m
 
 
 @pytest.mark.parametrize("ahead", [True, False])
