@@ -77,14 +77,18 @@ def _random_horizon(
     return xy, velocity, eta
 
 
-@pytest.mark.parametrize("vehicle_model", [False, True])
-def test_horizon_gradient_matches_central_finite_differences(vehicle_model: bool) -> None:
+def _nlp_and_input(vehicle_model: bool) -> tuple[Scenario, int, HorizonNLP, SlotInput]:
+    """paper.yaml (with the vehicle model or not), its horizon length and NLP, and slot 12's
+    input of a `proposed` run."""
     s = _scenario()
     if vehicle_model:
         s = _vehicle(s)
-    L = s.planner.horizon.length
-    nlp = horizon_nlp(SolverKit(s))
-    inp = _inputs(s, "proposed")[12]
+    return s, s.planner.horizon.length, horizon_nlp(SolverKit(s)), _inputs(s, "proposed")[12]
+
+
+@pytest.mark.parametrize("vehicle_model", [False, True])
+def test_horizon_gradient_matches_central_finite_differences(vehicle_model: bool) -> None:
+    s, L, nlp, inp = _nlp_and_input(vehicle_model)
     rng = np.random.default_rng(4)
     xy, velocity, eta = _random_horizon(s, inp, L, rng)
     x, p = nlp.pack(xy, velocity if vehicle_model else None, eta, _data(s, inp, L))
@@ -134,12 +138,7 @@ def test_horizon_objective_is_the_bound_recursion_recomputed_independently() -> 
 def test_the_lifted_recursion_is_the_bound_at_the_start_and_at_the_answer(
     vehicle_model: bool,
 ) -> None:
-    s = _scenario()
-    if vehicle_model:
-        s = _vehicle(s)
-    L = s.planner.horizon.length
-    nlp = horizon_nlp(SolverKit(s))
-    inp = _inputs(s, "proposed")[12]
+    s, L, nlp, inp = _nlp_and_input(vehicle_model)
     data = _data(s, inp, L)
     xy, velocity, eta = _random_horizon(s, inp, L, np.random.default_rng(11))
     velocity_or_none = velocity if vehicle_model else None
