@@ -39,7 +39,7 @@ from isac_mission.planning.margins import (
     sag_m,
     target_clearance_m,
 )
-from isac_mission.planning.per_slot import Proposed
+from isac_mission.planning.per_slot import Proposed, polish_nlp
 from isac_mission.planning.problem import PlansOnceToWarmUp, SlotInput, with_end_velocity
 from isac_mission.tracking.pcrb import (
     Bound,
@@ -345,7 +345,9 @@ class Horizon(PlansOnceToWarmUp):
         return plan_horizon(inp, base, kit, started_s)
 
     def prepare(self, kit: SolverKit) -> None:
-        """The per-slot method's problems and the NLP built, then one slot planned."""
-        Proposed().prepare(kit)
+        """The polish's NLP and the horizon's built (the warm-up slot need not reach the
+        polish), then one slot planned."""
+        if kit.scenario.planner.polish:
+            polish_nlp(kit)
         horizon_nlp(kit)
         super().prepare(kit)
