@@ -90,6 +90,8 @@ async def test_lost_and_late_detections_are_exactly_the_missing_measurements(
     # the ground waits for a slot's detections until they are all in or 2 wall s have passed
     # (the held clock never reaches the 0.5 s deadline), so the late ones are used and only the
     # lost ones are missing: the trace's missing measurements are exactly the channel's losses.
+    # The world does not hold after the last slot (no plan follows it), so slot N's late
+    # detections race its 0.5 s deadline on the running clock: there, only lost => missing.
     s = paper.with_changes(N=12)
     imp = apply_impairment_flags(
         ImpairmentConfig(), ["detections:loss=0.2,latency_ms=300,jitter_ms=200"]
@@ -99,9 +101,11 @@ async def test_lost_and_late_detections_are_exactly_the_missing_measurements(
     trace = read_trace(run.live.trace_path)
     missing = {(r.slot, m) for r in trace.slots for m in range(s.M) if np.isnan(r.r_diag[m])}
     lost = {(n, m) for n, m in run.detections_lost if 1 <= n <= s.N}
-    assert missing == lost and lost, (sorted(missing), sorted(lost))
+    held = {(n, m) for n, m in missing | lost if n < s.N}
+    assert missing & held == lost & held and lost & held, (sorted(missing), sorted(lost))
+    assert {k for k in lost if k[0] == s.N} <= missing, (sorted(missing), sorted(lost))
     late = [d for (n, _), d in run.detections_late_s.items() if 1 <= n <= s.N]
     assert len(late) == s.N * s.M - len(lost) and min(late) >= 0.1 and max(late) <= 0.5
     assert run.counters.get("detections stale", 0) == 0
-    assert run.counters["slots with missing detections"] == len({n for n, _ in lost})
+    assert run.counters["slots with missing detections"] == len({n for n, _ in missing})
     assert math.isfinite(run.loc_rmse_m)

@@ -30,7 +30,7 @@ from tests.support.ports import free_udp_ports
 from tests.support.sim_harness import SimRunner
 
 SPEED = 10.0
-"""Simulation seconds per wall second."""
+"""Simulation seconds per wall second (the default; `rig(..., speed=)` for another)."""
 ALTITUDE_M = 10.0
 V_MAX_MPS = 12.0  # the simulated airframe's MPC_XY_VEL_MAX
 CLOCK_PERIOD_S = 0.1  # the world publishes its clock at 10 Hz of simulation time
@@ -44,9 +44,10 @@ KEYS = Keys("bridge-test")
 class ClockPublisher:
     """SimClock tick callback (sim thread): the world's `clock` message every 0.1 s sim."""
 
-    def __init__(self, bus: ZenohBus, slot_s: float) -> None:
+    def __init__(self, bus: ZenohBus, slot_s: float, speed: float = SPEED) -> None:
         self.bus = bus
         self.slot_s = slot_s
+        self.speed = speed
         self.mission_t0_s: float | None = None
         self._next_s = 0.0
 
@@ -56,7 +57,7 @@ class ClockPublisher:
         self._next_s = CLOCK_GRID.slot_end_s(CLOCK_GRID.slot_of(now_s) + 1)
         t0 = self.mission_t0_s
         slot = -1 if t0 is None or now_s < t0 else SlotTimeline(t0, self.slot_s).slot_of(now_s)
-        msg = ClockMsg(slot=slot, t_s=now_s, slot_s=self.slot_s, speed=SPEED, mission_t0_s=t0)
+        msg = ClockMsg(slot=slot, t_s=now_s, slot_s=self.slot_s, speed=self.speed, mission_t0_s=t0)
         with contextlib.suppress(RuntimeError):  # the bus closed meanwhile
             self.bus.publish(KEYS.clock, encode_clock(msg))
 
@@ -137,7 +138,12 @@ def make_rig(sim_runner: Callable[..., SimRunner], hub: ZenohBus) -> Callable[..
     """Factory (for a test module's `rig` fixture): `rig(spawn_xy_m=[(x, y)],
     **autopilot_settings)` starts the vehicles."""
 
-    def make(spawn_xy_m: list[tuple[float, float]], slot_s: float = 1.0, **overrides: Any) -> Rig:
+    def make(
+        spawn_xy_m: list[tuple[float, float]],
+        slot_s: float = 1.0,
+        speed: float = SPEED,
+        **overrides: Any,
+    ) -> Rig:
         n = len(spawn_xy_m)
         ports = free_udp_ports(2 * n)
         settings = [
@@ -150,8 +156,8 @@ def make_rig(sim_runner: Callable[..., SimRunner], hub: ZenohBus) -> Callable[..
             )
             for m in range(n)
         ]
-        runner = sim_runner(settings, speed=SPEED)
-        clock = ClockPublisher(hub, slot_s)
+        runner = sim_runner(settings, speed=speed)
+        clock = ClockPublisher(hub, slot_s, speed)
         runner.call(lambda: runner.clock.add_tick_callback(clock))
         return Rig(runner, hub, clock, ports[:n])
 
