@@ -8,8 +8,8 @@ method and seed (the same noise for both methods), run in a subprocess of its ow
 
 Per M and method: build (SolverKit.warm_up, cold: there is no disk cache), median and p95 of the
 plan time (report.solve_s), and for `horizon` IPOPT's iterations (median, max) and the slots
-converged (its answer flown), at the iteration cap (the per-slot plan flown instead) and fallen
-back for another reason; the mission-mean tr(PCRB) of each method's own closed loop and their
+converged (its answer flown), stopped at the iteration cap on a feasible, lower iterate (flown),
+at the cap otherwise (the per-slot plan flown instead) and fallen back for another reason; the mission-mean tr(PCRB) of each method's own closed loop and their
 ratio. With --compare-tree the package in DIR runs the same cells, interleaved with this tree's
 (old, new per seed), so both see the same load.
 
@@ -33,6 +33,9 @@ from pathlib import Path
 import numpy as np
 
 METHODS = ("proposed", "horizon")
+AT_CAP_NOTE = "its last iterate kept"
+"""planning/horizon.py's note of a capped iterate flown (a literal: the cells may import an
+older package, which has none)."""
 
 
 def fleet_scenario(m: int, slots: int):  # type: ignore[no-untyped-def]
@@ -82,14 +85,16 @@ def run_cell(m: int, slots: int, seed: int) -> dict[str, dict[str, object]]:
     return out
 
 
-def horizon_counts(notes: list[str]) -> tuple[list[int], int, int, int]:
-    """(iterations, converged, at the cap, other fallbacks) from the horizon's slot notes."""
+def horizon_counts(notes: list[str]) -> tuple[list[int], int, int, int, int]:
+    """(iterations, converged, accepted at the cap, fallen back at the cap, other fallbacks)
+    from the horizon's slot notes."""
     iterations = [
         int(g) for note in notes for g in re.findall(r"IPOPT \w+ (?:in|after) (\d+) it", note)
     ]
+    kept = sum(AT_CAP_NOTE in note for note in notes)
     capped = sum(note.startswith("fallback horizon: IPOPT Maximum_Iterations") for note in notes)
-    converged = sum(not note.startswith("fallback ") for note in notes)
-    return iterations, converged, capped, len(notes) - converged - capped
+    converged = sum(not note.startswith("fallback ") for note in notes) - kept
+    return iterations, converged, kept, capped, len(notes) - converged - kept - capped
 
 
 @dataclass
@@ -121,7 +126,7 @@ def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
     """Print one line per (tree, M, method)."""
     print(
         f"{'tree':<7} {'M':>3} {'method':<9} {'slots':>5} {'build s':>8} {'median ms':>9} "
-        f"{'p95 ms':>8} {'it med':>6} {'it max':>6} {'conv':>5} {'cap':>4} {'other':>5} "
+        f"{'p95 ms':>8} {'it med':>6} {'it max':>6} {'conv':>5} {'kept':>4} {'cap':>4} {'other':>5} "
         f"{'tr(PCRB)':>10} {'/ prop.':>7} {'t / prop.':>9}"
     )
     for tree, m, cells in rows:
@@ -131,11 +136,11 @@ def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
             runs = cells[method]
             times = 1e3 * np.array([t for c in runs for t in c.solve_s])
             pcrb = float(np.mean([c.pcrb for c in runs]))
-            counts = f"{'':>6} {'':>6} {'':>5} {'':>4} {'':>5}"
+            counts = f"{'':>6} {'':>6} {'':>5} {'':>4} {'':>4} {'':>5}"
             if method == "horizon":
-                its, conv, cap, other = horizon_counts([n for c in runs for n in c.notes])
+                its, conv, kept, cap, other = horizon_counts([n for c in runs for n in c.notes])
                 med, top = (f"{np.median(its):.0f}", str(max(its))) if its else ("-", "-")
-                counts = f"{med:>6} {top:>6} {conv:>5d} {cap:>4d} {other:>5d}"
+                counts = f"{med:>6} {top:>6} {conv:>5d} {kept:>4d} {cap:>4d} {other:>5d}"
             print(
                 f"{tree:<7} {m:>3} {method:<9} {len(times):>5} "
                 f"{np.median([c.build_s for c in runs]):>8.1f} {np.median(times):>9.1f} "
@@ -144,7 +149,8 @@ def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
             )
     print(
         "build: SolverKit.warm_up (cold), median over seeds; it: IPOPT's iterations; conv: "
-        "horizon's answer flown; cap: IPOPT at max_iterations, the per-slot plan flown; other: "
+        "IPOPT converged, its answer flown; kept: IPOPT at max_iterations, its feasible, lower "
+        "last iterate flown; cap: at max_iterations, the per-slot plan flown; other: "
         "fallen back for another reason; tr(PCRB): mission mean of the method's own closed loop, "
         "mean over seeds; / prop.: against proposed's; t / prop.: median plan time against "
         "proposed's"

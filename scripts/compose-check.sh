@@ -221,7 +221,11 @@ for c in ground world; do
         fail "$c exited $code"
     }
 done
-docker logs "$ground" 2>&1 | grep -Eq 'vehicles landed[^0-9]*3' || {
+# The ground's log read once into a file: `docker logs | grep -q` under pipefail fails when grep
+# exits at its match while docker logs is still writing (SIGPIPE, exit 141).
+ground_log="$(mktemp)"
+docker logs "$ground" > "$ground_log" 2>&1
+grep -Eq 'vehicles landed[^0-9]*3' "$ground_log" || {
     docker logs --tail 40 "$ground" >&2
     fail "the ground's summary does not say the 3 vehicles landed"
 }
@@ -231,10 +235,10 @@ docker cp "$("${compose[@]}" -p "$project" ps -a -q ground)":/data/serve "$out/"
 ok_slots="$(grep -c '"status": *"ok"' "$out/serve/trace_proposed.jsonl" || true)"
 [ "$ok_slots" -ge "$min_ok_slots" ] || fail "the trace has $ok_slots ok slots"
 # `stop` came mid-mission (the landing is the shutdown's, not the mission's end).
-docker logs "$ground" 2>&1 | grep -Eq 'slots completed[^0-9]*([0-9]|[1-5][0-9])/60' || {
+grep -Eq 'slots completed[^0-9]*([0-9]|[1-5][0-9])/60' "$ground_log" || {
     docker logs --tail 40 "$ground" >&2
     fail "the mission was not stopped mid-way (see the summary above)"
 }
-rm -rf "$out" "$heartbeats"
+rm -rf "$out" "$heartbeats" "$ground_log"
 say "both exited 0; 3 vehicles landed; $ok_slots ok slots in the trace"
 say "passed in $((SECONDS - t_start)) s"

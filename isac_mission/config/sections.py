@@ -200,7 +200,10 @@ class HorizonConfig(Section):
         "beyond the horizon (1 = none; docs/model.md).",
     )
     max_iterations: int = Field(
-        60, ge=1, description="IPOPT's iteration cap (no wall-clock limit): at the cap, fallback."
+        60,
+        ge=1,
+        description="IPOPT's iteration cap (no wall-clock limit): at the cap the last iterate "
+        "is flown if it is feasible and below the start, else the per-slot plan (docs/model.md).",
     )
     leg_samples: int = Field(
         4,

@@ -6,7 +6,7 @@ summaries count them), from most to least planned:
 | fallback | when | what flies | where |
 |---|---|---|---|
 | "" | the method planned | its plan | the method |
-| `horizon: <why>` | the horizon's answer is not kept (IPOPT failed, the answer breaks the exact check or the leg limits, the per-slot plan is infeasible) | the per-slot plan (`per_slot_instead`) | planning/horizon.py |
+| `horizon: <why>` | the horizon's answer is not kept (IPOPT failed, or stopped at its cap on an iterate infeasible or no better than its start; the answer breaks the exact check or the leg limits, the per-slot plan is infeasible) | the per-slot plan (`per_slot_instead`) | planning/horizon.py |
 | `infeasible` | no plan meets 14a-14j (the link cannot reach R_th, or the search ends infeasible) | `best_effort`: the link-optimal waypoints (or the coasting point), away from the target first | planning/per_slot.py, planning/benchmarks.py |
 | `solver error` | the planner raised | the communication-optimal plan, else `hold_plan` | planning/fleet.py |
 | `timeout`, `no vehicles` | the live budget passed; nothing can follow a plan | `hold_plan`: every vehicle holds where it is | service/ground/loop.py, planning/fleet.py |

@@ -6,9 +6,11 @@ Each slot (docs/model.md, "Receding horizon"):
 2. the horizon NLP (planning/horizon_nlp.py) is solved from the better (lower horizon objective)
    of two starts: last slot's horizon shifted by one slot (the warm start), and the per-slot plan
    continued at constant velocity;
-3. the answer's first slot is kept if IPOPT succeeded and it passes the exact checks of 14a-14j
-   on the slot (SlotConstraints.feasible, which every other method's plan passes too) and the
-   vehicle model's leg limits; otherwise the per-slot plan is returned, saying why.
+3. the answer's first slot is kept if IPOPT succeeded (or stopped at its iteration cap on an
+   iterate that meets every horizon constraint below the start's objective, `kept_at_cap`) and
+   it passes the exact checks of 14a-14j on the slot (SlotConstraints.feasible, which every
+   other method's plan passes too) and the vehicle model's leg limits; otherwise the per-slot
+   plan is returned, saying why.
 
 Pure: no clock, no RNG, no I/O.
 """
@@ -16,6 +18,7 @@ Pure: no clock, no RNG, no I/O.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -30,6 +33,7 @@ from isac_mission.planning.feasibility import SlotConstraints, operating_area
 from isac_mission.planning.horizon_nlp import (
     HorizonNLP,
     HorizonSlotData,
+    HorizonSolution,
     horizon_weights,
 )
 from isac_mission.planning.legs import chord_point_clearance_m
@@ -220,6 +224,35 @@ def legs_ok(
     )
 
 
+AT_CAP_NOTE = "its last iterate kept (feasible, lower)"
+"""In a slot's note: IPOPT stopped at its cap on an iterate that is a better horizon plan."""
+
+CAP_FEASIBILITY_TOL = 1e-7
+"""Slack (the NLP's scaled units) of a capped iterate's horizon constraints: IPOPT's converged
+answers meet them to its constr_viol_tol, 1e-8; the flown slot meets the exact check."""
+
+
+def kept_at_cap(
+    nlp: HorizonNLP,
+    sol: HorizonSolution,
+    data: HorizonSlotData,
+    start_infeasible: bool,
+    start_value: float,
+    value: Callable[[FloatArray, FloatArray], float],
+) -> bool:
+    """Whether IPOPT's last iterate at its iteration cap is kept: it meets every horizon
+    constraint and is below a feasible start's objective. An interior point iterate stays
+    inside the inequalities it started inside; from the acceleration phase's starts IPOPT often
+    makes most of its descent and then creeps, and that iterate is a better plan than the start
+    (the flown slot still passes the exact check, as a converged answer does)."""
+    if sol.status != "Maximum_Iterations_Exceeded":
+        return False
+    velocity = sol.uav_velocity_mps if nlp.vehicle_model else None
+    if not nlp.satisfies(sol.uav_xy_m, velocity, sol.bandwidth_share, data, CAP_FEASIBILITY_TOL):
+        return False
+    return start_infeasible or value(sol.uav_xy_m, sol.bandwidth_share) < start_value
+
+
 def horizon_nlp(kit: SolverKit) -> HorizonNLP:
     """The kit's receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept."""
     return kit.built("horizon", lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock))
@@ -280,9 +313,12 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
     start_infeasible, start_value, first = scored[0]
     start = starts[first]
     sol = nlp.solve(start[0], velocities(start[1]), start[2], data)
-    if not sol.success:
-        return fall_back(f"IPOPT {sol.status} after {sol.iterations} it", f"IPOPT {sol.status}")
     note = f"IPOPT {sol.status} in {sol.iterations} it"
+    if not sol.success:
+        if not kept_at_cap(nlp, sol, data, start_infeasible, start_value, value):
+            why = f"IPOPT {sol.status} after {sol.iterations} it"
+            return fall_back(why, f"IPOPT {sol.status}")
+        note += f", {AT_CAP_NOTE}"
     if not start_infeasible and value(sol.uav_xy_m, sol.bandwidth_share) > start_value:
         # A local solver may end above a feasible start: the start is a valid horizon then.
         sol = replace(

@@ -16,6 +16,8 @@ from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
 from isac_mission.model.channel import full_band_rate, rate, rate_radius
 from isac_mission.planning.fleet import KitCache, PlanningJob, prepare_fleet
 from isac_mission.planning.horizon import (
+    AT_CAP_NOTE,
+    CAP_FEASIBILITY_TOL,
     _shares_meeting_rates,
     horizon_bound_traces,
     horizon_nlp,
@@ -31,6 +33,7 @@ from isac_mission.planning.horizon_nlp import (
 from isac_mission.planning.per_slot import polish_nlp
 from isac_mission.planning.polish import PolishNLP
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.records import read_trace
 from isac_mission.tracking.pcrb import SensingParams
 from isac_mission.types import Gaussian
 from tests.support.independent.constraints import check_constraints
@@ -217,17 +220,56 @@ def test_horizon_plans_carry_their_horizon_and_beat_the_per_slot_start() -> None
     assert compared >= 1
 
 
-def test_a_horizon_solve_at_its_iteration_cap_falls_back_to_the_per_slot_plan() -> None:
-    s = _scenario(max_iterations=1)
+def test_a_horizon_solve_at_its_iteration_cap_flies_a_better_feasible_iterate_or_falls_back() -> (
+    None
+):
+    # At a cap of 3 iterations IPOPT stops on every one of these slots: its last iterate is
+    # flown where it meets every horizon constraint below the start's objective (the note says
+    # so), otherwise the per-slot plan is, saying why. Both happen on these slots.
+    s = _scenario(max_iterations=3)
     kit = SolverKit(s)
-    inp = _inputs(s, "proposed")[15]
-    inp = replace(inp, prev_plan=None)
-    plan = plan_slot(inp, kit, "horizon")
-    base = plan_slot(inp, kit, "proposed")
-    assert "horizon: IPOPT Maximum_Iterations_Exceeded" in plan.report.reason
-    np.testing.assert_array_equal(plan.uav_xy_m, base.uav_xy_m)
-    np.testing.assert_array_equal(plan.bandwidth_share, base.bandwidth_share)
-    assert plan.horizon is None
+    nlp = horizon_nlp(kit)
+    L = s.planner.horizon.length
+    cfg = s.planner.horizon
+    w = horizon_weights(L, cfg.discount, cfg.terminal_weight)
+    inputs = _inputs(s, "proposed")
+    kinds = []
+    for n in (3, 8, 15, 30):
+        inp = replace(inputs[n], prev_plan=None)
+        plan = plan_slot(inp, kit, "horizon")
+        base = plan_slot(inp, kit, "proposed")
+        if plan.horizon is None:
+            kinds.append("fallback")
+            assert "horizon: IPOPT Maximum_Iterations_Exceeded after 3 it" in plan.report.reason
+            assert plan.report.fallback == "horizon: IPOPT Maximum_Iterations_Exceeded"
+            np.testing.assert_array_equal(plan.uav_xy_m, base.uav_xy_m)
+            np.testing.assert_array_equal(plan.bandwidth_share, base.bandwidth_share)
+            continue
+        kinds.append("kept")
+        assert f"Maximum_Iterations_Exceeded in 3 it, {AT_CAP_NOTE}" in plan.report.polish
+        assert inp.target_cov_pred is not None
+        data = horizon_slot_data(s, inp, np.zeros((s.M, 2)), inp.target_cov_pred, base, L)
+        h = plan.horizon
+        assert nlp.satisfies(h.uav_xy_m, None, h.bandwidth_share, data, CAP_FEASIBILITY_TOL)
+        # Its only start (no previous horizon): the per-slot plan continued, rates restored.
+        v = (base.uav_xy_m - inp.prev_xy_m) / s.dt
+        cont = np.array([base.uav_xy_m + k * s.dt * v for k in range(L)])
+        eta = np.repeat(base.bandwidth_share[None], L, axis=0)
+        eta = _shares_meeting_rates(s, cont, eta, data.serving_xy, nlp.margins.link_m)
+        start = w @ horizon_bound_traces(
+            s, inp.prior_information, inp.target_state_pred, cont, eta, kit.sensing
+        )
+        assert w @ h.pcrb_trace < start
+    assert set(kinds) == {"kept", "fallback"}, kinds
+
+
+def test_capped_iterates_flown_in_a_mission_pass_the_independent_check(tmp_path: Path) -> None:
+    s = _scenario(max_iterations=3).with_changes(N=30)
+    run_monte_carlo(s, ["horizon"], runs=1, seed=21, trace_dir=tmp_path)
+    trace = read_trace(trace_path(tmp_path, "horizon", 0))
+    capped = [r for r in trace.slots if r.reason and "Maximum_Iterations_Exceeded" in r.reason]
+    assert 0 < len(capped) < len(trace.slots) - 3  # the others (8 of 30) flew capped iterates
+    assert check_constraints(trace_path(tmp_path, "horizon", 0)) == []
 
 
 def test_vehicle_model_horizon_plans_stay_within_a_max_and_v_max() -> None:

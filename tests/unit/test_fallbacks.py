@@ -60,8 +60,11 @@ def test_the_horizon_names_its_fallback(paper: Scenario) -> None:
     planner = paper.planner.model_copy(update={"vehicle_model": True, "horizon": horizon})
     s = dataclasses.replace(paper, planner=planner)
     plan = plan_slot(slot_input(s), SolverKit(s), "horizon")
-    assert plan.report.fallback == "horizon: IPOPT Maximum_Iterations_Exceeded"
-    assert plan.report.status == "ok"  # the per-slot plan it flies instead is feasible
+    # From rest one iteration is already a better feasible horizon: flown, no fallback (the
+    # cap's fallback is named in tests/numerics/test_horizon.py, on slots where it is not).
+    assert plan.report.fallback == "" and plan.horizon is not None
+    assert "Maximum_Iterations_Exceeded in 1 it, its last iterate kept" in plan.report.polish
+    assert plan.report.status == "ok"
     # A horizon over an infeasible slot keeps the per-slot plan's own reason.
     bad = unreachable_rate(s)
     assert plan_slot(slot_input(bad), SolverKit(bad), "horizon").report.fallback == "infeasible"
