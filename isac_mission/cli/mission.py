@@ -33,6 +33,7 @@ from isac_mission.mavwire.ports import (
 )
 from isac_mission.mavwire.serial_link import parse_vehicle_links
 from isac_mission.mavwire.signing import SIGNATURE_REJECTIONS
+from isac_mission.planning.fleet import prepare_fleet
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
@@ -146,7 +147,7 @@ async def fly_mission(
     kit = SolverKit(planning, solve_lock=SOLVE_LOCK)
     # On a thread: the event loop meanwhile opens an embedded world's vehicles (ground stations
     # see them at once) and the bus; the kit is not used by anything else until it returns.
-    await asyncio.to_thread(kit.warm_up, opts.method)
+    await asyncio.to_thread(prepare_fleet, kit, opts.method)
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(
         s,
