@@ -241,10 +241,11 @@ def kept_at_cap(
     value: Callable[[FloatArray, FloatArray], float],
 ) -> bool:
     """Whether IPOPT's last iterate at its iteration cap is kept: it meets every horizon
-    constraint and is below a feasible start's objective. An interior point iterate stays
-    inside the inequalities it started inside; from the acceleration phase's starts IPOPT often
-    makes most of its descent and then creeps, and that iterate is a better plan than the start
-    (the flown slot still passes the exact check, as a converged answer does)."""
+    constraint and is below a feasible start's objective. IPOPT's iterates keep the variable
+    bounds but may leave the constraint rows; from the acceleration phase's starts it often makes
+    most of its descent inside them and then creeps, and where its last iterate meets them it is
+    a better plan than the start (the flown slot still passes the exact check, as a converged
+    answer does)."""
     if sol.status != "Maximum_Iterations_Exceeded":
         return False
     velocity = sol.uav_velocity_mps if nlp.vehicle_model else None
