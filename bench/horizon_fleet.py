@@ -9,8 +9,8 @@ method and seed (the same noise for both methods), run in a subprocess of its ow
 Per M and method: build (SolverKit.warm_up, cold: there is no disk cache), median and p95 of the
 plan time (report.solve_s), and for `horizon` IPOPT's iterations (median, max) and the slots
 converged (its answer flown), stopped at the iteration cap on a feasible, lower iterate (flown),
-at the cap otherwise (the per-slot plan flown instead) and fallen back for another reason; the mission-mean tr(PCRB) of each method's own closed loop and their
-ratio. With --compare-tree the package in DIR runs the same cells, interleaved with this tree's
+at the cap otherwise (the per-slot plan flown instead) and fallen back for another reason; the
+mission-mean tr(PCRB) of each method's own closed loop and their ratio. With --compare-tree the package in DIR runs the same cells, interleaved with this tree's
 (old, new per seed), so both see the same load.
 
 Run: python bench/horizon_fleet.py [--sizes 3,6,12] [--slots 60] [--seeds 1,2,3]

@@ -35,7 +35,7 @@ from isac_mission.planning.polish import PolishNLP
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.records import read_trace
 from isac_mission.tracking.pcrb import SensingParams
-from isac_mission.types import Gaussian
+from isac_mission.types import Gaussian, SlotPlan
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import bound_update, cv_model, jacobian
 
@@ -78,6 +78,16 @@ def _random_horizon(
     velocity = rng.uniform(-20, 20, size=(L, s.M, 2))
     eta = rng.dirichlet(np.ones(s.M), size=L)
     return xy, velocity, eta
+
+
+def _continued(
+    s: Scenario, inp: SlotInput, base: SlotPlan, L: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The per-slot plan `base` continued at its constant velocity over L slots (xy [L, M, 2])
+    with its shares (eta [L, M]), on the paper's kinematics."""
+    v = (base.uav_xy_m - inp.prev_xy_m) / s.dt
+    cont = np.array([base.uav_xy_m + h * s.dt * v for h in range(L)])
+    return cont, np.repeat(base.bandwidth_share[None], L, axis=0)
 
 
 def _nlp_and_input(vehicle_model: bool) -> tuple[Scenario, int, HorizonNLP, SlotInput]:
@@ -202,9 +212,7 @@ def test_horizon_plans_carry_their_horizon_and_beat_the_per_slot_start() -> None
         assert plan.pcrb_trace == pytest.approx(plan.horizon.pcrb_trace[0])
         # The per-slot plan continued at constant velocity is one start: where it is feasible
         # the horizon's answer is no worse on the horizon objective.
-        v = (base.uav_xy_m - inp.prev_xy_m) / s.dt
-        cont = np.array([base.uav_xy_m + h * s.dt * v for h in range(L)])
-        eta = np.repeat(base.bandwidth_share[None], L, axis=0)
+        cont, eta = _continued(s, inp, base, L)
         cfg = s.planner.horizon
         w = horizon_weights(L, cfg.discount, cfg.terminal_weight)
         assert inp.target_cov_pred is not None
@@ -252,9 +260,7 @@ def test_a_horizon_solve_at_its_iteration_cap_flies_a_better_feasible_iterate_or
         h = plan.horizon
         assert nlp.satisfies(h.uav_xy_m, None, h.bandwidth_share, data, CAP_FEASIBILITY_TOL)
         # Its only start (no previous horizon): the per-slot plan continued, rates restored.
-        v = (base.uav_xy_m - inp.prev_xy_m) / s.dt
-        cont = np.array([base.uav_xy_m + k * s.dt * v for k in range(L)])
-        eta = np.repeat(base.bandwidth_share[None], L, axis=0)
+        cont, eta = _continued(s, inp, base, L)
         eta = _shares_meeting_rates(s, cont, eta, data.serving_xy, nlp.margins.link_m)
         start = w @ horizon_bound_traces(
             s, inp.prior_information, inp.target_state_pred, cont, eta, kit.sensing

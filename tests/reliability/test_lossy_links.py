@@ -101,8 +101,9 @@ async def test_lost_and_late_detections_are_exactly_the_missing_measurements(
     trace = read_trace(run.live.trace_path)
     missing = {(r.slot, m) for r in trace.slots for m in range(s.M) if np.isnan(r.r_diag[m])}
     lost = {(n, m) for n, m in run.detections_lost if 1 <= n <= s.N}
-    held = {(n, m) for n, m in missing | lost if n < s.N}
-    assert missing & held == lost & held and lost & held, (sorted(missing), sorted(lost))
+    missing_held = {k for k in missing if k[0] < s.N}
+    lost_held = {k for k in lost if k[0] < s.N}
+    assert missing_held == lost_held and lost_held, (sorted(missing), sorted(lost))
     assert {k for k in lost if k[0] == s.N} <= missing, (sorted(missing), sorted(lost))
     late = [d for (n, _), d in run.detections_late_s.items() if 1 <= n <= s.N]
     assert len(late) == s.N * s.M - len(lost) and min(late) >= 0.1 and max(late) <= 0.5
