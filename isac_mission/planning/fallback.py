@@ -7,7 +7,8 @@ summaries count them), from most to least planned:
 |---|---|---|---|
 | "" | the method planned | its plan | the method |
 | `horizon: <why>` | the horizon's answer is not kept (IPOPT failed, or stopped at its cap on an iterate infeasible or no better than its start; the answer breaks the exact check or the leg limits, the per-slot plan is infeasible) | the per-slot plan (`per_slot_instead`) | planning/horizon.py |
-| `infeasible` | no plan meets 14a-14j (the link cannot reach R_th, or the search ends infeasible) | `best_effort`: the link-optimal waypoints (or the coasting point), away from the target first | planning/per_slot.py, planning/benchmarks.py |
+| `infeasible` | no plan meets 14a-14j (the link cannot reach R_th, or the search ends infeasible) | `best_effort`: the link-optimal waypoints (or the coasting point), away from the target first; with the vehicle model, threatened UAVs on evasive legs | planning/per_slot.py, planning/benchmarks.py |
+| `evasive` | with the vehicle model, the plan's end state leaves UAVs that cannot brake apart before D_s | `kept_viable`: those UAVs on evasive legs (planning/evasion.py), the others the plan | planning/slot.py |
 | `solver error` | the planner raised | the communication-optimal plan, else `hold_plan` | planning/fleet.py |
 | `timeout`, `no vehicles` | the live budget passed; nothing can follow a plan | `hold_plan`: every vehicle holds where it is | service/ground/loop.py, planning/fleet.py |
 | `late` | a plan is published after its slot's end | that plan, marked | service/ground/loop.py |
@@ -24,7 +25,10 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.model.radar import SensingParams
 from isac_mission.planning.association import association_costs, optimal_assignment
-from isac_mission.planning.problem import SlotProblem
+from isac_mission.planning.evasion import Parties, coasting_threats, evasive_legs, unviable_pairs
+from isac_mission.planning.feasibility import operating_area
+from isac_mission.planning.margins import SafetyMargins
+from isac_mission.planning.problem import SlotInput, SlotProblem, slot_clearance_m
 from isac_mission.tracking.pcrb import PlanningObjective
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 
@@ -49,17 +53,84 @@ def evade_target(
 def best_effort(problem: SlotProblem, reason: str) -> SlotPlan:
     """The plan of a slot no method can solve (status and fallback "infeasible"): the
     link-optimal waypoints, or where the vehicles coast to when the planner respects their
-    dynamics; either way away from the target first, inside the operating area."""
+    dynamics; either way away from the target first, inside the operating area. With the
+    vehicle model a UAV that coasts toward another UAV, the target or a keep-out point flies its
+    evasive leg instead (planning/evasion.py), its end velocity in the plan."""
     cons = problem.constraints
     comm = problem.communication
     best = comm.uav_xy if problem.ballistic_xy_m is None else problem.ballistic_xy_m
     inp = problem.inp
+    s = problem.scenario
+    report = SolveReport("infeasible", reason, solve_s=problem.elapsed_s(), fallback="infeasible")
+    if s.planner.vehicle_model and inp.prev_velocity_mps is not None:
+        parties = slot_parties(inp, s)
+        threat, _ = coasting_threats(parties, s.a_max, s.dt)
+        xy, velocity, _ = evasive_legs(
+            parties, threat, best, (best - inp.prev_xy_m) / s.dt, s.a_max, s.v_max, s.dt
+        )
+        plan = problem.plan(np.clip(xy, *cons.area_bounds()), comm.eta, report)
+        return replace(plan, uav_velocity_mps=velocity)
     xy = evade_target(
         best, inp.prev_xy_m, inp.target_state_pred[:2], cons.clearance_m, problem.max_step_m
     )
     xy = np.clip(xy, *cons.area_bounds())  # the vehicles' geofence would clamp it anyway
-    report = SolveReport("infeasible", reason, solve_s=problem.elapsed_s(), fallback="infeasible")
     return problem.plan(xy, comm.eta, report)
+
+
+def slot_parties(inp: SlotInput, s: Scenario) -> Parties:
+    """The slot's parties (planning/evasion.py) at its start: the UAVs at prev_velocity_mps
+    (D_s plus the margins apart), the target a slot before its prediction at its predicted
+    velocity (the slot's 14j clearance), the keep-out points."""
+    assert inp.prev_velocity_mps is not None
+    target = np.asarray(inp.target_state_pred, dtype=float)
+    return Parties.of(
+        inp.prev_xy_m,
+        inp.prev_velocity_mps,
+        SafetyMargins.of(s).separation_m,
+        target[:2] - s.dt * target[2:4],
+        target[2:4],
+        slot_clearance_m(inp, s),
+        inp.keep_out_xy_m,
+    )
+
+
+def kept_viable(plan: SlotPlan, inp: SlotInput, s: Scenario, sensing: SensingParams) -> SlotPlan:
+    """`plan`, or under the vehicle model, where its end state leaves UAVs that cannot brake
+    apart before D_s (evasion.unviable_pairs), the plan with those UAVs on their evasive legs
+    (fallback "evasive"; the bound re-evaluated, the association and shares kept)."""
+    if not s.planner.vehicle_model or inp.prev_velocity_mps is None:
+        return plan
+    if plan.uav_velocity_mps is None:
+        return plan
+    parties = slot_parties(inp, s)
+    unviable = unviable_pairs(parties, plan.uav_xy_m, plan.uav_velocity_mps, s.a_max)
+    if not unviable.any():
+        return plan
+    threat = unviable
+    for _ in range(s.M):  # an evading UAV can leave a neighbour unviable: it evades too
+        xy, velocity, evading = evasive_legs(
+            parties, threat, plan.uav_xy_m, plan.uav_velocity_mps, s.a_max, s.v_max, s.dt
+        )
+        more = threat | unviable_pairs(parties, xy, velocity, s.a_max)
+        if (more == threat).all():
+            break
+        threat = more
+    xy = np.clip(xy, *operating_area(s))
+    objective = PlanningObjective(inp.prior_information, inp.target_state_pred, sensing)
+    uavs = ", ".join(str(m) for m in np.flatnonzero(evading))
+    why = f"evasive legs for UAVs {uavs}: their planned end states could not brake apart before D_s"
+    report = replace(
+        plan.report,
+        reason=why + (f"; {plan.report.reason}" * bool(plan.report.reason)),
+        fallback=plan.report.fallback or "evasive",
+    )
+    return replace(
+        plan,
+        uav_xy_m=xy,
+        uav_velocity_mps=velocity,
+        pcrb_trace=float(objective.value(xy, plan.bandwidth_share)),
+        report=report,
+    )
 
 
 def per_slot_instead(base: SlotPlan, method: str, why: str, kind: str, solve_s: float) -> SlotPlan:

@@ -17,7 +17,7 @@ from typing import TypeVar, cast
 from isac_mission.config import Scenario
 from isac_mission.planning.association import AssociationLP
 from isac_mission.planning.bandwidth import BandwidthSubproblem
-from isac_mission.planning.fallback import evade_target
+from isac_mission.planning.fallback import evade_target, kept_viable
 from isac_mission.planning.nlp_model import SolveLock
 from isac_mission.planning.positions import PositionSubproblem
 from isac_mission.planning.problem import SlotInput, slot_clearance_m, with_end_velocity
@@ -107,5 +107,9 @@ def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> Sl
 
     With planner.vehicle_model the waypoints keep within the exact reach a_max dt^2 / 4 of the
     coasting point (model/vehicle.py) and the plan carries the mean-velocity leg's end velocity
-    (q_n - q_{n-1}) / dt as uav_velocity_mps (docs/model.md, "Vehicle model")."""
-    return with_end_velocity(planner(method).plan(inp, kit), inp, kit.scenario)
+    (q_n - q_{n-1}) / dt as uav_velocity_mps (docs/model.md, "Vehicle model"); UAVs whose end
+    states could not brake apart before D_s fly evasive legs instead (fallback "evasive",
+    planning/evasion.py)."""
+    s = kit.scenario
+    plan = with_end_velocity(planner(method).plan(inp, kit), inp, s)
+    return kept_viable(plan, inp, s, kit.sensing)

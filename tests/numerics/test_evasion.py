@@ -1,0 +1,180 @@
+"""Evasion under the vehicle model (planning/evasion.py, planning/fallback.py; docs/model.md,
+"Evasion").
+
+- `evasive_velocity` is the best end velocity within a_max and V_max: against a polar grid;
+- the viability test is the braking bound: pairs braked along their line of sight, simulated
+  finely, stop closing before D_s exactly when the test says viable;
+- the guard's invariant: two UAVs that start viable and coast at each other, planned by the worst
+  plan (coasting on) and guarded slot by slot, never come within D_s along their legs, and every
+  evasive leg keeps a_max and V_max;
+- the trap that found it: a 12-UAV fleet of the horizon bench, `proposed` with the vehicle
+  model, whose pair came to 16.6 m of D_s = 30 m before the guard, keeps every pair >= D_s
+  along the flown legs.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+from isac_mission.config import Scenario
+from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run_closed_loop
+from isac_mission.model.vehicle import VehicleModel, hermite_position
+from isac_mission.planning.evasion import (
+    Parties,
+    coasting_threats,
+    evasive_legs,
+    evasive_velocity,
+    unviable_pairs,
+)
+from isac_mission.planning.margins import SafetyMargins
+from isac_mission.planning.slot import SolverKit
+
+A_MAX, V_MAX, DT, SEP = 8.0, 22.5, 1.0, 30.0
+FAR = np.array([1e6, 1e6])
+"""The target, far away: these tests are about UAV pairs."""
+
+
+def pair_parties(xy: np.ndarray, v: np.ndarray) -> Parties:
+    return Parties.of(xy, v, SEP, FAR, np.zeros(2), SEP, None)
+
+
+def test_the_evasive_velocity_is_the_best_within_a_max_and_v_max(
+    rng: np.random.Generator,
+) -> None:
+    radius = np.linspace(0, A_MAX * DT, 201)[:, None]
+    angle = np.linspace(0, 2 * np.pi, 721)[None]
+    disk = np.stack([radius * np.cos(angle), radius * np.sin(angle)], -1).reshape(-1, 2)
+    for _ in range(300):
+        v0 = rng.uniform(-1, 1, 2) * rng.uniform(0, 1.05) * V_MAX / np.sqrt(2) * 1.4
+        u = rng.normal(size=2)
+        u /= np.linalg.norm(u)
+        v1 = evasive_velocity(v0, u, A_MAX, V_MAX, DT)
+        grid = v0 + disk
+        grid = grid[np.linalg.norm(grid, axis=1) <= V_MAX]
+        if len(grid) == 0:  # faster than V_max + a_max dt: it brakes
+            assert np.linalg.norm(v1) < np.linalg.norm(v0)
+            continue
+        assert np.linalg.norm(v1 - v0) <= A_MAX * DT * (1 + 1e-9)
+        assert np.linalg.norm(v1) <= V_MAX
+        best = float(np.max((grid - v0) @ u))
+        assert float((v1 - v0) @ u) >= best - 1e-2 * A_MAX * DT
+
+
+def braked_minimum_gap_m(gap_m: float, closing_mps: float) -> float:
+    """Two UAVs closing head-on, each braking at a_max: their smallest gap, simulated."""
+    t = np.linspace(0, closing_mps / (2 * A_MAX), 20001)
+    return float(np.min(gap_m - closing_mps * t + A_MAX * t**2))
+
+
+@pytest.mark.parametrize("closing_mps", [2.0, 10.0, 25.0, 40.0])
+def test_the_viability_test_is_the_braking_bound(closing_mps: float) -> None:
+    for gap in np.linspace(SEP + 0.5, SEP + 120, 60):
+        xy = np.array([[0.0, 0.0], [gap, 0.0]])
+        v = np.array([[closing_mps / 2, 0.0], [-closing_mps / 2, 0.0]])
+        unviable = unviable_pairs(pair_parties(xy, v), xy, v, A_MAX)
+        assert unviable[0, 1] == unviable[1, 0]
+        assert bool(unviable[0, 1]) == (braked_minimum_gap_m(gap, closing_mps) < SEP - 1e-3)
+        # Opening pairs are always viable.
+        assert not unviable_pairs(pair_parties(xy, -v), xy, -v, A_MAX)[0, 1]
+
+
+def fly_guarded(xy: np.ndarray, v: np.ndarray, slots: int) -> tuple[float, bool]:
+    """Slots of the worst plan (every UAV coasting on), each guarded: the smallest gap along
+    the legs (dense samples) and whether every leg kept a_max and V_max."""
+    model = VehicleModel(V_MAX, A_MAX, DT)
+    smallest, within = np.inf, True
+    for _ in range(slots):
+        parties = pair_parties(xy, v)
+        end_xy, end_v = xy + v * DT, v.copy()
+        unviable = unviable_pairs(parties, end_xy, end_v, A_MAX)
+        if unviable.any():
+            end_xy, end_v, _ = evasive_legs(parties, unviable, end_xy, end_v, A_MAX, V_MAX, DT)
+        legs = np.stack(
+            [hermite_position(xy, v, end_xy, end_v, DT, f) for f in np.linspace(0, 1, 101)]
+        )
+        smallest = min(smallest, float(np.min(np.linalg.norm(legs[:, 0] - legs[:, 1], axis=-1))))
+        within &= bool(np.all(model.check_leg(xy, v, end_xy, end_v, tol=1e-6).feasible))
+        xy, v = end_xy, end_v
+    return smallest, within
+
+
+def test_guarded_pairs_that_start_viable_never_come_within_d_s(rng: np.random.Generator) -> None:
+    tried = 0
+    while tried < 150:
+        xy = np.array([[0.0, 0.0], rng.uniform(-150, 150, 2)])
+        v = rng.uniform(-1, 1, (2, 2)) * V_MAX / np.sqrt(2)
+        if unviable_pairs(pair_parties(xy, v), xy, v, A_MAX).any():
+            continue  # not a viable start: no plan can promise anything
+        if np.linalg.norm(xy[1] - xy[0]) < SEP + 1:
+            continue
+        tried += 1
+        smallest, within = fly_guarded(xy, v, 12)
+        assert within
+        assert smallest >= SEP - 0.05, (xy.tolist(), v.tolist(), smallest)
+
+
+def test_unguarded_coasting_pairs_do_collide() -> None:
+    """The guard test can fail: the same worst plan without it flies head-on pairs together."""
+    xy = np.array([[0.0, 0.0], [80.0, 0.0]])
+    v = np.array([[10.0, 0.0], [-10.0, 0.0]])
+    assert not unviable_pairs(pair_parties(xy, v), xy, v, A_MAX).any()
+    assert fly_guarded(xy, v, 6)[0] >= SEP - 0.05
+    legs = xy[None] + np.linspace(0, 6, 601)[:, None, None] * v[None]
+    assert np.min(np.linalg.norm(legs[:, 0] - legs[:, 1], axis=-1)) < SEP
+
+
+def test_a_coasting_threat_is_what_the_closest_approach_says() -> None:
+    """UAVs 0 and 1 pass 10 m apart at t = 3 s, inside the look-ahead 1 + 20 / 8 s; UAVs 0 and 2
+    would too, but at t = 10 s, beyond it; UAV 3 is still and far from every path."""
+    xy = np.array([[0.0, 0.0], [60.0, 10.0], [200.0, -10.0], [0.0, 500.0]])
+    v = np.array([[10.0, 0.0], [-10.0, 0.0], [-10.0, 0.0], [0.0, 0.0]])
+    threat, t = coasting_threats(pair_parties(xy, v), A_MAX, DT)
+    assert threat[0, 1] and threat[1, 0]
+    assert t[0, 1] == pytest.approx(3.0)
+    assert not threat[0, 2] and not threat[2, 0]
+    assert t[0, 2] == pytest.approx(1 + 20 / A_MAX)
+    assert not threat[3].any() and not threat[:, 3].any()
+
+
+def load_bench() -> ModuleType:
+    path = Path(__file__).resolve().parents[2] / "bench" / "horizon_fleet.py"
+    spec = importlib.util.spec_from_file_location("bench_horizon_fleet", path)
+    assert spec is not None and spec.loader is not None
+    module = sys.modules.setdefault("bench_horizon_fleet", importlib.util.module_from_spec(spec))
+    spec.loader.exec_module(module)
+    return module
+
+
+def smallest_gaps_along_legs(s: Scenario, outcomes: list[SlotOutcome]) -> list[float]:
+    """Per slot, the smallest UAV-UAV distance along the flown Hermite legs (41 samples)."""
+    out = []
+    for o in outcomes:
+        p0, v0 = o.slot_input.prev_xy_m, o.slot_input.prev_velocity_mps
+        p1, v1 = o.plan.uav_xy_m, o.plan.uav_velocity_mps
+        assert v0 is not None and v1 is not None
+        pts = np.stack([hermite_position(p0, v0, p1, v1, s.dt, f) for f in np.linspace(0, 1, 41)])
+        d = np.linalg.norm(pts[:, :, None] - pts[:, None], axis=-1) + 1e9 * np.eye(s.M)
+        out.append(float(d.min()))
+    return out
+
+
+def test_the_twelve_uav_trap_keeps_every_pair_apart() -> None:
+    s = load_bench().fleet_scenario(12, 60)
+    assert s.planner.vehicle_model
+    outcomes: list[SlotOutcome] = []
+    run_closed_loop(s, "proposed", draw_run_noise(s, 1), SolverKit(s), outcomes.append)
+    gaps = smallest_gaps_along_legs(s, outcomes)
+    assert min(gaps) >= s.d_safe, [
+        (o.slot, g) for o, g in zip(outcomes, gaps, strict=True) if g < s.d_safe
+    ]
+    evasive = [o for o in outcomes if o.plan.report.fallback == "evasive"]
+    assert evasive, "the guard never acted: the trap is gone and this test no longer tests it"
+    for o in evasive:
+        assert "evasive legs for UAVs" in o.plan.report.reason
+    assert SafetyMargins.of(s).separation_m >= s.d_safe
