@@ -13,7 +13,11 @@ at the cap otherwise (the per-slot plan flown instead) and fallen back for anoth
 mission-mean tr(PCRB) of each method's own closed loop and their ratio. With --compare-tree the package in DIR runs the same cells, interleaved with this tree's
 (old, new per seed), so both see the same load.
 
-Run: python bench/horizon_fleet.py [--sizes 3,6,12] [--slots 60] [--seeds 1,2,3]
+Safety, per M and method: the slots flown on the best effort (infeasible) or by the evasion guard
+(evasive), and the smallest UAV-UAV and UAV-to-true-target distances along the flown legs
+(`flown_gaps_m`), with the slots where a UAV pair came within D_s.
+
+Run: python bench/horizon_fleet.py [--sizes 3,6,12] [--slots 60] [--seeds 1,2,3] [--methods ...]
      python bench/horizon_fleet.py --compare-tree DIR [...]   (before/after in one run)
 """
 
@@ -62,14 +66,38 @@ def fleet_scenario(m: int, slots: int):  # type: ignore[no-untyped-def]
     return LiveSettings().apply(s)
 
 
-def run_cell(m: int, slots: int, seed: int) -> dict[str, dict[str, object]]:
-    """Both methods' closed loops at M = m, seed `seed`: what the table needs, as JSON values."""
+def flown_gaps_m(s, outcomes) -> tuple[list[float], list[float]]:  # type: ignore[no-untyped-def]
+    """Per slot, the smallest UAV-UAV distance and the smallest UAV-to-true-target distance (m)
+    along the flown legs: the cubic Hermite legs from each slot's start (position, velocity) to
+    its plan's (waypoint, end velocity), the target on the chord between its true states, at 41
+    instants a slot."""
+    from isac_mission.model.vehicle import hermite_position
+
+    uav_gaps, target_gaps = [], []
+    fractions = np.linspace(0, 1, 41)
+    target_from = s.x0[:2]
+    for o in outcomes:
+        p0, v0 = o.slot_input.prev_xy_m, o.slot_input.prev_velocity_mps
+        p1, v1 = o.plan.uav_xy_m, o.plan.uav_velocity_mps
+        pts = np.stack([hermite_position(p0, v0, p1, v1, s.dt, f) for f in fractions])
+        d = np.linalg.norm(pts[:, :, None] - pts[:, None], axis=-1) + 1e9 * np.eye(s.M)
+        uav_gaps.append(float(d.min()))
+        target = target_from + fractions[:, None] * (o.target_true[:2] - target_from)
+        target_gaps.append(float(np.linalg.norm(pts - target[:, None], axis=-1).min()))
+        target_from = o.target_true[:2]
+    return uav_gaps, target_gaps
+
+
+def run_cell(
+    m: int, slots: int, seed: int, methods: tuple[str, ...]
+) -> dict[str, dict[str, object]]:
+    """The methods' closed loops at M = m, seed `seed`: what the table needs, as JSON values."""
     from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run_closed_loop
     from isac_mission.planning.slot import SolverKit
 
     s = fleet_scenario(m, slots)
     out: dict[str, dict[str, object]] = {}
-    for method in METHODS:
+    for method in methods:
         kit = SolverKit(s)
         t0 = time.perf_counter()
         kit.warm_up(method)
@@ -78,8 +106,16 @@ def run_cell(m: int, slots: int, seed: int) -> dict[str, dict[str, object]]:
         result = run_closed_loop(s, method, draw_run_noise(s, seed), kit, outcomes.append)
         reports = [o.plan.report for o in outcomes]
         notes = [f"fallback {r.fallback}: {r.reason}" if r.fallback else r.polish for r in reports]
+        uav_gaps, target_gaps = flown_gaps_m(s, outcomes)
         run = MethodRun(
-            build_s, [float(t) for t in result.solve_s], float(np.mean(result.pcrb)), notes
+            build_s,
+            [float(t) for t in result.solve_s],
+            float(np.mean(result.pcrb)),
+            notes,
+            [r.fallback for r in reports],
+            uav_gaps,
+            target_gaps,
+            float(s.d_safe),
         )
         out[method] = asdict(run)
     return out
@@ -100,18 +136,25 @@ def horizon_counts(notes: list[str]) -> tuple[list[int], int, int, int, int]:
 @dataclass
 class MethodRun:
     """One method's closed loop in one cell: build (s), plan times [N] (s), mean tr(PCRB), the
-    slot notes (report.polish, or "fallback KIND: REASON")."""
+    slot notes (report.polish, or "fallback KIND: REASON"), the fallback kinds [N], the
+    smallest UAV-UAV and UAV-target distances along each slot's flown legs [N] (m), D_s (m)."""
 
     build_s: float
     solve_s: list[float]
     pcrb: float
     notes: list[str]
+    fallbacks: list[str]
+    uav_gap_m: list[float]
+    target_gap_m: list[float]
+    d_safe_m: float
 
 
-def collect(tree: str, m: int, slots: int, seed: int) -> dict[str, MethodRun]:
+def collect(
+    tree: str, m: int, slots: int, seed: int, methods: tuple[str, ...]
+) -> dict[str, MethodRun]:
     """run_cell in a subprocess with the package of `tree`."""
     out = subprocess.run(
-        [sys.executable, __file__, "--cell", str(m), str(slots), str(seed)],
+        [sys.executable, __file__, "--cell", str(m), str(slots), str(seed), *methods],
         cwd=tree,
         env={**os.environ, "PYTHONPATH": tree},
         capture_output=True,
@@ -119,7 +162,7 @@ def collect(tree: str, m: int, slots: int, seed: int) -> dict[str, MethodRun]:
         check=True,
     )
     cell = json.loads(out.stdout.strip().splitlines()[-1])
-    return {method: MethodRun(**cell[method]) for method in METHODS}
+    return {method: MethodRun(**cell[method]) for method in methods}
 
 
 def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
@@ -127,13 +170,13 @@ def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
     print(
         f"{'tree':<7} {'M':>3} {'method':<9} {'slots':>5} {'build s':>8} {'median ms':>9} "
         f"{'p95 ms':>8} {'it med':>6} {'it max':>6} {'conv':>5} {'kept':>4} {'cap':>4} {'other':>5} "
+        f"{'inf':>4} {'evas':>4} {'gap m':>6} {'<D_s':>4} {'tgt m':>6} "
         f"{'tr(PCRB)':>10} {'/ prop.':>7} {'t / prop.':>9}"
     )
     for tree, m, cells in rows:
         proposed_pcrb = float(np.mean([c.pcrb for c in cells["proposed"]]))
         proposed_ms = 1e3 * float(np.median([t for c in cells["proposed"] for t in c.solve_s]))
-        for method in METHODS:
-            runs = cells[method]
+        for method, runs in cells.items():
             times = 1e3 * np.array([t for c in runs for t in c.solve_s])
             pcrb = float(np.mean([c.pcrb for c in runs]))
             counts = f"{'':>6} {'':>6} {'':>5} {'':>4} {'':>4} {'':>5}"
@@ -141,17 +184,28 @@ def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
                 its, conv, kept, cap, other = horizon_counts([n for c in runs for n in c.notes])
                 med, top = (f"{np.median(its):.0f}", str(max(its))) if its else ("-", "-")
                 counts = f"{med:>6} {top:>6} {conv:>5d} {kept:>4d} {cap:>4d} {other:>5d}"
+            kinds = [f for c in runs for f in c.fallbacks]
+            gaps = [g for c in runs for g in c.uav_gap_m]
+            below = sum(g < c.d_safe_m for c in runs for g in c.uav_gap_m)
+            target = min(g for c in runs for g in c.target_gap_m)
+            safety = (
+                f"{kinds.count('infeasible'):>4d} {kinds.count('evasive'):>4d} "
+                f"{min(gaps):>6.1f} {below:>4d} {target:>6.1f}"
+            )
             print(
                 f"{tree:<7} {m:>3} {method:<9} {len(times):>5} "
                 f"{np.median([c.build_s for c in runs]):>8.1f} {np.median(times):>9.1f} "
-                f"{np.percentile(times, 95):>8.1f} {counts} {pcrb:>10.4g} "
+                f"{np.percentile(times, 95):>8.1f} {counts} {safety} {pcrb:>10.4g} "
                 f"{pcrb / proposed_pcrb:>7.3f} {np.median(times) / proposed_ms:>9.1f}"
             )
     print(
         "build: SolverKit.warm_up (cold), median over seeds; it: IPOPT's iterations; conv: "
         "IPOPT converged, its answer flown; kept: IPOPT at max_iterations, its feasible, lower "
         "last iterate flown; cap: at max_iterations, the per-slot plan flown; other: "
-        "fallen back for another reason; tr(PCRB): mission mean of the method's own closed loop, "
+        "fallen back for another reason; inf, evas: slots whose fallback is infeasible (the best "
+        "effort) or evasive (the guard); gap m: the smallest UAV-UAV distance along the flown "
+        "legs, <D_s: slots where it is below D_s; tgt m: the smallest UAV-to-true-target "
+        "distance; tr(PCRB): mission mean of the method's own closed loop, "
         "mean over seeds; / prop.: against proposed's; t / prop.: median plan time against "
         "proposed's"
     )
@@ -162,13 +216,17 @@ def main() -> None:
     ap.add_argument("--sizes", default="3,6,12", help="fleet sizes M (comma-separated)")
     ap.add_argument("--slots", type=int, default=60, help="slots per mission")
     ap.add_argument("--seeds", default="1,2,3", help="noise seeds (comma-separated)")
+    ap.add_argument("--methods", default=",".join(METHODS), help="proposed and/or horizon")
     ap.add_argument("--compare-tree", metavar="DIR", help="also the isac_mission package in DIR")
-    ap.add_argument("--cell", nargs=3, type=int, help=argparse.SUPPRESS)
+    ap.add_argument("--cell", nargs="+", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.cell:
-        m, slots, seed = args.cell
-        print(json.dumps(run_cell(m, slots, seed)))
+        m, slots, seed = (int(v) for v in args.cell[:3])
+        print(json.dumps(run_cell(m, slots, seed, tuple(args.cell[3:]) or METHODS)))
         return
+    methods = tuple(args.methods.split(","))
+    if "proposed" not in methods or not set(methods) <= set(METHODS):
+        ap.error(f"--methods: proposed and a subset of {', '.join(METHODS)}")
     here = str(Path(__file__).resolve().parent.parent)
     trees = {"after": here}
     if args.compare_tree:
@@ -177,11 +235,11 @@ def main() -> None:
     rows = []
     for m in (int(v) for v in args.sizes.split(",")):
         cells: dict[str, dict[str, list[MethodRun]]] = {
-            t: {method: [] for method in METHODS} for t in trees
+            t: {method: [] for method in methods} for t in trees
         }
         for seed in (int(v) for v in args.seeds.split(",")):
             for name, tree in trees.items():
-                for method, cell in collect(tree, m, args.slots, seed).items():
+                for method, cell in collect(tree, m, args.slots, seed, methods).items():
                     cells[name][method].append(cell)
         rows += [(name, m, cells[name]) for name in trees]
     table(rows)

@@ -22,7 +22,6 @@ from types import ModuleType
 import numpy as np
 import pytest
 
-from isac_mission.config import Scenario
 from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run_closed_loop
 from isac_mission.model.vehicle import VehicleModel, hermite_position
 from isac_mission.planning.evasion import (
@@ -151,25 +150,13 @@ def load_bench() -> ModuleType:
     return module
 
 
-def smallest_gaps_along_legs(s: Scenario, outcomes: list[SlotOutcome]) -> list[float]:
-    """Per slot, the smallest UAV-UAV distance along the flown Hermite legs (41 samples)."""
-    out = []
-    for o in outcomes:
-        p0, v0 = o.slot_input.prev_xy_m, o.slot_input.prev_velocity_mps
-        p1, v1 = o.plan.uav_xy_m, o.plan.uav_velocity_mps
-        assert v0 is not None and v1 is not None
-        pts = np.stack([hermite_position(p0, v0, p1, v1, s.dt, f) for f in np.linspace(0, 1, 41)])
-        d = np.linalg.norm(pts[:, :, None] - pts[:, None], axis=-1) + 1e9 * np.eye(s.M)
-        out.append(float(d.min()))
-    return out
-
-
 def test_the_twelve_uav_trap_keeps_every_pair_apart() -> None:
-    s = load_bench().fleet_scenario(12, 60)
+    bench = load_bench()
+    s = bench.fleet_scenario(12, 60)
     assert s.planner.vehicle_model
     outcomes: list[SlotOutcome] = []
     run_closed_loop(s, "proposed", draw_run_noise(s, 1), SolverKit(s), outcomes.append)
-    gaps = smallest_gaps_along_legs(s, outcomes)
+    gaps, _ = bench.flown_gaps_m(s, outcomes)
     assert min(gaps) >= s.d_safe, [
         (o.slot, g) for o, g in zip(outcomes, gaps, strict=True) if g < s.d_safe
     ]
