@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from isac_mission.config import Scenario, load_scenario
+from isac_mission.config import Scenario, load_scenario, single_target_problem
 from isac_mission.errors import ConfigError
 
 app = typer.Typer(
@@ -68,13 +68,19 @@ PublicOpt = Annotated[
 ]
 
 
-def load_or_exit(path: Path) -> Scenario:
-    """Load a scenario or print its problems (one per line) and exit with status 2."""
+def load_or_exit(path: Path, flies: bool = True) -> Scenario:
+    """Load a scenario or print its problems (one per line) and exit with status 2; with
+    `flies`, a multi-target scenario is refused too (`single_target_problem`)."""
     try:
-        return load_scenario(path)
+        s = load_scenario(path)
     except ConfigError as err:
         err_console.print(f"[bold red]invalid configuration[/]\n{err}", highlight=False)
         raise typer.Exit(2) from None
+    problem = single_target_problem(s) if flies else None
+    if problem is not None:
+        err_console.print(f"[bold red]not supported yet[/]\n{path}: {problem}", highlight=False)
+        raise typer.Exit(2)
+    return s
 
 
 def _print_version(value: bool) -> None:

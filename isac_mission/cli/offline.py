@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 @app.command("check-config")
 def check_config(config: ConfigArg) -> None:
     """Validate a scenario and print its derived constants in SI units."""
-    s = load_or_exit(config)
+    s = load_or_exit(config, flies=False)
     table = Table(title=f"{config} (mission {s.mission_id})")
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -40,6 +40,20 @@ def check_config(config: ConfigArg) -> None:
         ("radar gain c0 (SNR^s = c0/d^4)", f"{s.radar_gain:.3e}", "m^4"),
         ("BS positions", str(s.bs_xy.round(1).tolist()), "m"),
     ]
+    if s.multi_target and s.detection is not None:
+        d = s.detection
+        rows += [
+            (
+                f"target {t.name}",
+                f"{t.motion}, slots {t.first_slot}-{t.last_slot}, "
+                f"{'known' if t.prior_known else 'unknown'}",
+                "",
+            )
+            for t in s.targets
+        ]
+        rows.append(
+            ("detection", f"{d.model}, {d.false_alarms_per_slot:g} false alarms/UAV/slot", "")
+        )
     for row in rows:
         table.add_row(*row)
     console.print(table)

@@ -26,7 +26,7 @@ from isac_mission.config.loading import (
     scenario_path,
 )
 from isac_mission.config.resolve import radar_crb_alphas, random_bs_layout, resolve
-from isac_mission.config.scenario import Scenario, ScenarioFile
+from isac_mission.config.scenario import Scenario, ScenarioFile, single_target_problem
 from isac_mission.config.sections import (
     AreaConfig,
     BaseStationConfig,
@@ -95,4 +95,5 @@ __all__ = [
     "resolve",
     "scenario_names",
     "scenario_path",
+    "single_target_problem",
 ]

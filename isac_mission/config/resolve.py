@@ -10,6 +10,7 @@ import numpy as np
 
 from isac_mission.config.scenario import Scenario, ScenarioFile
 from isac_mission.config.signing import mavlink_signing_key
+from isac_mission.config.targets import DetectionSpec, TargetSpec
 from isac_mission.config.units import SPEED_OF_LIGHT_MPS, db_to_linear, dbm_to_w
 from isac_mission.errors import ConfigError
 from isac_mission.types import FloatArray
@@ -68,6 +69,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
         alpha_d, alpha_v = sens.alpha_d, sens.alpha_v
     sp, sv = spec.tracker.initial_position_std_m, spec.tracker.initial_velocity_std_mps
     n_slots = spec.timing.duration_s / spec.timing.slot_s
+    targets = resolve_targets(spec, round(n_slots))
     scenario = Scenario(
         mission_id=spec.mission_id,
         seed=spec.seed,
@@ -96,9 +98,9 @@ def resolve(spec: ScenarioFile) -> Scenario:
         v_max=uav.max_speed_mps,
         d_safe=uav.safe_distance_m,
         a_max=uav.max_accel_mps2,
-        x0=np.asarray(tgt.initial_state, dtype=float),
+        x0=np.asarray(targets[0].x0, dtype=float),
         kappa=tgt.process_noise_intensity,
-        rcs_m2=db_to_linear(tgt.rcs_dbsm),
+        rcs_m2=targets[0].rcs_m2,
         sensing_model=sens.model,
         Ts=sens.cpi_s,
         alpha_d=alpha_d,
@@ -113,11 +115,68 @@ def resolve(spec: ScenarioFile) -> Scenario:
         mavlink_signing_key=mavlink_signing_key(spec.security.mavlink_signing),
         impairment=spec.impairment,
         links=spec.links,
+        targets=targets,
+        detection=resolve_detection(spec),
     )
     problems = _cross_field_problems(scenario, n_slots)
     if problems:
         raise ConfigError("\n".join(problems))
     return scenario
+
+
+def resolve_targets(spec: ScenarioFile, n_slots: int) -> tuple[TargetSpec, ...]:
+    """The scenario's targets: the `targets:` list, or the one under `target:` (known, in the
+    scene from slot 0 to N). A target's slots are those from ceil(appears_s / dt) to
+    floor(leaves_s / dt) (N at most)."""
+    dt = spec.timing.slot_s
+    if spec.targets is None:
+        t = spec.target
+        return (
+            TargetSpec(
+                "target-0",
+                t.initial_state,
+                db_to_linear(t.rcs_dbsm),
+                "constant_velocity",
+                0.0,
+                (),
+                0,
+                n_slots,
+                True,
+            ),
+        )
+    out = []
+    for i, e in enumerate(spec.targets):
+        first = math.ceil(e.appears_s / dt - 1e-9)
+        last = n_slots if e.leaves_s is None else min(n_slots, math.floor(e.leaves_s / dt + 1e-9))
+        out.append(
+            TargetSpec(
+                name=e.name or f"target-{i}",
+                x0=e.initial_state,
+                rcs_m2=db_to_linear(e.rcs_dbsm),
+                motion=e.motion,
+                turn_rate_radps=e.turn_rate_radps or 0.0,
+                waypoints_xy_m=tuple(e.waypoints_xy_m or ()),
+                first_slot=first,
+                last_slot=last,
+                prior_known=e.prior == "known",
+            )
+        )
+    return tuple(out)
+
+
+def resolve_detection(spec: ScenarioFile) -> DetectionSpec:
+    """The detection model in SI units, its windows' defaults filled in (config/targets.py)."""
+    d = spec.detection
+    diagonal = math.hypot(*spec.area.size_m)
+    height = spec.uavs.altitude_m
+    return DetectionSpec(
+        model=d.model,
+        detection_prob=1.0 - spec.sensing.missed_detection_prob,
+        snr_threshold=0.0 if d.snr_threshold_db is None else db_to_linear(d.snr_threshold_db),
+        false_alarms_per_slot=d.false_alarms_per_slot,
+        range_window_m=d.range_window_m or (0.0, math.hypot(diagonal, height)),
+        doppler_window_mps=d.doppler_window_mps or (-60.0, 60.0),
+    )
 
 
 def _cross_field_problems(s: Scenario, n_slots: float) -> list[str]:
@@ -158,14 +217,22 @@ def _cross_field_problems(s: Scenario, n_slots: float) -> list[str]:
     for m in s.battery.capacity_wh_by_uav:
         if m >= s.M:
             out.append(f"uavs.battery.capacity_wh_by_uav: no UAV {m} (M = {s.M})")
-    p = s.x0[:2]
-    if not (0 <= p[0] <= s.area[0] and 0 <= p[1] <= s.area[1]):
-        out.append(f"target.initial_state: position {p.tolist()} is outside the area")
-    for m, q in enumerate(s.uav_start_xy):
-        gap = float(np.linalg.norm(q - p))
-        if gap < s.d_safe:
-            out.append(
-                f"uavs.start_xy_m[{m}]: {gap:.1f} m from the target's start, closer than "
-                f"safe_distance_m = {s.d_safe} m"
-            )
+    many = len(s.targets) > 1 or s.targets[0].first_slot > 0
+    for i, t in enumerate(s.targets):
+        where = f"targets[{i}].initial_state" if many else "target.initial_state"
+        p = np.asarray(t.x0[:2])
+        if not (0 <= p[0] <= s.area[0] and 0 <= p[1] <= s.area[1]):
+            out.append(f"{where}: position {p.tolist()} is outside the area")
+        if t.first_slot > s.N:
+            out.append(f"targets[{i}].appears_s: after the mission's end ({s.N * s.dt} s)")
+        if t.first_slot > 0:
+            continue  # the UAVs have moved by the time it appears
+        for m, q in enumerate(s.uav_start_xy):
+            gap = float(np.linalg.norm(q - p))
+            if gap < s.d_safe:
+                whose = f"target {t.name}'s" if many else "the target's"
+                out.append(
+                    f"uavs.start_xy_m[{m}]: {gap:.1f} m from {whose} start, closer than "
+                    f"safe_distance_m = {s.d_safe} m"
+                )
     return out

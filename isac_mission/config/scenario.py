@@ -3,11 +3,12 @@ after the paper's symbols)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from isac_mission.config.impairment import ImpairmentConfig
 from isac_mission.config.links import LinksConfig
@@ -26,6 +27,7 @@ from isac_mission.config.sections import (
 )
 from isac_mission.config.security import SecurityConfig
 from isac_mission.config.signing import MavlinkSigningKey
+from isac_mission.config.targets import DetectionConfig, DetectionSpec, TargetEntry, TargetSpec
 from isac_mission.types import FloatArray
 
 
@@ -40,12 +42,30 @@ class ScenarioFile(Section):
     base_stations: BaseStationConfig = BaseStationConfig()
     uavs: UavConfig = UavConfig()
     target: TargetConfig = TargetConfig()
+    targets: list[TargetEntry] | None = Field(
+        None,
+        min_length=1,
+        description="Several intruders (config/targets.py); null: the one under target:.",
+    )
     sensing: SensingConfig = SensingConfig()
+    detection: DetectionConfig = DetectionConfig()
     tracker: TrackerConfig = TrackerConfig()
     planner: PlannerConfig = PlannerConfig()
     security: SecurityConfig = SecurityConfig()
     impairment: ImpairmentConfig = ImpairmentConfig()
     links: LinksConfig = LinksConfig()
+
+    @model_validator(mode="after")
+    def _one_way_to_give_targets(self) -> ScenarioFile:
+        if self.targets is not None:
+            both = {"initial_state", "rcs_dbsm"} & self.target.model_fields_set
+            if both:
+                raise ValueError(
+                    f"target.{sorted(both)[0]}: give the targets under targets: (a list) or one "
+                    "under target:, not both (target.process_noise_intensity stays the "
+                    "scenario's process noise)"
+                )
+        return self
 
 
 @dataclass(frozen=True)
@@ -103,6 +123,21 @@ class Scenario:
     """Fault injection on the simulated world's links (read by `sim` only; not traced)."""
     links: LinksConfig = field(default_factory=LinksConfig)
     """MAVLink ports of the live system (PX4 SITL's layout; the CLI's options override them)."""
+    targets: tuple[TargetSpec, ...] = ()
+    """Every intruder (config/targets.py); () on a Scenario built by hand: the one at x0. On the
+    single-target path the loops read x0, kappa and rcs_m2 (which `with_changes` may change),
+    never targets[0]."""
+    detection: DetectionSpec | None = None
+    """The detection model (detection:); None on a Scenario built by hand: fixed, no clutter."""
+
+    @property
+    def multi_target(self) -> bool:
+        """More than one target, a target that turns, flies waypoints, comes, goes or must be
+        found, or detections with false alarms or an SNR model: the multi-target path; False on
+        every single-target scenario as before."""
+        if len(self.targets) > 1 or (self.detection is not None and not self.detection.is_default):
+            return True
+        return bool(self.targets) and not self.targets[0].is_plain(self.N)
 
     @property
     def radar_gain(self) -> float:
@@ -152,4 +187,26 @@ class Scenario:
             "bound_prior": self.bound_prior,
             "ekf_iterations": self.ekf_iterations,
             "planner": self.planner.model_dump(),
+            **(self._multi_target_config() if self.multi_target else {}),
         }
+
+    def _multi_target_config(self) -> dict[str, Any]:
+        """The trace config of the multi-target path (absent from single-target traces)."""
+        return {
+            "targets": [dataclasses.asdict(t) for t in self.targets],
+            "detection": None if self.detection is None else dataclasses.asdict(self.detection),
+        }
+
+
+def single_target_problem(s: Scenario) -> str | None:
+    """Why the closed loops (`simulate`, `sweep`, `run`, `serve`) cannot fly `s` yet, or None:
+    the multi-target path (several targets, false alarms, an SNR detection model, a target that
+    turns, comes late or must be found) has its scenario, truth and detections
+    (model/targets.py, model/detections.py) but not yet its tracker and planner."""
+    if not s.multi_target:
+        return None
+    return (
+        "targets/detection: this scenario takes the multi-target path (docs/model.md, "
+        "'Several targets'): its truth and unlabelled detections exist, its tracker and the "
+        "closed loops do not yet; the closed loops fly single-target scenarios"
+    )

@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from isac_mission.config import Scenario
+from isac_mission.config import Scenario, single_target_problem
+from isac_mission.errors import ConfigError
 from isac_mission.model.detections import noisy_detections
 from isac_mission.model.kinematics import transition_matrix
 from isac_mission.model.run_noise import RunNoise
@@ -88,7 +89,11 @@ def run_closed_loop(
 ) -> RunResult:
     """Fly one mission of N slots with the given planning method; returns per-slot results.
     truth [N + 1, 4]: the target's true states x_0..x_N (a scripted target); None: the
-    constant-velocity model driven by the run's process noise (`true_trajectory`)."""
+    constant-velocity model driven by the run's process noise (`true_trajectory`). A scenario of
+    the multi-target path raises ConfigError (config.single_target_problem)."""
+    problem = single_target_problem(s)
+    if problem is not None:
+        raise ConfigError(f"{s.mission_id}: {problem}")
     model = CycleModel.from_scenario(s)
     truth = true_trajectory(s, noise) if truth is None else np.asarray(truth, dtype=float)
     state = TrackState(

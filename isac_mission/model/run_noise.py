@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.model.detections import SlotDraws
 from isac_mission.model.kinematics import process_noise
 from isac_mission.types import FloatArray
 
@@ -42,3 +43,42 @@ def draw_run_noise(s: Scenario, seed: int) -> RunNoise:
         measurement=rng.standard_normal((s.N, 2 * s.M)),
         miss_draw=rng.uniform(size=(s.N, s.M)),
     )
+
+
+MULTI_TARGET_STREAM = 26
+"""The second key of the multi-target draws' generator, [seed, 26]: a stream of its own, so a
+single-target run's numbers (`draw_run_noise`) are the same whether or not these are drawn."""
+
+
+@dataclass(frozen=True)
+class MultiTargetNoise:
+    """One run's random numbers of the multi-target path (docs/model.md, "Several targets").
+
+    target_normals [T, N, 4]: standard normals of every target's process noise (model/targets.py);
+    slots [N]: each slot's draws of the unlabelled detections (model/detections.SlotDraws).
+    """
+
+    seed: int
+    target_normals: FloatArray
+    slots: tuple[SlotDraws, ...]
+
+
+def draw_multi_target_noise(s: Scenario, seed: int) -> MultiTargetNoise:
+    """Draw a run's multi-target numbers from the generator [seed, MULTI_TARGET_STREAM]; the false
+    alarms' counts are Poisson with the scenario's mean per UAV per slot."""
+    rng = np.random.default_rng([seed, MULTI_TARGET_STREAM])
+    T, M = max(len(s.targets), 1), s.M
+    rate = 0.0 if s.detection is None else s.detection.false_alarms_per_slot
+    target_normals = rng.standard_normal((T, s.N, 4))
+    slots = []
+    for _ in range(s.N):
+        counts = rng.poisson(rate, size=M)
+        slots.append(
+            SlotDraws(
+                normals=rng.standard_normal((M, T, 2)),
+                detect=rng.uniform(size=(M, T)),
+                target_keys=rng.uniform(size=(M, T)),
+                clutter=tuple(rng.uniform(size=(int(c), 3)) for c in counts),
+            )
+        )
+    return MultiTargetNoise(seed, target_normals, tuple(slots))

@@ -1,0 +1,109 @@
+"""The multi-target scenario (config/targets.py): `targets:` and `detection:` load, resolve and are
+refused with a clear message where wrong; every single-target scenario means what it meant."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from isac_mission.cli import app
+from isac_mission.config import load_scenario, parse_scenario, single_target_problem
+from isac_mission.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def multi() -> dict[str, Any]:
+    data = yaml.safe_load((ROOT / "config" / "multi-target.yaml").read_text())
+    assert isinstance(data, dict)
+    return data
+
+
+def test_the_shipped_multi_target_scenario_is_the_issues() -> None:
+    s = load_scenario("multi-target")
+    assert s.M == 6 and len(s.targets) == 3
+    known, entering, turning = s.targets
+    assert known.prior_known and known.first_slot == 0
+    assert not entering.prior_known and entering.first_slot == 20
+    assert turning.motion == "coordinated_turn" and turning.turn_rate_radps == 0.05
+    assert s.detection is not None
+    assert s.detection.detection_prob == pytest.approx(0.9)
+    assert s.detection.false_alarms_per_slot == 2
+    assert s.multi_target
+    assert single_target_problem(s) is not None
+
+
+@pytest.mark.parametrize("name", ["paper", "paper-literal", "constrained"])
+def test_single_target_scenarios_are_as_before(name: str) -> None:
+    s = load_scenario(name)
+    assert not s.multi_target and single_target_problem(s) is None
+    (t,) = s.targets
+    assert t.x0 == tuple(s.x0.tolist()) and t.rcs_m2 == s.rcs_m2
+    assert (t.first_slot, t.last_slot, t.prior_known) == (0, s.N, True)
+    config = s.trace_config()
+    assert "targets" not in config and "detection" not in config
+
+
+def test_a_multi_target_trace_config_names_the_targets() -> None:
+    config = load_scenario("multi-target").trace_config()
+    assert [t["name"] for t in config["targets"]] == ["known", "entering", "turning"]
+    assert config["detection"]["false_alarms_per_slot"] == 2
+
+
+def test_one_known_plain_target_under_targets_is_the_single_target_path() -> None:
+    data = multi()
+    data["targets"] = [data["targets"][0]]
+    data["sensing"]["missed_detection_prob"] = 0.0
+    data["detection"] = {"model": "fixed", "false_alarms_per_slot": 0}
+    assert not parse_scenario(data, "one").multi_target
+    late = copy.deepcopy(data)
+    late["targets"][0]["appears_s"] = 5
+    assert parse_scenario(late, "late").multi_target
+    unknown = copy.deepcopy(data)
+    unknown["targets"][0]["prior"] = "unknown"
+    assert parse_scenario(unknown, "unknown").multi_target
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda d: d["target"].update(initial_state=[1, 2, 3, 4]), "not both"),
+        (lambda d: d["targets"][2].pop("turn_rate_radps"), "needs turn_rate_radps"),
+        (lambda d: d["targets"][0].update(turn_rate_radps=0.1), "is for motion coordinated_turn"),
+        (lambda d: d["targets"][0].update(motion="waypoints"), "needs waypoints_xy_m"),
+        (lambda d: d["targets"][1].update(leaves_s=10), "must be after appears_s"),
+        (lambda d: d["targets"][1].update(appears_s=500), "after the mission's end"),
+        (lambda d: d["targets"][1].update(initial_state=[-5, 600, 1, 1]), "outside the area"),
+        (lambda d: d["targets"][0].update(initial_state=[1500, 2310, 1, 1]), "closer than"),
+        (lambda d: d["targets"][0].update(colour="red"), "colour"),
+        (lambda d: d["detection"].update(model="snr"), "needs snr_threshold_db"),
+        (lambda d: d["detection"].update(snr_threshold_db=13), "is for model snr"),
+        (lambda d: d["detection"].update(false_alarms_per_slot=-1), "false_alarms_per_slot"),
+        (lambda d: d["detection"].update(doppler_window_mps=[5, -5]), "low < high"),
+        (lambda d: d.update(targets=[]), "targets"),
+    ],
+)
+def test_bad_multi_target_input_is_named(change: Any, message: str) -> None:
+    data = multi()
+    change(data)
+    with pytest.raises((ConfigError, ValueError), match=message):
+        parse_scenario(data, "bad")
+
+
+def test_the_closed_loops_refuse_the_multi_target_path_clearly(tmp_path: Path) -> None:
+    result = CliRunner().invoke(
+        app, ["simulate", str(ROOT / "config" / "multi-target.yaml"), "--runs", "1"]
+    )
+    assert result.exit_code == 2
+    assert "multi-target path" in result.output
+
+
+def test_check_config_accepts_and_describes_a_multi_target_scenario() -> None:
+    result = CliRunner().invoke(app, ["check-config", str(ROOT / "config" / "multi-target.yaml")])
+    assert result.exit_code == 0, result.output
+    assert "target turning" in result.output and "coordinated_turn" in result.output
