@@ -117,6 +117,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
         links=spec.links,
         targets=targets,
         detection=resolve_detection(spec),
+        multi_tracker=spec.multi_target,
     )
     problems = _cross_field_problems(scenario, n_slots)
     if problems:

@@ -27,7 +27,13 @@ from isac_mission.config.sections import (
 )
 from isac_mission.config.security import SecurityConfig
 from isac_mission.config.signing import MavlinkSigningKey
-from isac_mission.config.targets import DetectionConfig, DetectionSpec, TargetEntry, TargetSpec
+from isac_mission.config.targets import (
+    DetectionConfig,
+    DetectionSpec,
+    MultiTrackerConfig,
+    TargetEntry,
+    TargetSpec,
+)
 from isac_mission.types import FloatArray
 
 
@@ -50,6 +56,7 @@ class ScenarioFile(Section):
     sensing: SensingConfig = SensingConfig()
     detection: DetectionConfig = DetectionConfig()
     tracker: TrackerConfig = TrackerConfig()
+    multi_target: MultiTrackerConfig = MultiTrackerConfig()
     planner: PlannerConfig = PlannerConfig()
     security: SecurityConfig = SecurityConfig()
     impairment: ImpairmentConfig = ImpairmentConfig()
@@ -129,6 +136,8 @@ class Scenario:
     never targets[0]."""
     detection: DetectionSpec | None = None
     """The detection model (detection:); None on a Scenario built by hand: fixed, no clutter."""
+    multi_tracker: MultiTrackerConfig = field(default_factory=MultiTrackerConfig)
+    """The multi-target tracker (multi_target:), read on the multi-target path only."""
 
     @property
     def multi_target(self) -> bool:
@@ -195,6 +204,7 @@ class Scenario:
         return {
             "targets": [dataclasses.asdict(t) for t in self.targets],
             "detection": None if self.detection is None else dataclasses.asdict(self.detection),
+            "multi_target": self.multi_tracker.model_dump(),
         }
 
 

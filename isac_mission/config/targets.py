@@ -101,6 +101,58 @@ class DetectionConfig(Section):
         return self
 
 
+class MultiTrackerConfig(Section):
+    """`multi_target:`: the multi-target tracker and its metric (docs/model.md, "The
+    multi-target tracker"); read on the multi-target path only."""
+
+    association: Literal["jpda", "gnn"] = Field(
+        "jpda",
+        description="jpda: joint probabilistic data association; gnn: global nearest "
+        "neighbour (docs/model.md, 'The multi-target tracker').",
+    )
+    gate_prob: float = Field(0.99, gt=0, lt=1, description="P_g of the association gate.")
+    process_noise_intensity: float | None = Field(
+        None,
+        ge=0,
+        description="kappa of the tracks' constant-velocity model, m^2/s^3; null: "
+        "target.process_noise_intensity. A turning target needs more (docs/model.md).",
+    )
+    hit_weight: float = Field(
+        2.5,
+        gt=0,
+        description="A slot is a hit for a track when sum_m (1 - beta_m0) >= this (about three "
+        "UAVs' measurements: two coarse ranges fit a ghost, docs/model.md).",
+    )
+    confirm_hits: int = Field(3, ge=1, description="Hits that confirm a tentative track...")
+    confirm_window: int = Field(4, ge=1, description="... within its first this many slots.")
+    delete_after_misses: int = Field(
+        3,
+        ge=1,
+        description="A confirmed track is deleted after this many slots in a row without a hit.",
+    )
+    initiation_gate_prob: float = Field(
+        0.999, gt=0, lt=1, description="Gate and residual test of a new track's measurements."
+    )
+    max_initial_position_std_m: float = Field(
+        150.0, gt=0, description="A new track's largest position std, m."
+    )
+    max_target_speed_mps: float = Field(
+        60.0, gt=0, description="The fastest intruder: a faster new track is clutter, m/s."
+    )
+    gospa_cutoff_m: float = Field(
+        10.0, gt=0, description="GOSPA's cut-off c, m (p = 2, alpha = 2)."
+    )
+
+    @model_validator(mode="after")
+    def _window_holds_the_hits(self) -> MultiTrackerConfig:
+        if self.confirm_hits > self.confirm_window:
+            raise ValueError(
+                f"confirm_hits {self.confirm_hits} cannot happen within confirm_window "
+                f"{self.confirm_window} slots"
+            )
+        return self
+
+
 @dataclass(frozen=True)
 class TargetSpec:
     """One resolved target (SI units): name; x0 [4] (m, m/s) at its first slot; rcs_m2; motion,
@@ -140,6 +192,12 @@ class DetectionSpec:
     false_alarms_per_slot: float
     range_window_m: tuple[float, float]
     doppler_window_mps: tuple[float, float]
+
+    @property
+    def clutter_density(self) -> float:
+        """lambda: the false alarms' mean number per unit of the window, per m * (m/s)."""
+        (r_lo, r_hi), (v_lo, v_hi) = self.range_window_m, self.doppler_window_mps
+        return self.false_alarms_per_slot / ((r_hi - r_lo) * (v_hi - v_lo))
 
     @property
     def is_default(self) -> bool:

@@ -55,12 +55,15 @@ class MultiTargetNoise:
     """One run's random numbers of the multi-target path (docs/model.md, "Several targets").
 
     target_normals [T, N, 4]: standard normals of every target's process noise (model/targets.py);
-    slots [N]: each slot's draws of the unlabelled detections (model/detections.SlotDraws).
+    slots [N]: each slot's draws of the unlabelled detections (model/detections.SlotDraws);
+    initial_errors [T, 4]: x_hat - x of each known target's first belief, ~ N(0, P0) (drawn
+    after the rest, so the draws above are those of a generator that draws no more).
     """
 
     seed: int
     target_normals: FloatArray
     slots: tuple[SlotDraws, ...]
+    initial_errors: FloatArray
 
 
 def draw_multi_target_noise(s: Scenario, seed: int) -> MultiTargetNoise:
@@ -81,4 +84,5 @@ def draw_multi_target_noise(s: Scenario, seed: int) -> MultiTargetNoise:
                 clutter=tuple(rng.uniform(size=(int(c), 3)) for c in counts),
             )
         )
-    return MultiTargetNoise(seed, target_normals, tuple(slots))
+    initial_errors = rng.multivariate_normal(np.zeros(4), s.P0, size=T)
+    return MultiTargetNoise(seed, target_normals, tuple(slots), initial_errors)

@@ -101,7 +101,9 @@ def alternate(problem: SlotProblem, kit: SolverKit, how: Alternation) -> SlotPla
     n_pos = n_bw = n_ao = 0
     search = {"epsilon": cfg.epsilon, "step": cfg.line_search_step}
     note, reason, n_polish = "", "", 0
-    polish = how.polish and moves
+    # The polish's NLP is one target's problem: with several targets Algorithm 2 plans alone.
+    single = objective if isinstance(objective, PlanningObjective) else None
+    polish = how.polish and moves and single is not None
     polished_early, n_early = False, 0
     for ao_iteration in range(1, cfg.max_ao_iterations + 1):
         n_ao = ao_iteration
@@ -135,10 +137,10 @@ def alternate(problem: SlotProblem, kit: SolverKit, how: Alternation) -> SlotPla
         history.append(f_new)
         decrease = (f - f_new) / f if np.isfinite(f) else np.inf
         f = f_new
-        if polish and ao_iteration == 1 and decrease > cfg.epsilon:
+        if single is not None and polish and ao_iteration == 1 and decrease > cfg.epsilon:
             # The polish after the first AO iteration (docs/model.md, "The polish"): kept when
             # it gains more than EARLY_POLISH_GAIN on that point; otherwise Algorithm 2 resumes.
-            early = polish_nlp(kit).polish(Q, eta, objective, cons)
+            early = polish_nlp(kit).polish(Q, eta, single, cons)
             if early.accepted and f_new - early.value > EARLY_POLISH_GAIN * f_new:
                 Q, eta, polished_early = early.uav_xy_m, early.bandwidth_share, True
                 note, n_polish = f"{early.note} after AO iteration 1", early.iterations
@@ -152,19 +154,19 @@ def alternate(problem: SlotProblem, kit: SolverKit, how: Alternation) -> SlotPla
         violated.append("14e capacity")
     if violated:
         return best_effort(problem, "infeasible: no plan satisfies " + ", ".join(violated))
-    if polish and not polished_early:
-        polished = polish_nlp(kit).polish(Q, eta, objective, cons)
+    if single is not None and polish and not polished_early:
+        polished = polish_nlp(kit).polish(Q, eta, single, cons)
         note, n_polish = polished.note, n_early + polished.iterations
         if polished.accepted:
             Q, eta = polished.uav_xy_m, polished.bandwidth_share
             history.append(polished.value)
         else:
             reason = polished.note
-    if polish:
+    if single is not None and polish:
         # The other basins: the band's leader moved to another UAV.
         f_best = history[-1]
-        for leader, start_eta in screen_leaders(Q, eta, objective, f_best):
-            other = polish_nlp(kit).polish(Q, start_eta, objective, cons)
+        for leader, start_eta in screen_leaders(Q, eta, single, f_best):
+            other = polish_nlp(kit).polish(Q, start_eta, single, cons)
             n_polish += other.iterations
             if other.accepted and other.value < f_best:
                 Q, eta, f_best = other.uav_xy_m, other.bandwidth_share, other.value

@@ -24,7 +24,7 @@ from isac_mission.planning.association import associate
 from isac_mission.planning.communication import CommunicationPlan, communication_optimal
 from isac_mission.planning.feasibility import SlotConstraints, operating_area
 from isac_mission.planning.margins import target_clearance_m
-from isac_mission.tracking.pcrb import PlanningObjective
+from isac_mission.tracking.pcrb import Objective, PlanningObjective, SumObjective
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 
 if TYPE_CHECKING:
@@ -53,7 +53,11 @@ class SlotInput:
     vehicles outside this plan that every planned UAV keeps D_s from (the kit must be built with
     n_keep_out = L); target_cov_pred [4, 4] or None: the tracker's predicted covariance of the
     target (the safety rule; None: prior_information^-1); prev_plan: last slot's plan (the
-    horizon's warm start), None at the first slot.
+    horizon's warm start), None at the first slot; other_targets: further targets the plan is
+    for, each (state_pred [4], prior_information [4, 4]) as target_state_pred and
+    prior_information are (the multi-target path: the objective is the sum of every target's
+    tr(PCRB); the polish and the horizon plan for the first target only, so the loops that
+    give other targets fly neither; docs/model.md, "Several targets").
 
     The names before units were added (prev_xy, prev_eta, prev_assoc, x_pred, J_pred,
     prev_velocity, keep_out_xy) are accepted as keywords and readable as attributes, with a
@@ -69,6 +73,7 @@ class SlotInput:
     keep_out_xy_m: FloatArray | None = None
     target_cov_pred: FloatArray | None = None
     prev_plan: SlotPlan | None = None
+    other_targets: tuple[tuple[FloatArray, FloatArray], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -80,7 +85,8 @@ class SlotProblem:
     (inside the 14h disk and the operating area) when a dynamics limit is set; constraints: the
     exact 14a-14j set with the slot's clearance; max_step_m: V_max dt, or 0 for a method that does
     not move the UAVs; communication: the communication-optimal plan at that step;
-    objective: tr(PCRB) at the predicted state (measurement_only for the CRB-criterion);
+    objective: tr(PCRB) at the predicted state (measurement_only for the CRB-criterion), summed
+    over the input's targets when it has other_targets;
     started_s: the perf_counter time planning began (for SolveReport.solve_s).
     """
 
@@ -91,7 +97,7 @@ class SlotProblem:
     constraints: SlotConstraints
     max_step_m: float
     communication: CommunicationPlan
-    objective: PlanningObjective
+    objective: Objective
     started_s: float = field(default_factory=time.perf_counter)
 
     def elapsed_s(self) -> float:
@@ -101,13 +107,11 @@ class SlotProblem:
     def plan(self, xy: FloatArray, eta: FloatArray, report: SolveReport) -> SlotPlan:
         """The SlotPlan of waypoints xy [M, 2] and shares eta [M], its bound by the full
         objective (prior included, also for the CRB-criterion)."""
-        o = self.objective
-        full = PlanningObjective(o.J_pred, o.x_pred, o.sensing)
         return SlotPlan(
             uav_xy_m=xy,
             bs_of_uav=self.bs_of_uav,
             bandwidth_share=eta,
-            pcrb_trace=full.value(xy, eta),
+            pcrb_trace=self.objective.with_prior().value(xy, eta),
             report=report,
         )
 
@@ -171,9 +175,11 @@ def build_slot_problem(
     comm = communication_optimal(
         inp.prev_xy_m, serving, max_step_m=step, dH=s.dH, rho0=s.rho0, B=s.B
     )
-    objective = PlanningObjective(
-        inp.prior_information, x_pred, kit.sensing, measurement_only=measurement_only
+    parts = tuple(
+        PlanningObjective(J, x, kit.sensing, measurement_only=measurement_only)
+        for x, J in ((x_pred, inp.prior_information), *inp.other_targets)
     )
+    objective: Objective = parts[0] if len(parts) == 1 else SumObjective(parts)
     return SlotProblem(
         inp=inp,
         scenario=s,

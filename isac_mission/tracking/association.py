@@ -43,12 +43,16 @@ def gate_threshold(probability: float, dimension: int = 2) -> float:
 class Hypotheses:
     """One report against the tracks: likelihood_ratio [T, k] (l_ij, 0 outside the gate),
     gated [T, k], distance2 [T, k] (the Mahalanobis distances squared), miss_weight
-    (1 - P_d P_g)."""
+    (1 - P_d P_g): one for every track, or [T] when each track has its own P_d."""
 
     likelihood_ratio: FloatArray
     gated: BoolArray
     distance2: FloatArray
-    miss_weight: float
+    miss_weight: float | FloatArray
+
+    def miss_weights(self) -> FloatArray:
+        """[T] each track's 1 - P_d P_g."""
+        return np.broadcast_to(np.asarray(self.miss_weight, dtype=float), self.gated.shape[:1])
 
     @classmethod
     def of(
@@ -56,28 +60,32 @@ class Hypotheses:
         predicted: FloatArray,
         innovation_cov: FloatArray,
         measurements: FloatArray,
-        detection_prob: float,
+        detection_prob: float | FloatArray,
         clutter_density: float,
         gate: float,
         gate_prob: float,
     ) -> Hypotheses:
-        """predicted [T, d], innovation_cov [T, d, d], measurements [k, d]; clutter_density
-        lambda > 0; gate gamma (`gate_threshold(gate_prob)`)."""
+        """predicted [T, d], innovation_cov [T, d, d], measurements [k, d]; detection_prob P_d,
+        one for every track or [T]; clutter_density lambda > 0; gate gamma
+        (`gate_threshold(gate_prob)`)."""
         z_hat = np.asarray(predicted, dtype=float)
         S = np.asarray(innovation_cov, dtype=float)
         dim = z_hat.shape[-1] if z_hat.ndim == 2 else 2
         z = np.asarray(measurements, dtype=float).reshape(-1, dim)
         T, k = len(z_hat), len(z)
+        pd = np.broadcast_to(np.asarray(detection_prob, dtype=float), (T,))
         d2 = np.full((T, k), np.inf)
         ratio = np.zeros((T, k))
         for i in range(T if k else 0):
             nu = z - z_hat[i]
             d2[i] = np.einsum("kd,de,ke->k", nu, np.linalg.inv(S[i]), nu)
             norm = 1.0 / math.sqrt(float(np.linalg.det(2 * math.pi * S[i])))
-            ratio[i] = detection_prob * norm * np.exp(-0.5 * d2[i]) / clutter_density
+            ratio[i] = pd[i] * norm * np.exp(-0.5 * d2[i]) / clutter_density
         gated = d2 <= gate
         ratio[~gated] = 0.0
-        return cls(ratio, gated, d2, 1.0 - detection_prob * gate_prob)
+        if np.ndim(detection_prob) == 0:
+            return cls(ratio, gated, d2, 1.0 - float(detection_prob) * gate_prob)
+        return cls(ratio, gated, d2, 1.0 - pd * gate_prob)
 
 
 def gnn(h: Hypotheses) -> IntArray:
@@ -90,7 +98,9 @@ def gnn(h: Hypotheses) -> IntArray:
     with np.errstate(divide="ignore"):
         cost = np.where(h.gated, -np.log(h.likelihood_ratio), big)
     miss = np.full((T, T), big)
-    np.fill_diagonal(miss, -math.log(h.miss_weight) if h.miss_weight > 0 else big)
+    w = h.miss_weights()
+    with np.errstate(divide="ignore"):
+        np.fill_diagonal(miss, np.where(w > 0, -np.log(np.where(w > 0, w, 1.0)), big))
     rows, cols = linear_sum_assignment(np.hstack([cost, miss]))
     for i, j in zip(rows, cols, strict=True):
         if j < k and h.gated[i, j] and cost[i, j] < big:
@@ -132,15 +142,15 @@ def jpda(h: Hypotheses) -> FloatArray:
     for tracks, meas in clusters(h.gated):
         sub = h.likelihood_ratio[np.ix_(tracks, meas)]
         weights = np.zeros((len(tracks), len(meas) + 1))
-        total = _enumerate(sub, h.miss_weight, weights)
+        total = _enumerate(sub, h.miss_weights()[tracks], weights)
         beta[tracks[:, None], meas[None]] = weights[:, :-1] / total
         beta[tracks, k] = weights[:, -1] / total
     return beta
 
 
-def _enumerate(ratio: FloatArray, miss_weight: float, weights: FloatArray) -> float:
+def _enumerate(ratio: FloatArray, miss_weight: FloatArray, weights: FloatArray) -> float:
     """The sum of every joint event's weight over the tracks [t] and measurements [m] of
-    `ratio` [t, m], adding each event's weight into weights [t, m + 1] at the pairs it holds
+    `ratio` [t, m], track i missed with weight miss_weight [t], adding each event's weight into weights [t, m + 1] at the pairs it holds
     (the miss in the last column). Depth-first over the tracks."""
     t, m = ratio.shape
     chosen = [MISSED] * t
@@ -157,7 +167,7 @@ def _enumerate(ratio: FloatArray, miss_weight: float, weights: FloatArray) -> fl
                 weights[r, m if c == MISSED else c] += w
             return
         chosen[i] = MISSED
-        visit(i + 1, w * miss_weight)
+        visit(i + 1, w * float(miss_weight[i]))
         for j in np.flatnonzero((ratio[i] > 0) & ~used):
             used[j], chosen[i] = True, int(j)
             visit(i + 1, w * float(ratio[i, j]))

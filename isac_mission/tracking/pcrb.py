@@ -123,6 +123,11 @@ class PlanningObjective:
     sensing: SensingParams
     measurement_only: bool = False
 
+    def with_prior(self) -> PlanningObjective:
+        """The objective with the prior information (the bound a plan reports, also for the
+        CRB-criterion, which plans without it)."""
+        return PlanningObjective(self.J_pred, self.x_pred, self.sensing)
+
     def _information(self, uav_xy: FloatArray, eta: FloatArray) -> tuple[FloatArray, ...]:
         g, k, d = measurement_directions(self.x_pred, uav_xy)
         a = self.sensing.range_information(d, eta)
@@ -229,3 +234,49 @@ class PlanningObjective:
         grad_q = -df_dr
         grad_eta = -(2.0 * a / np.asarray(eta)) * gC2g
         return float(np.trace(C)), grad_q, grad_eta
+
+
+@dataclass(frozen=True)
+class SumObjective:
+    """f(Q, eta) = sum_i tr((J_pred,i + J_M,i(Q, eta))^-1): several targets' bounds summed, each
+    part a `PlanningObjective` at its own predicted state (docs/model.md, "Several targets":
+    every method plans for the sum of the confirmed tracks' tr(PCRB)). The same methods as
+    `PlanningObjective`, each the sum of its parts' (the information of one target does not
+    depend on another's, so the gradients add too)."""
+
+    parts: tuple[PlanningObjective, ...]
+
+    def with_prior(self) -> SumObjective:
+        """Every part with its prior information (`PlanningObjective.with_prior`)."""
+        return SumObjective(tuple(p.with_prior() for p in self.parts))
+
+    def value(self, uav_xy: FloatArray, eta: FloatArray) -> float:
+        """f for positions [M, 2] and shares [M]."""
+        return float(sum(p.value(uav_xy, eta) for p in self.parts))
+
+    def values(self, uav_xy: FloatArray, eta: FloatArray) -> FloatArray:
+        """f [L] for positions [L, M, 2] and shares [L, M] (or [M])."""
+        return np.asarray(sum(p.values(uav_xy, eta) for p in self.parts), dtype=float)
+
+    def values_moving_one(
+        self, current_xy: FloatArray, eta: FloatArray, m: int, candidates_m: FloatArray
+    ) -> FloatArray:
+        """f [L] with UAV m moved to candidates_m [L, 2] (`PlanningObjective.values_moving_one`)."""
+        return np.asarray(
+            sum(p.values_moving_one(current_xy, eta, m, candidates_m) for p in self.parts),
+            dtype=float,
+        )
+
+    def value_and_gradients(
+        self, uav_xy: FloatArray, eta: FloatArray
+    ) -> tuple[float, FloatArray, FloatArray]:
+        """(f, df/dQ [M, 2], df/deta [M])."""
+        f, grad_q, grad_eta = 0.0, np.zeros_like(uav_xy, dtype=float), np.zeros(len(eta))
+        for p in self.parts:
+            fi, gq, ge = p.value_and_gradients(uav_xy, eta)
+            f, grad_q, grad_eta = f + fi, grad_q + gq, grad_eta + ge
+        return f, grad_q, grad_eta
+
+
+Objective = PlanningObjective | SumObjective
+"""What a slot problem minimises: one target's tr(PCRB), or several targets' sum."""

@@ -1,0 +1,431 @@
+"""The multi-target tracker (docs/model.md, "The multi-target tracker"): one EKF per track,
+each UAV's unlabelled report associated to the tracks (JPDA or GNN, tracking/association.py),
+tracks started from what no track explains (tracking/initiation.py), confirmed and deleted by
+rules on their hits, with IDs that never change or repeat.
+
+A slot: every track is predicted (eq. 3); then the UAVs' reports are taken one after another
+(the sequential multi-sensor JPDA: UAV m's report meets the tracks as UAV m - 1's left them).
+For a report, each track i has the predicted measurement h_m(x_i) and the innovation covariance
+S = H P H^T + R at its prediction, the detection probability of the scenario's model at that
+range, and the clutter density lambda; association gives the marginals beta_ij (JPDA) or one
+measurement per track (GNN, a one-hot beta), and the PDA update folds them in. A measurement
+the tracks do not explain (their marginals of it sum below EXPLAINED) goes to initiation, with
+the other UAVs' unexplained measurements of the slot.
+
+Track management, per slot: the track's association weight w = sum_m (1 - beta_m0) (the
+expected number of UAVs that measured it); a hit is w >= `hit_weight`. What initiation finds is
+first a candidate, internal to the tracker: three UAVs' measurements leave a fit with two degrees
+of freedom, which clutter passes often (about one candidate a slot from 15 false alarms over five
+UAVs), so a candidate becomes a tentative track, with its ID, only when the next slot is a hit,
+and is dropped silently otherwise. A tentative track is confirmed at `confirm_hits` hits within
+its first `confirm_window` slots (its candidate slot counts as one) and deleted when that can no
+longer happen; a confirmed track is deleted after `delete_after_misses` slots in a row without a
+hit. A candidate whose position lies inside an older track's gate (a second track on one
+target) is dropped.
+
+Pure: numpy and scipy. Shapes: M UAVs, T tracks, k_m measurements of UAV m.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from scipy.stats import chi2
+
+from isac_mission.config.targets import DetectionSpec
+from isac_mission.model.detections import detection_probability
+from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.model.radar import SensingParams, measure, measurement_jacobian
+from isac_mission.tracking.association import (
+    MISSED,
+    Hypotheses,
+    gate_threshold,
+    gnn,
+    jpda,
+    pda_update,
+)
+from isac_mission.tracking.ekf import ekf_predict
+from isac_mission.tracking.initiation import InitiationSettings, initiate, refit
+from isac_mission.tracking.origin_uncertainty import (
+    bound_step_with_origin,
+    uav_reduction_factors,
+)
+from isac_mission.tracking.pcrb import Bound, predict_information
+from isac_mission.types import BoolArray, FloatArray, Gaussian
+
+if TYPE_CHECKING:
+    from isac_mission.config import Scenario
+
+Associator = Literal["jpda", "gnn"]
+
+EXPLAINED = 0.5
+"""A measurement whose association probabilities to the tracks sum to this or more is the
+tracks'; the others go to initiation (a new target's measurement that falls in a broad gate of
+a track, a UAV's coarse range, is not lost to it)."""
+
+_MIN_CLUTTER_DENSITY = 1e-12
+"""lambda per m * (m/s) that association uses when the scenario has no false alarms (its
+likelihood ratios divide by lambda): every gated measurement is then the track's by far."""
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """The tracker's constants.
+
+    F, W [4, 4]: eq. 3's transition and the tracks' process noise (the filter's);
+    bound_W [4, 4] or None: the process noise of each track's bound (the targets' own, eq. 4;
+    None: W); detection: the scenario's detection model
+    (its P_d, or the SNR model's threshold) and clutter_density lambda (per m * m/s);
+    association: "jpda" or "gnn"; gate_prob: P_g of the association gate; hit_weight,
+    confirm_hits, confirm_window, delete_after_misses: track management (module docstring);
+    initiation: tracking/initiation.py's settings.
+    """
+
+    F: FloatArray
+    W: FloatArray
+    detection: DetectionSpec
+    clutter_density: float
+    association: Associator = "jpda"
+    gate_prob: float = 0.99
+    hit_weight: float = 2.5
+    confirm_hits: int = 3
+    confirm_window: int = 4
+    delete_after_misses: int = 3
+    initiation: InitiationSettings = field(default_factory=InitiationSettings)
+    bound_W: FloatArray | None = None
+
+    @property
+    def bound_noise(self) -> FloatArray:
+        """The bound's process noise [4, 4]."""
+        return self.W if self.bound_W is None else self.bound_W
+
+    @classmethod
+    def from_scenario(cls, s: Scenario) -> TrackerSettings:
+        """The settings of a scenario's `multi_target:` and `detection:` sections."""
+        c = s.multi_tracker
+        kappa = s.kappa if c.process_noise_intensity is None else c.process_noise_intensity
+        detection = s.detection
+        if detection is None:
+            raise ValueError("the multi-target tracker needs the scenario's detection model")
+        return cls(
+            F=transition_matrix(s.dt),
+            W=process_noise(s.dt, kappa),
+            bound_W=process_noise(s.dt, s.kappa),
+            detection=detection,
+            clutter_density=detection.clutter_density,
+            association=c.association,
+            gate_prob=c.gate_prob,
+            hit_weight=c.hit_weight,
+            confirm_hits=c.confirm_hits,
+            confirm_window=c.confirm_window,
+            delete_after_misses=c.delete_after_misses,
+            initiation=InitiationSettings(
+                gate_prob=c.initiation_gate_prob,
+                max_position_std_m=c.max_initial_position_std_m,
+                max_speed_mps=c.max_target_speed_mps,
+                area_m=(float(s.area[0]), float(s.area[1])),
+            ),
+        )
+
+
+@dataclass(frozen=True)
+class TrackEstimate:
+    """One track after a slot: track_id (stable, never reused), confirmed, belief (x [4] in m
+    and m/s, P [4, 4]), bound: its PCRB with origin uncertainty (tracking/origin_uncertainty.py),
+    weight: its association weight this slot (sum over UAVs of 1 - beta_0)."""
+
+    track_id: int
+    confirmed: bool
+    belief: Gaussian
+    bound: Bound
+    weight: float
+
+
+@dataclass(frozen=True)
+class TrackPrediction:
+    """One track before a slot's reports: track_id, confirmed, prediction (x [4], P [4, 4]) and
+    prior_information J_pred [4, 4] = (F C F^T + W)^-1 of its bound (what planning sees)."""
+
+    track_id: int
+    confirmed: bool
+    prediction: Gaussian
+    prior_information: FloatArray
+
+
+@dataclass
+class _Track:
+    track_id: int
+    belief: Gaussian
+    bound: Bound
+    confirmed: bool
+    hits: list[bool]
+    misses_in_row: int = 0
+    x_pred: FloatArray | None = None
+    J_pred: FloatArray | None = None
+    own: dict[int, FloatArray] = field(default_factory=dict)
+    suspects: list[tuple[int, FloatArray]] = field(default_factory=list)
+    refuted: Gaussian | None = None
+
+
+@dataclass(frozen=True)
+class SlotTracking:
+    """What one slot's update did: tracks [T] after it (confirmed and tentative), started and
+    deleted: the IDs started and deleted this slot."""
+
+    tracks: tuple[TrackEstimate, ...]
+    started: tuple[int, ...]
+    deleted: tuple[int, ...]
+
+    @property
+    def confirmed(self) -> tuple[TrackEstimate, ...]:
+        return tuple(t for t in self.tracks if t.confirmed)
+
+
+class MultiTargetTracker:
+    """Tracks from unlabelled reports: `add_confirmed` for a target whose prior is known, then
+    `predict` and `update` each slot."""
+
+    def __init__(self, settings: TrackerSettings) -> None:
+        self.settings = settings
+        self._tracks: list[_Track] = []
+        self._next_id = 1
+        self._next_candidate = 1
+        self._gate = gate_threshold(settings.gate_prob)
+
+    def add_confirmed(self, belief: Gaussian) -> int:
+        """Start a confirmed track from a known prior (its bound from the same covariance);
+        returns its ID."""
+        return self._start(belief, confirmed=True)
+
+    def _start(self, belief: Gaussian, confirmed: bool, candidate: bool = False) -> int:
+        if candidate:  # an internal, negative ID until its second hit
+            track_id = -self._next_candidate
+            self._next_candidate += 1
+        else:
+            track_id = self._new_id()
+        bound = Bound.from_covariance(belief.P.copy())
+        self._tracks.append(_Track(track_id, belief, bound, confirmed, hits=[True]))
+        return track_id
+
+    def _new_id(self) -> int:
+        self._next_id += 1
+        return self._next_id - 1
+
+    def predict(self) -> tuple[TrackPrediction, ...]:
+        """Advance every track and its bound one slot (eq. 3); returns the predictions of the
+        tentative and confirmed tracks (candidates are internal)."""
+        s = self.settings
+        out = []
+        for t in self._tracks:
+            t.belief = ekf_predict(t.belief, s.F, s.W)
+            t.x_pred = t.belief.x.copy()
+            t.J_pred = predict_information(t.bound, s.F, s.bound_noise)
+            t.own, t.suspects = {}, []
+            if t.refuted is not None:
+                t.refuted = ekf_predict(t.refuted, s.F, s.W)
+            if t.track_id > 0:
+                out.append(TrackPrediction(t.track_id, t.confirmed, t.belief, t.J_pred))
+        return tuple(out)
+
+    def update(
+        self,
+        reports: Sequence[FloatArray],
+        uav_xy_m: FloatArray,
+        eta: FloatArray,
+        sensing: SensingParams,
+    ) -> SlotTracking:
+        """Fold in one slot's reports [M] (arrays [k_m, 2] of range m and Doppler m/s, no
+        labels) taken at uav_xy_m [M, 2] with shares eta [M]; step each track's bound; manage
+        the tracks. Call after `predict`. `sensing` gives eq. 8's variances (its radar gain the
+        nominal target's: the tracker does not know an unknown target's RCS)."""
+        weights = np.zeros(len(self._tracks))
+        unexplained: list[FloatArray] = []
+        for m, report in enumerate(reports):
+            z = np.asarray(report, dtype=float).reshape(-1, 2)
+            if not eta[m] > 0:
+                unexplained.append(np.zeros((0, 2)))
+                continue
+            explained = self._associate(m, z, uav_xy_m[m], float(eta[m]), sensing, weights)
+            unexplained.append(z[~explained])
+        self._repair(unexplained, uav_xy_m, eta, sensing)
+        for t in self._tracks:
+            self._step_bound(t, uav_xy_m, eta, sensing)
+        weight_of = {t.track_id: float(w) for t, w in zip(self._tracks, weights, strict=True)}
+        deleted, started = self._manage(weights)
+        candidates = {
+            self._start(b, confirmed=False, candidate=True)
+            for b in initiate(unexplained, uav_xy_m, eta, sensing, self.settings.initiation)
+        }
+        self._drop_duplicates(candidates)
+        out = tuple(
+            TrackEstimate(
+                t.track_id, t.confirmed, t.belief, t.bound, weight_of.get(t.track_id, 0.0)
+            )
+            for t in self._tracks
+            if t.track_id > 0
+        )
+        return SlotTracking(out, tuple(started), tuple(deleted))
+
+    def _associate(
+        self,
+        m: int,
+        z: FloatArray,
+        uav_xy: FloatArray,
+        eta: float,
+        sensing: SensingParams,
+        weights: FloatArray,
+    ) -> BoolArray:
+        """One UAV's report against every track: PDA updates in place, association weights
+        added to weights [T]; returns [k] whether each measurement is explained (the tracks'
+        marginals of it sum to EXPLAINED or more; under GNN, it was assigned)."""
+        s = self.settings
+        T = len(self._tracks)
+        q = uav_xy[None]
+        if T == 0:
+            return np.zeros(len(z), dtype=bool)
+        z_hat = np.empty((T, 2))
+        H = np.empty((T, 2, 4))
+        S = np.empty((T, 2, 2))
+        for i, t in enumerate(self._tracks):
+            z_hat[i] = measure(t.belief.x, q)
+            H[i] = measurement_jacobian(t.belief.x, q)
+            R = np.diag(sensing.variances(z_hat[i, :1], np.array([eta])))
+            S[i] = H[i] @ t.belief.P @ H[i].T + R
+        pd = detection_probability(
+            z_hat[:, 0], np.full(T, sensing.radar_gain), s.detection, sensing.B, sensing.Ts
+        )
+        if len(z) == 0:
+            return np.zeros(0, dtype=bool)
+        density = max(s.clutter_density, _MIN_CLUTTER_DENSITY)
+        h = Hypotheses.of(z_hat, S, z, pd, density, self._gate, s.gate_prob)
+        if s.association == "jpda":
+            beta = jpda(h)
+        else:
+            choice = gnn(h)
+            beta = np.zeros((T, len(z) + 1))
+            beta[np.arange(T), np.where(choice == MISSED, len(z), choice)] = 1.0
+        doppler_gate = float(chi2.ppf(s.initiation.gate_prob, 1))
+        for i, t in enumerate(self._tracks):
+            best = int(np.argmax(beta[i, :-1]))
+            if beta[i, best] >= EXPLAINED:
+                t.own[m] = z[best]
+            elif beta[i, -1] >= EXPLAINED:
+                # Missed here: a measurement whose Doppler fits but whose range does not may be
+                # this target's, seen by a UAV whose range refutes where the track is.
+                nu_v = z[:, 1] - z_hat[i, 1]
+                t.suspects += [
+                    (m, z[j]) for j in np.flatnonzero(nu_v**2 <= doppler_gate * S[i, 1, 1])
+                ]
+            if beta[i, -1] >= 1.0:
+                continue  # nothing of this report is the track's: its prediction stands
+            x, P = pda_update(t.belief.x, t.belief.P, z_hat[i], H[i], S[i], z, beta[i])
+            t.belief = Gaussian(x=x, P=P)
+            weights[i] += 1.0 - beta[i, -1]
+        return np.asarray(beta[:, :-1].sum(axis=0) >= EXPLAINED, dtype=bool)
+
+    def _repair(
+        self,
+        unexplained: list[FloatArray],
+        uav_xy_m: FloatArray,
+        eta: FloatArray,
+        sensing: SensingParams,
+    ) -> list[int]:
+        """Re-fit each track that a UAV refuted two slots running (module docstring, "A
+        ghost"): the track's own measurements of the slot with one of that UAV's unexplained
+        suspects, fitted; a fit that passes initiation's tests and lies outside the track's gate
+        is a refutation. A refutation that the last slot's, predicted, agrees with moves the
+        track there (the suspect is then the track's); a single one is kept for the next slot.
+        Returns the IDs moved."""
+        s = self.settings.initiation
+        repaired = []
+        for t in self._tracks:
+            refuted = None
+            if len(t.own) + 1 >= s.min_uavs:
+                for m, z in t.suspects:
+                    row = np.flatnonzero(np.all(unexplained[m] == z, axis=1))
+                    if not len(row):
+                        continue
+                    belief = refit({**t.own, m: z}, t.belief.x, uav_xy_m, eta, sensing, s)
+                    if belief is not None and _outside(t.belief, belief, self._gate):
+                        refuted = belief, m, int(row[0])
+                        break
+            if refuted is None:
+                t.refuted = None
+                continue
+            belief, m, row_index = refuted
+            if t.refuted is not None and not _outside(t.refuted, belief, self._gate):
+                t.belief, t.refuted = belief, None
+                unexplained[m] = np.delete(unexplained[m], row_index, axis=0)
+                repaired.append(t.track_id)
+            else:
+                t.refuted = belief
+        return repaired
+
+    def _step_bound(
+        self, t: _Track, uav_xy_m: FloatArray, eta: FloatArray, sensing: SensingParams
+    ) -> None:
+        """The track's bound takes the slot's step at its predicted state (where eq. 12 is
+        evaluated), each UAV's information scaled by its reduction factor q_m of P_d and the
+        clutter (tracking/origin_uncertainty.py); a UAV without a share adds nothing."""
+        if t.x_pred is None:
+            return  # started this slot: its bound is its initial covariance
+        s = self.settings
+        range_m = np.linalg.norm(t.x_pred[None, :2] - uav_xy_m, axis=1)
+        sensed = np.asarray(eta, dtype=float) > 0
+        with np.errstate(divide="ignore"):
+            r_diag = sensing.variances(range_m, np.where(sensed, eta, 0.0))
+        r_diag[~np.concatenate([sensed, sensed])] = np.nan
+        pd = detection_probability(
+            range_m, np.full(len(range_m), sensing.radar_gain), s.detection, sensing.B, sensing.Ts
+        )
+        q = uav_reduction_factors(pd, s.clutter_density, r_diag, self._gate)
+        t.bound = bound_step_with_origin(t.bound, s.F, s.bound_noise, t.x_pred, uav_xy_m, r_diag, q)
+
+    def _manage(self, weights: FloatArray) -> tuple[list[int], list[int]]:
+        """Hits, promotion, confirmation and deletion after the slot's reports; returns the IDs
+        deleted and those started (candidates promoted to tentative tracks)."""
+        s = self.settings
+        keep: list[_Track] = []
+        deleted: list[int] = []
+        started: list[int] = []
+        for t, w in zip(self._tracks, weights, strict=True):
+            hit = bool(w >= s.hit_weight)
+            t.hits.append(hit)
+            t.misses_in_row = 0 if hit else t.misses_in_row + 1
+            if t.track_id < 0:
+                if not hit:
+                    continue  # a candidate not seen again: gone without a trace
+                t.track_id = self._new_id()
+                started.append(t.track_id)
+            if not t.confirmed:
+                window = t.hits[: s.confirm_window]
+                if sum(window) >= s.confirm_hits:
+                    t.confirmed = True
+                elif sum(window) + max(s.confirm_window - len(window), 0) < s.confirm_hits:
+                    deleted.append(t.track_id)
+                    continue
+            elif t.misses_in_row >= s.delete_after_misses:
+                deleted.append(t.track_id)
+                continue
+            keep.append(t)
+        self._tracks = keep
+        return deleted, started
+
+    def _drop_duplicates(self, new: set[int]) -> None:
+        """Drop the new candidates whose position lies in an older track's position gate."""
+        old = [t for t in self._tracks if t.track_id not in new]
+        deleted = [
+            t.track_id
+            for t in self._tracks
+            if t.track_id in new and any(not _outside(o.belief, t.belief, self._gate) for o in old)
+        ]
+        self._tracks = [t for t in self._tracks if t.track_id not in deleted]
+
+
+def _outside(a: Gaussian, b: Gaussian, gate: float) -> bool:
+    """Whether b's position lies outside the joint position gate of a and b."""
+    e = a.x[:2] - b.x[:2]
+    return float(e @ np.linalg.solve(a.P[:2, :2] + b.P[:2, :2], e)) > gate
