@@ -16,6 +16,9 @@ from isac_mission.quiet import quiet_highs_banner
 if TYPE_CHECKING:
     from isac_mission.config import Scenario
 
+DEFAULT_METHODS = "proposed,sd,aba,crb,horizon"
+DEFAULT_MULTI_TARGET_METHODS = "proposed,sd,aba,crb"
+
 
 @app.command("check-config")
 def check_config(config: ConfigArg) -> None:
@@ -68,9 +71,12 @@ def simulate(
         Path | None, typer.Option(help="Output folder (traces, plots, summary).")
     ] = None,
     methods: Annotated[
-        str,
-        typer.Option(help=f"Comma-separated: {methods_help()}."),
-    ] = "proposed,sd,aba,crb,horizon",
+        str | None,
+        typer.Option(
+            help=f"Comma-separated: {methods_help()}. Default: {DEFAULT_METHODS}; on a "
+            f"multi-target scenario {DEFAULT_MULTI_TARGET_METHODS} (horizon plans one target)."
+        ),
+    ] = None,
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 2,
     plots: Annotated[bool, typer.Option(help="Write the Fig. 2 / Fig. 3 style PNGs.")] = True,
     live_settings: Annotated[
@@ -86,16 +92,20 @@ def simulate(
     from isac_mission.experiment.report import simulate_report
     from isac_mission.planning.registry import METHODS
 
-    s = load_or_exit(config)
+    s = load_or_exit(config, flies=False)
     if live_settings:
         s = _with_live_settings(s)
-    chosen = [m.strip() for m in methods.split(",") if m.strip()]
+    default = DEFAULT_MULTI_TARGET_METHODS if s.multi_target else DEFAULT_METHODS
+    chosen = [m.strip() for m in (methods or default).split(",") if m.strip()]
     unknown = sorted(set(chosen) - set(METHODS))
     if unknown or not chosen:
         err_console.print(f"--methods: unknown {unknown}; choose from {', '.join(METHODS)}")
         raise typer.Exit(2)
     quiet_highs_banner()
     out_dir = out if out is not None else Path("out") / f"simulate-{s.mission_id}"
+    if s.multi_target:
+        _simulate_multi_target(s, chosen, runs, s.seed if seed is None else seed, out_dir, workers)
+        return
     simulate_report(
         s,
         chosen,
@@ -105,6 +115,25 @@ def simulate(
         workers=workers,
         plots=plots,
         console=console,
+    )
+
+
+def _simulate_multi_target(
+    s: Scenario, methods: list[str], runs: int, seed: int, out_dir: Path, workers: int
+) -> None:
+    """`simulate` on the multi-target path (experiment/multi_target_report.py)."""
+    from isac_mission.errors import ConfigError
+    from isac_mission.experiment.multi_target_loop import check_multi_target_method
+    from isac_mission.experiment.multi_target_report import multi_target_report
+
+    try:
+        for m in methods:
+            check_multi_target_method(m)
+    except ConfigError as err:
+        err_console.print(f"--methods: {err}", highlight=False)
+        raise typer.Exit(2) from None
+    multi_target_report(
+        s, methods, runs=runs, seed=seed, out_dir=out_dir, workers=workers, console=console
     )
 
 

@@ -209,14 +209,14 @@ class Scenario:
 
 
 def single_target_problem(s: Scenario) -> str | None:
-    """Why the closed loops (`simulate`, `sweep`, `run`, `serve`) cannot fly `s` yet, or None:
-    the multi-target path (several targets, false alarms, an SNR detection model, a target that
-    turns, comes late or must be found) has its scenario, truth and detections
-    (model/targets.py, model/detections.py) but not yet its tracker and planner."""
+    """Why `sweep`, `run` and `serve` cannot fly `s` yet, or None: the multi-target path
+    (several targets, false alarms, an SNR detection model, a target that turns, comes late or
+    must be found) has its tracker and offline closed loop (`simulate`) but not yet its live
+    service or sweep."""
     if not s.multi_target:
         return None
     return (
         "targets/detection: this scenario takes the multi-target path (docs/model.md, "
-        "'Several targets'): its truth and unlabelled detections exist, its tracker and the "
-        "closed loops do not yet; the closed loops fly single-target scenarios"
+        "'Several targets'): `simulate` flies it; `sweep`, `run` and `serve` fly "
+        "single-target scenarios only, so far"
     )

@@ -2,9 +2,11 @@
 which confirmed track follows which target, ID switches, each target's confirmation delay, its
 location error against its track's bound, and the false tracks.
 
-Which track follows a target at a slot: the optimal assignment of the confirmed tracks to the
-targets in the scene by position, pairs farther apart than `IDENTITY_CUTOFF_M` left unassigned
-(GOSPA's own assignment at that cut-off). A target's track changes ID when its assigned track
+Which track follows a target at a slot: the optimal assignment (least total distance) of the
+confirmed tracks to the targets in the scene, a pair admissible when the track lies within
+`IDENTITY_CUTOFF_M` of the target or the target within the track's own position gate
+(chi-square, 2 degrees of freedom, `IDENTITY_GATE_PROB`: a new track far from its target but
+honest about it follows it). A target's track changes ID when its assigned track
 differs from the one it last had (a slot without one in between does not count as a switch: the
 same ID coming back is no switch). A confirmed track assigned to no target is false at that slot.
 Pure: numpy and scipy.
@@ -17,13 +19,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
 
 from isac_mission.experiment.multi_target_loop import MultiTargetRun
 from isac_mission.tracking.gospa import UNASSIGNED, gospa
+from isac_mission.tracking.multi_target import TrackEstimate
 from isac_mission.types import FloatArray, IntArray
 
 IDENTITY_CUTOFF_M = 100.0
-"""A confirmed track farther than this from every target follows none (m)."""
+"""A confirmed track within this of a target may follow it (m)..."""
+
+IDENTITY_GATE_PROB = 0.999
+"""... or one whose position gate of this probability holds the target."""
 
 MIN_UAVS_SEEN = 3
 """A target counts as seen from the first slot at least this many UAVs detected it."""
@@ -85,7 +93,7 @@ def run_figures(run: MultiTargetRun, gospa_cutoff_m: float) -> RunFigures:
         track_xy = np.array([t.belief.x[:2] for t in confirmed]).reshape(-1, 2)
         g = gospa(truth_xy, track_xy, c=gospa_cutoff_m)
         parts[:, k] = g.distance, g.localisation, g.missed, g.false
-        identity = gospa(truth_xy, track_xy, c=IDENTITY_CUTOFF_M).assignment
+        identity = follow(truth_xy, confirmed)
         ids = np.full(T, 0, dtype=np.int64)
         for i, t in enumerate(present):
             detections = sum(int(np.any(r.origin == t)) for r in slot.reports)
@@ -121,6 +129,25 @@ def run_figures(run: MultiTargetRun, gospa_cutoff_m: float) -> RunFigures:
     return RunFigures(
         parts[0], parts[1], parts[2], parts[3], targets, tuple(longest_false.values())
     )
+
+
+def follow(truth_xy: FloatArray, tracks: Sequence[TrackEstimate]) -> IntArray:
+    """[n] the index into tracks of the track following each target at truth_xy [n, 2] (m),
+    or UNASSIGNED (module docstring)."""
+    out = np.full(len(truth_xy), UNASSIGNED, dtype=np.int64)
+    if not len(truth_xy) or not tracks:
+        return out
+    xy = np.array([t.belief.x[:2] for t in tracks])
+    e = truth_xy[:, None, :] - xy[None]  # [n, m, 2]
+    d = np.linalg.norm(e, axis=2)
+    inv = np.linalg.inv(np.array([t.belief.P[:2, :2] for t in tracks]))
+    d2 = np.einsum("nmi,mij,nmj->nm", e, inv, e)
+    admissible = (d <= IDENTITY_CUTOFF_M) | (d2 <= chi2.ppf(IDENTITY_GATE_PROB, 2))
+    big = 1e12
+    rows, cols = linear_sum_assignment(np.where(admissible, d, big))
+    ok = admissible[rows, cols]
+    out[rows[ok]] = cols[ok]
+    return out
 
 
 def _first_slot(run: MultiTargetRun, ids: IntArray) -> int:

@@ -1,0 +1,221 @@
+"""`simulate` on a multi-target scenario (docs/model.md, "Several targets"): every method on the
+same runs (common random numbers), the tracking figures per method, each method's GOSPA and
+per-target errors against `proposed`'s with paired bootstrap intervals, the traces
+(docs/trace.md, "Multi-target traces") and summary.json.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from isac_mission.config import Scenario
+from isac_mission.experiment.bootstrap import paired_bootstrap, reduction_of_means
+from isac_mission.experiment.multi_target_loop import (
+    MultiTargetSlot,
+    check_multi_target_method,
+    multi_target_kit,
+    run_multi_target,
+)
+from isac_mission.experiment.multi_target_metrics import (
+    RunFigures,
+    TrackingSummary,
+    run_figures,
+    summarize_tracking,
+)
+from isac_mission.experiment.report import interval_cell, print_table
+from isac_mission.model.run_noise import draw_multi_target_noise
+from isac_mission.planning.registry import LABELS
+from isac_mission.records.jsonlines import dumps_line, to_jsonable
+
+TRACE_FORMAT = "isac-mission multi-target trace 1"
+"""The first line's `format` of a multi-target trace (docs/trace.md)."""
+
+
+@dataclass(frozen=True)
+class MethodRuns:
+    """One method's runs: figures [R] and plan times (s) of every slot of every run."""
+
+    method: str
+    figures: tuple[RunFigures, ...]
+    solve_s: tuple[float, ...]
+
+
+def _one_run(s: Scenario, method: str, run: int, seed: int, trace_dir: Path | None) -> MethodRuns:
+    noise = draw_multi_target_noise(s, seed + run)
+    kit = multi_target_kit(s)
+    lines: list[str] = []
+    result = run_multi_target(s, method, noise, kit, lambda o: lines.append(slot_line(o)))
+    if trace_dir is not None:
+        config = s.trace_config() | {"seed": seed + run, "method": method}
+        head = dumps_line(to_jsonable({"format": TRACE_FORMAT, "config": config}))
+        path = trace_dir / f"{method}_run{run:03d}.jsonl"
+        path.write_text("\n".join([head, *lines]) + "\n")
+    figures = run_figures(result, s.multi_tracker.gospa_cutoff_m)
+    return MethodRuns(method, (figures,), tuple(o.plan.report.solve_s for o in result.slots))
+
+
+def slot_line(o: MultiTargetSlot) -> str:
+    """One slot of a multi-target trace as a JSON line (docs/trace.md)."""
+    present = np.flatnonzero(np.all(np.isfinite(o.truth), axis=1))
+    record: dict[str, Any] = {
+        "slot": o.slot,
+        "method": o.method,
+        "status": o.plan.report.status,
+        "fallback": o.plan.report.fallback,
+        "solve_ms": 1e3 * o.plan.report.solve_s,
+        "uav_xy": o.uav_xy_m,
+        "eta": o.bandwidth_share,
+        "assoc": o.plan.bs_of_uav,
+        "planned_for": o.planned_for,
+        "targets": [{"index": int(t), "state": o.truth[t]} for t in present],
+        "tracks": [
+            {
+                "id": t.track_id,
+                "confirmed": t.confirmed,
+                "x": t.belief.x,
+                "P": t.belief.P,
+                "pcrb_position_trace": float(np.trace(t.bound.C[:2, :2])),
+                "weight": t.weight,
+            }
+            for t in o.tracks
+        ],
+        "measurements": [r.measurements for r in o.reports],
+        "origins": [r.origin for r in o.reports],
+    }
+    return dumps_line(to_jsonable(record))
+
+
+def run_multi_target_monte_carlo(
+    s: Scenario,
+    methods: Sequence[str],
+    runs: int,
+    seed: int,
+    trace_dir: Path | None = None,
+    workers: int = 1,
+) -> dict[str, MethodRuns]:
+    """Every method on runs 0..runs-1 (noise seed = seed + run), in `workers` processes."""
+    for m in methods:
+        check_multi_target_method(m)
+    if trace_dir is not None:
+        trace_dir.mkdir(parents=True, exist_ok=True)
+    jobs = [(m, r) for r in range(runs) for m in methods]
+    if workers <= 1:
+        done = [_one_run(s, m, r, seed, trace_dir) for m, r in jobs]
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(_one_run, s, m, r, seed, trace_dir) for m, r in jobs]
+            done = [f.result() for f in futures]
+    out: dict[str, MethodRuns] = {}
+    for m in methods:
+        mine = [d for d in done if d.method == m]
+        out[m] = MethodRuns(
+            m,
+            tuple(f for d in mine for f in d.figures),
+            tuple(t for d in mine for t in d.solve_s),
+        )
+    return out
+
+
+def tracking_table(s: Scenario, summaries: dict[str, TrackingSummary], title: str) -> Table:
+    """Per method: GOSPA and its parts, ID switches, false tracks, confirmation delays."""
+    table = Table(title=title)
+    for col in (
+        "method",
+        "GOSPA (m)",
+        "loc. / missed / false (m^2)",
+        "ID switches / run",
+        "runs w/ false track",
+        "longest false (slots)",
+        "confirm delay median / max",
+        "never confirmed",
+    ):
+        table.add_column(col, justify="right")
+    for m, x in summaries.items():
+        delays = x.confirmation_delays
+        table.add_row(
+            LABELS.get(m, m),
+            f"{x.gospa_m:.3f}",
+            f"{x.localisation_m2:.2f} / {x.missed_m2:.2f} / {x.false_m2:.2f}",
+            f"{x.id_switches:.2f}",
+            f"{100 * x.runs_with_false_tracks:.0f} %",
+            str(x.longest_false_run),
+            f"{np.median(delays):.0f} / {max(delays)}" if delays else "-",
+            str(x.never_confirmed),
+        )
+    return table
+
+
+def target_table(s: Scenario, summaries: dict[str, TrackingSummary]) -> Table:
+    """Per method and target: location RMSE, mean tr(PCRB_pos), MSE / tr(PCRB_pos)."""
+    table = Table(title="each target, over the slots a confirmed track followed it")
+    table.add_column("method")
+    for t in s.targets:
+        table.add_column(f"{t.name}: RMSE (m) / tr(PCRB_pos) (m^2) / ratio", justify="right")
+    for m, x in summaries.items():
+        cells = [
+            f"{r:.3f} / {b:.3f} / {e:.2f}"
+            for r, b, e in zip(x.rmse_m, x.bound_m2, x.efficiency, strict=True)
+        ]
+        table.add_row(LABELS.get(m, m), *cells)
+    return table
+
+
+def multi_target_report(
+    s: Scenario,
+    methods: Sequence[str],
+    *,
+    runs: int,
+    seed: int,
+    out_dir: Path,
+    workers: int,
+    console: Console,
+) -> dict[str, Any]:
+    """Run, print the tables, write the traces and summary.json under out_dir; returns the
+    summary."""
+    by_method = run_multi_target_monte_carlo(
+        s, methods, runs, seed, out_dir / "traces", workers=workers
+    )
+    summaries = {m: summarize_tracking(r.figures) for m, r in by_method.items()}
+    title = (
+        f"{s.mission_id}: {runs} runs, {len(s.targets)} targets, seeds {seed}..{seed + runs - 1}"
+    )
+    print_table(console, tracking_table(s, summaries, title))
+    print_table(console, target_table(s, summaries))
+    baseline = methods[0]
+    against = Table(title=f"against {LABELS.get(baseline, baseline)} (paired 95 % intervals)")
+    against.add_column("method")
+    against.add_column("GOSPA reduction %", justify="right")
+    against.add_column("plan time median (ms)", justify="right")
+    rows: dict[str, Any] = {}
+    base = np.array([f.gospa_m.mean() for f in by_method[baseline].figures])
+    for m, r in by_method.items():
+        g = np.array([f.gospa_m.mean() for f in r.figures])
+        iv = paired_bootstrap(base, g, reduction_of_means, seed=seed) if runs >= 2 else None
+        against.add_row(
+            LABELS.get(m, m), interval_cell(iv), f"{1e3 * float(np.median(r.solve_s)):.1f}"
+        )
+        rows[m] = {
+            "gospa_reduction_pct": None if iv is None else [iv.estimate, iv.low, iv.high],
+            "plan_time_median_ms": 1e3 * float(np.median(r.solve_s)),
+        }
+    print_table(console, against)
+    summary = {
+        "scenario": s.mission_id,
+        "runs": runs,
+        "seed": seed,
+        "methods": {m: to_jsonable(vars(x)) for m, x in summaries.items()},
+        "against_baseline": rows,
+    }
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "summary.json").write_text(json.dumps(to_jsonable(summary), indent=1))
+    console.print(f"traces and summary.json in {out_dir}")
+    return summary
