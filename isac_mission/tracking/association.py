@@ -20,6 +20,7 @@ scipy. Shapes: T tracks, k measurements, d the measurement's dimension.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -33,9 +34,10 @@ MISSED = -1
 """The measurement index of a track given none."""
 
 
+@functools.lru_cache(maxsize=256)
 def gate_threshold(probability: float, dimension: int = 2) -> float:
     """gamma: the chi-square quantile with `dimension` degrees of freedom that a track's own
-    measurement falls inside with `probability` (P_g)."""
+    measurement falls inside with `probability` (P_g); cached (the tracker asks it every slot)."""
     return float(chi2.ppf(probability, dimension))
 
 

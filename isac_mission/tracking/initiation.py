@@ -29,13 +29,16 @@ Pure: numpy and scipy. Shapes: M UAVs, k_m measurements of UAV m, S starts, L pr
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
+from isac_mission.config.targets import DetectionSpec
+from isac_mission.model.detections import detection_probability
 from isac_mission.model.radar import SensingParams
+from isac_mission.tracking.association import gate_threshold
 from isac_mission.types import FloatArray, Gaussian
 
 _MIN_LOS_SINE = 0.05
@@ -48,14 +51,24 @@ class InitiationSettings:
     """gate_prob: the probability of the supporters' gate and of the refined residual's test;
     max_position_std_m: the largest sqrt(tr(P_pos) / 2) a new track may start with (m);
     max_speed_mps: the fastest target there is (a proposal faster than this is clutter);
-    min_uavs: how many UAVs must have measured a target to start a track on it; area_m: the
-    operating area's size (x, y from 0, m) where tracks start (None: anywhere)."""
+    min_uavs: how many UAVs must have measured a target to start a track on it, at least;
+    min_detected_share: ... and at least this share of the UAVs expected to detect it there
+    (the sum of their P_d by `detection`, None: P_d = 1); area_m: the operating area's size
+    (x, y from 0, m) where tracks start (None: anywhere); max_starts: the most precise UAVs
+    whose pairs start the fit; max_pairs: about how many pairs of UAVs propose; max_rivals: how
+    many of the next proposals sharing a winner's measurements are fitted to test it for
+    ambiguity (module docstring)."""
 
     gate_prob: float = 0.999
     max_position_std_m: float = 150.0
     max_speed_mps: float = 60.0
     min_uavs: int = 3
+    min_detected_share: float = 0.5
+    detection: DetectionSpec | None = None
     area_m: tuple[float, float] | None = None
+    max_starts: int = 4
+    max_pairs: int = 60
+    max_rivals: int = 4
 
 
 Members = tuple[tuple[int, int], ...]
@@ -64,11 +77,13 @@ Members = tuple[tuple[int, int], ...]
 
 @dataclass(frozen=True)
 class _Proposal:
-    """One proposed state x [4] with its measurements."""
+    """One proposed state x [4] with its measurements, the sum of its supporters' squared
+    distances, and how many UAVs a track there needs (`_required`)."""
 
     x: FloatArray
     members: Members
     distance2: float
+    required: int
 
 
 def _pair_states(
@@ -131,21 +146,46 @@ def _variances(sensing: SensingParams, range_m: FloatArray, eta: float) -> Float
     return sensing.variances(r, np.full(r.shape, eta)).reshape(2, -1).T
 
 
+def _pairs(seen: list[int], max_pairs: int) -> list[tuple[int, int]]:
+    """The pairs of UAVs that propose: every pair of `seen` while there are at most max_pairs,
+    else each UAV with partners spread evenly around the list (about max_pairs pairs: a target
+    that many UAVs see is proposed by one of them all the same)."""
+    every = list(itertools.combinations(seen, 2))
+    if len(every) <= max_pairs:
+        return every
+    n = len(seen)
+    per_uav = max(1, max_pairs // n)
+    step = max(1, n // (per_uav + 1))
+    pairs = {
+        tuple(sorted((seen[i], seen[(i + 1 + j * step) % n])))
+        for i in range(n)
+        for j in range(per_uav)
+    }
+    return sorted((a, b) for a, b in pairs if a != b)
+
+
 def _proposals(
     measurements: Sequence[FloatArray],
     uav_xy_m: FloatArray,
     eta: FloatArray,
     sensing: SensingParams,
     gate: float,
-    max_speed_mps: float,
+    settings: InitiationSettings,
 ) -> list[_Proposal]:
-    """Every pair's proposals with the supporters each gathers (at most one measurement per
-    UAV: the nearest in the gate)."""
+    """The pairs' proposals (`_pairs`) with the supporters each gathers (at most one
+    measurement per UAV: the nearest in the gate), those with fewer UAVs than `_required`
+    left out; proposals too fast or outside the area are dropped before their support is
+    sought. Every pair's states are gated against each other UAV at once."""
     seen = [m for m in range(len(measurements)) if len(measurements[m]) and eta[m] > 0]
-    out: list[_Proposal] = []
-    for a, b in itertools.combinations(seen, 2):
+    xs, firsts, seconds, sigmas = [], [], [], []
+    for a, b in _pairs(seen, settings.max_pairs):
         x, index = _pair_states(uav_xy_m[a], measurements[a], uav_xy_m[b], measurements[b])
-        plausible = np.linalg.norm(x[:, 2:], axis=1) <= max_speed_mps
+        plausible = np.linalg.norm(x[:, 2:], axis=1) <= settings.max_speed_mps
+        if settings.area_m is not None:
+            margin = settings.max_position_std_m
+            plausible &= np.all(
+                (x[:, :2] >= -margin) & (x[:, :2] <= np.asarray(settings.area_m) + margin), axis=1
+            )
         x, index = x[plausible], index[plausible]
         if not len(x):
             continue
@@ -155,29 +195,44 @@ def _proposals(
         r_b = _variances(sensing, measurements[b][index[:, 1], 0], float(eta[b]))
         R = np.stack([r_a[:, 0], r_b[:, 0], r_a[:, 1], r_b[:, 1]], axis=1)
         ok = np.abs(np.linalg.det(H)) > 1e-12
-        x, index, H, R = x[ok], index[ok], H[ok], R[ok]
-        H_inv = np.linalg.inv(H)
-        Sigma = np.einsum("lij,lj,lkj->lik", H_inv, R, H_inv)
-        support: list[list[tuple[int, int]]] = [[] for _ in range(len(x))]
-        total = np.zeros(len(x))
-        for c in seen:
-            if c in (a, b):
-                continue
-            z_hat = _predicted(x, uav_xy_m[c])
-            H_c = _jacobians(x, uav_xy_m[c])
-            S = np.einsum("lij,ljk,lmk->lim", H_c, Sigma, H_c)
-            S[:, [0, 1], [0, 1]] += _variances(sensing, z_hat[:, 0], float(eta[c]))
-            nu = measurements[c][None, :, :] - z_hat[:, None, :]  # [L, k_c, 2]
-            d2 = np.einsum("lki,lij,lkj->lk", nu, np.linalg.inv(S), nu)
-            best = np.argmin(d2, axis=1)
-            best_d2 = d2[np.arange(len(x)), best]
-            for row in np.flatnonzero(best_d2 <= gate).tolist():
-                support[row].append((c, int(best[row])))
-                total[row] += best_d2[row]
-        for row, members in enumerate(support):
-            if members:
-                pair = ((a, int(index[row, 0])), (b, int(index[row, 1])))
-                out.append(_Proposal(x[row], pair + tuple(members), float(total[row])))
+        H_inv = np.linalg.inv(H[ok])
+        xs.append(x[ok])
+        firsts.append(np.stack([np.full(int(ok.sum()), a), index[ok, 0]], axis=1))
+        seconds.append(np.stack([np.full(int(ok.sum()), b), index[ok, 1]], axis=1))
+        sigmas.append(np.einsum("lij,lj,lkj->lik", H_inv, R[ok], H_inv))
+    if not xs:
+        return []
+    x = np.concatenate(xs)
+    first, second, Sigma = np.concatenate(firsts), np.concatenate(seconds), np.concatenate(sigmas)
+    L = len(x)
+    chosen = np.full((L, len(measurements)), -1, dtype=np.int64)
+    total = np.zeros(L)
+    for c in seen:
+        rows = np.flatnonzero((first[:, 0] != c) & (second[:, 0] != c))
+        z_hat = _predicted(x[rows], uav_xy_m[c])
+        H_c = _jacobians(x[rows], uav_xy_m[c])
+        S = np.einsum("lij,ljk,lmk->lim", H_c, Sigma[rows], H_c)
+        S[:, [0, 1], [0, 1]] += _variances(sensing, z_hat[:, 0], float(eta[c]))
+        nu = measurements[c][None, :, :] - z_hat[:, None, :]  # [L', k_c, 2]
+        d2 = np.einsum("lki,lij,lkj->lk", nu, np.linalg.inv(S), nu)
+        best = np.argmin(d2, axis=1)
+        best_d2 = d2[np.arange(len(rows)), best]
+        inside = best_d2 <= gate
+        chosen[rows[inside], c] = best[inside]
+        total[rows[inside]] += best_d2[inside]
+    n_uavs = 2 + np.sum(chosen >= 0, axis=1)
+    sensed = uav_xy_m[np.asarray(eta) > 0]
+    out: list[_Proposal] = []
+    for row in np.flatnonzero(n_uavs >= settings.min_uavs):
+        need = _required(x[row], sensed, sensing, settings)
+        if n_uavs[row] < need:
+            continue
+        support = tuple((int(c), int(chosen[row, c])) for c in np.flatnonzero(chosen[row] >= 0))
+        pair = (
+            (int(first[row, 0]), int(first[row, 1])),
+            (int(second[row, 0]), int(second[row, 1])),
+        )
+        out.append(_Proposal(x[row], pair + support, float(total[row]), need))
     return out
 
 
@@ -262,10 +317,12 @@ def _fits(
     eta: FloatArray,
     sensing: SensingParams,
     max_speed_mps: float,
+    max_starts: int,
 ) -> list[_Fit]:
-    """The fits of the members' measurements ((UAV, index) pairs) from x0 [4] and from every
-    start their pairs of UAVs propose (both circle crossings of each pair): the local minima
-    found, each once, the lowest chi-square first."""
+    """The fits of the members' measurements ((UAV, index) pairs) from x0 [4] and from the
+    starts that the pairs of its `max_starts` most precise UAVs (finest range) propose (both
+    circle crossings of each pair): the local minima found, each once, the lowest chi-square
+    first."""
     uavs = np.array([m for m, _ in members])
     z = np.array([measurements[m][j] for m, j in members])
     z_flat = np.concatenate([z[:, 0], z[:, 1]])
@@ -274,7 +331,8 @@ def _fits(
     )
     w = 1.0 / np.concatenate([r[:, 0], r[:, 1]])
     starts = [x0]
-    for i, k in itertools.combinations(range(len(uavs)), 2):
+    precise = np.argsort(r[:, 0], kind="stable")[:max_starts]
+    for i, k in itertools.combinations(sorted(precise.tolist()), 2):
         x, _ = _pair_states(uav_xy_m[uavs[i]], z[i : i + 1], uav_xy_m[uavs[k]], z[k : k + 1])
         starts += [s for s in x if np.linalg.norm(s[2:]) <= max_speed_mps]
     minima: list[_Fit] = []
@@ -297,8 +355,11 @@ def initiate(
     track explains [M] (arrays [k_m, 2] of range m and Doppler m/s) taken at uav_xy_m [M, 2]
     with shares eta [M] (a UAV with eta <= 0 measured nothing). `sensing` gives eq. 8's
     variances (at a nominal RCS: the tracker does not know an unknown target's)."""
+    sensing_uavs = sum(1 for m, z in enumerate(measurements) if len(z) and eta[m] > 0)
+    if sensing_uavs < settings.min_uavs:
+        return []
     gate = _gate(settings)
-    proposals = _proposals(measurements, uav_xy_m, eta, sensing, gate, settings.max_speed_mps)
+    proposals = _proposals(measurements, uav_xy_m, eta, sensing, gate, settings)
     proposals.sort(key=lambda p: (-len(p.members), p.distance2))
     # One proposal per set of measurements (each pair of a set proposes it again).
     distinct: dict[frozenset[tuple[int, int]], _Proposal] = {}
@@ -319,9 +380,16 @@ def initiate(
 
     def verdict(p: _Proposal) -> tuple[Gaussian, Members] | None:
         members = p.members
-        while len(members) >= settings.min_uavs:
+        while len(members) >= p.required:
             found = _fits(
-                members, p.x, measurements, uav_xy_m, eta, sensing, settings.max_speed_mps
+                members,
+                p.x,
+                measurements,
+                uav_xy_m,
+                eta,
+                sensing,
+                settings.max_speed_mps,
+                settings.max_starts,
             )
             good = [fit for fit in found if _passes(fit, settings)]
             if good:
@@ -334,18 +402,19 @@ def initiate(
         return None
 
     for i, p in enumerate(proposals):
-        if len(p.members) < settings.min_uavs or used.intersection(p.members):
+        if len(p.members) < p.required or used.intersection(p.members):
             continue
         winner = accepted(p)
         if winner is None:
             continue
         belief, members = winner
         used.update(members)
+        rivals = [
+            q for q in proposals[i + 1 :] if len(set(q.members) & set(members)) >= settings.min_uavs
+        ][: settings.max_rivals]
         if not any(
-            _elsewhere(belief, rival[0], gate)
-            for q in proposals[i + 1 :]
-            if len(set(q.members) & set(members)) >= settings.min_uavs
-            and (rival := accepted(q)) is not None
+            (rival := accepted(q)) is not None and _elsewhere(belief, rival[0], gate)
+            for q in rivals
         ):
             out.append(belief)
     return out
@@ -366,12 +435,37 @@ def refit(
     for m, z in z_by_uav.items():
         measurements[m] = np.asarray(z, dtype=float).reshape(1, 2)
     members = tuple((m, 0) for m in sorted(z_by_uav))
-    found = _fits(members, x0, measurements, uav_xy_m, eta, sensing, settings.max_speed_mps)
+    found = _fits(
+        members,
+        x0,
+        measurements,
+        uav_xy_m,
+        eta,
+        sensing,
+        settings.max_speed_mps,
+        settings.max_starts,
+    )
     return _unique([fit for fit in found if _passes(fit, settings)], _gate(settings))
 
 
+def _required(
+    x: FloatArray, uav_xy_m: FloatArray, sensing: SensingParams, settings: InitiationSettings
+) -> int:
+    """How many UAVs must have measured a target at state x [4] to start a track there:
+    min_uavs, or min_detected_share of the detections expected from the sensing UAVs at
+    uav_xy_m [M', 2] (P_d at each one's range), whichever is more."""
+    if settings.detection is None:
+        expected = float(len(uav_xy_m))
+    else:
+        range_m = np.linalg.norm(uav_xy_m - x[:2], axis=1)
+        gains = np.full(len(range_m), sensing.radar_gain)
+        pd = detection_probability(range_m, gains, settings.detection, sensing.B, sensing.Ts)
+        expected = float(np.sum(pd))
+    return max(settings.min_uavs, math.ceil(settings.min_detected_share * expected - 1e-9))
+
+
 def _gate(settings: InitiationSettings) -> float:
-    return float(chi2.ppf(settings.gate_prob, 2))
+    return gate_threshold(settings.gate_prob, 2)
 
 
 def _passes(fit: _Fit, settings: InitiationSettings) -> bool:
@@ -383,7 +477,7 @@ def _passes(fit: _Fit, settings: InitiationSettings) -> bool:
         0 <= x <= settings.area_m[0] and 0 <= y <= settings.area_m[1]
     )
     return bool(
-        fit.chi_square <= chi2.ppf(settings.gate_prob, 2 * n - 4)
+        fit.chi_square <= gate_threshold(settings.gate_prob, 2 * n - 4)
         and position_std_m <= settings.max_position_std_m
         and np.linalg.norm(belief.x[2:]) <= settings.max_speed_mps
         and inside

@@ -33,7 +33,6 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-from scipy.stats import chi2
 
 from isac_mission.config.targets import DetectionSpec
 from isac_mission.model.detections import detection_probability
@@ -126,6 +125,7 @@ class TrackerSettings:
                 gate_prob=c.initiation_gate_prob,
                 max_position_std_m=c.max_initial_position_std_m,
                 max_speed_mps=c.max_target_speed_mps,
+                detection=detection,
                 area_m=(float(s.area[0]), float(s.area[1])),
             ),
         )
@@ -307,7 +307,7 @@ class MultiTargetTracker:
             choice = gnn(h)
             beta = np.zeros((T, len(z) + 1))
             beta[np.arange(T), np.where(choice == MISSED, len(z), choice)] = 1.0
-        doppler_gate = float(chi2.ppf(s.initiation.gate_prob, 1))
+        doppler_gate = gate_threshold(s.initiation.gate_prob, 1)
         for i, t in enumerate(self._tracks):
             best = int(np.argmax(beta[i, :-1]))
             if beta[i, best] >= EXPLAINED:
