@@ -11,6 +11,8 @@ detections, each outcome checked against what the rules say:
 
 from __future__ import annotations
 
+import itertools
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -20,7 +22,7 @@ from isac_mission.config import load_scenario
 from isac_mission.config.targets import DetectionSpec
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.radar import SensingParams, measure
-from isac_mission.tracking.initiation import InitiationSettings, initiate
+from isac_mission.tracking.initiation import InitiationSettings, _pairs, _required, initiate
 from isac_mission.tracking.multi_target import MultiTargetTracker, TrackerSettings
 from isac_mission.tracking.pcrb import Bound, bound_step
 from isac_mission.types import FloatArray, Gaussian
@@ -211,3 +213,51 @@ def test_without_misses_and_clutter_the_bound_is_todays(rng: np.random.Generator
         (track,) = tracker.update(report(xs[n], [0, 1, 2, 3, 4], rng), UAV_XY, ETA, SENSING).tracks
         np.testing.assert_allclose(track.bound.J, want.J, rtol=1e-12)
         np.testing.assert_allclose(track.bound.C, want.C, rtol=1e-10)
+
+
+def test_pairs_cover_every_uav_at_fleet_scale() -> None:
+    assert _pairs(list(range(6)), 60) == list(itertools.combinations(range(6), 2))
+    pairs = _pairs(list(range(24)), 60)
+    assert len(pairs) == len(set(pairs)) <= 72
+    assert all(a < b for a, b in pairs)
+    uses = np.bincount(np.array(pairs).ravel(), minlength=24)
+    assert uses.min() >= 2  # every UAV proposes with at least two partners
+
+
+def test_a_track_needs_half_the_detections_expected_there() -> None:
+    fleet = np.array([[x, y] for x in range(0, 3000, 500) for y in range(0, 2000, 500)])
+    settings_ = InitiationSettings(detection=detection(pd=0.9))
+    assert _required(X0, fleet, SENSING, settings_) == math.ceil(0.5 * 0.9 * len(fleet))
+    assert _required(X0, fleet[:4], SENSING, settings_) == 3  # never fewer than min_uavs
+
+
+@pytest.mark.parametrize("fine_every", [1, 2])
+def test_a_ghost_is_moved_to_its_target_after_two_refutations(
+    fine_every: int, rng: np.random.Generator
+) -> None:
+    # UAV 0 has most of the band (a fine range); the others' ranges are coarse. A confirmed track
+    # 150 m off the target along UAV 0's line of sight takes the coarse measurements; UAV 0's
+    # echo falls outside its gate. Two refutations in a row move it, its ID kept.
+    eta = np.array([0.9, 0.025, 0.025, 0.025, 0.025])
+    xs = path(X0, 6)
+    los = (X0[:2] - UAV_XY[0]) / np.linalg.norm(X0[:2] - UAV_XY[0])
+    ghost = np.concatenate([X0[:2] + 150 * los, X0[2:]])
+    tracker = MultiTargetTracker(settings(pd=1.0))
+    tracker.add_confirmed(Gaussian(ghost, np.diag([400.0, 400.0, 1.0, 1.0])))
+    errors = []
+    for n in range(1, 7):
+        tracker.predict()
+        z = []
+        for m in range(len(UAV_XY)):
+            clean = measure(xs[n], UAV_XY[m : m + 1])
+            noise = np.sqrt(SENSING.variances(clean[:1], eta[m : m + 1])) * rng.standard_normal(2)
+            seen = m > 0 or n % fine_every == 1 % fine_every
+            z.append((clean + noise)[None] if seen else np.zeros((0, 2)))
+        (track,) = tracker.update(z, UAV_XY, eta, SENSING).tracks
+        assert track.track_id == 1
+        errors.append(float(np.linalg.norm(track.belief.x[:2] - xs[n][:2])))
+    assert errors[0] > 60  # the ghost holds at first...
+    if fine_every == 1:
+        assert max(errors[1:]) < 30, errors  # ... and is on its target at the second refutation
+    else:  # refuted every other slot, never twice in a row: it stays (a single one may be chance)
+        assert min(errors) > 60, errors
