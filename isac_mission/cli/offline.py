@@ -104,7 +104,9 @@ def simulate(
     quiet_highs_banner()
     out_dir = out if out is not None else Path("out") / f"simulate-{s.mission_id}"
     if s.multi_target:
-        _simulate_multi_target(s, chosen, runs, s.seed if seed is None else seed, out_dir, workers)
+        _simulate_multi_target(
+            s, chosen, runs, s.seed if seed is None else seed, out_dir, workers, plots
+        )
         return
     simulate_report(
         s,
@@ -119,7 +121,7 @@ def simulate(
 
 
 def _simulate_multi_target(
-    s: Scenario, methods: list[str], runs: int, seed: int, out_dir: Path, workers: int
+    s: Scenario, methods: list[str], runs: int, seed: int, out_dir: Path, workers: int, plots: bool
 ) -> None:
     """`simulate` on the multi-target path (experiment/multi_target_report.py)."""
     from isac_mission.errors import ConfigError
@@ -133,7 +135,14 @@ def _simulate_multi_target(
         err_console.print(f"--methods: {err}", highlight=False)
         raise typer.Exit(2) from None
     multi_target_report(
-        s, methods, runs=runs, seed=seed, out_dir=out_dir, workers=workers, console=console
+        s,
+        methods,
+        runs=runs,
+        seed=seed,
+        out_dir=out_dir,
+        workers=workers,
+        console=console,
+        plots=plots,
     )
 
 

@@ -33,6 +33,11 @@ IDENTITY_CUTOFF_M = 100.0
 IDENTITY_GATE_PROB = 0.999
 """... or one whose position gate of this probability holds the target."""
 
+SETTLING_SLOTS = 10
+"""The first slots a track follows its target are its approach (the EKF from a prior or an
+initiation fit, at about twice its bound, as on the single-target path's slots 1..10); the
+settled ratio leaves them out."""
+
 MIN_UAVS_SEEN = 3
 """A target counts as seen from the first slot at least this many UAVs detected it."""
 
@@ -167,7 +172,8 @@ class TrackingSummary:
     switches per run, the share of runs with a confirmed false track and the longest false run,
     the confirmation delays [.] (slots, targets that were seen and confirmed), the targets seen
     but never confirmed, and per target (by index) location RMSE (m), mean tr(PCRB_pos) (m^2)
-    and MSE / tr(PCRB_pos)."""
+    and MSE / tr(PCRB_pos), over every slot a track followed it and, settled, without each
+    run's first SETTLING_SLOTS of them."""
 
     gospa_m: float
     localisation_m2: float
@@ -181,6 +187,7 @@ class TrackingSummary:
     rmse_m: tuple[float, ...]
     bound_m2: tuple[float, ...]
     efficiency: tuple[float, ...]
+    settled_efficiency: tuple[float, ...]
 
 
 def summarize_tracking(figures: Sequence[RunFigures]) -> TrackingSummary:
@@ -188,7 +195,7 @@ def summarize_tracking(figures: Sequence[RunFigures]) -> TrackingSummary:
     T = len(figures[0].targets) if figures else 0
     delays = [d for f in figures for t in f.targets if (d := t.confirmation_delay) is not None]
     never = sum(1 for f in figures for t in f.targets if t.seen_slot and not t.confirmed_slot)
-    rmse, bound, efficiency = [], [], []
+    rmse, bound, efficiency, settled = [], [], [], []
     for t in range(T):
         e = np.concatenate([f.targets[t].squared_error_m2 for f in figures])
         b = np.concatenate([f.targets[t].bound_m2 for f in figures])
@@ -197,6 +204,9 @@ def summarize_tracking(figures: Sequence[RunFigures]) -> TrackingSummary:
         rmse.append(float(np.sqrt(mse)))
         bound.append(mb)
         efficiency.append(mse / mb if len(b) else float("nan"))
+        e_s = np.concatenate([f.targets[t].squared_error_m2[SETTLING_SLOTS:] for f in figures])
+        b_s = np.concatenate([f.targets[t].bound_m2[SETTLING_SLOTS:] for f in figures])
+        settled.append(float(np.mean(e_s) / np.mean(b_s)) if len(b_s) else float("nan"))
     return TrackingSummary(
         gospa_m=float(np.mean([f.gospa_m.mean() for f in figures])),
         localisation_m2=float(np.mean([f.localisation_m2.mean() for f in figures])),
@@ -210,4 +220,5 @@ def summarize_tracking(figures: Sequence[RunFigures]) -> TrackingSummary:
         rmse_m=tuple(rmse),
         bound_m2=tuple(bound),
         efficiency=tuple(efficiency),
+        settled_efficiency=tuple(settled),
     )

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io
 import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -224,3 +225,8 @@ def test_the_report_prints_its_tables_and_writes_traces(scenario: Scenario, tmp_
     assert any(t["confirmed"] for t in slots[-1]["tracks"])
     on_disk = json.loads((tmp_path / "summary.json").read_text())
     assert on_disk["methods"]["sd"]["gospa_m"] == pytest.approx(summary["methods"]["sd"]["gospa_m"])
+    for method in ("sd", "aba"):  # the pictures: PNGs of the figure's size
+        png = (tmp_path / f"tracks_{method}.png").read_bytes()
+        assert png[:8] == b"\x89PNG\r\n\x1a\n"
+        width, height = struct.unpack(">II", png[16:24])
+        assert (width, height) == (8 * 120, 7 * 120)
