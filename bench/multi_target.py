@@ -151,6 +151,7 @@ def run_ours(
 
 def run_stone_soup(s: Scenario, rec: Recorded) -> tuple[list[float], list[FloatArray]]:
     """Stone Soup's EKF-JPDA on the same reports (module docstring)."""
+    from stonesoup.base import Property
     from stonesoup.dataassociator.probability import JPDA
     from stonesoup.functions import gm_reduce_single
     from stonesoup.hypothesiser.probability import PDAHypothesiser
@@ -161,7 +162,6 @@ def run_stone_soup(s: Scenario, rec: Recorded) -> tuple[list[float], list[FloatA
     )
     from stonesoup.predictor.kalman import ExtendedKalmanPredictor
     from stonesoup.types.array import CovarianceMatrix, StateVector, StateVectors
-    from stonesoup.base import Property
     from stonesoup.types.detection import Detection
     from stonesoup.types.state import GaussianState
     from stonesoup.types.track import Track

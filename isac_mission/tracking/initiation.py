@@ -316,11 +316,10 @@ def _fits(
     uav_xy_m: FloatArray,
     eta: FloatArray,
     sensing: SensingParams,
-    max_speed_mps: float,
-    max_starts: int,
+    settings: InitiationSettings,
 ) -> list[_Fit]:
     """The fits of the members' measurements ((UAV, index) pairs) from x0 [4] and from the
-    starts that the pairs of its `max_starts` most precise UAVs (finest range) propose (both
+    starts that the pairs of its `settings.max_starts` most precise UAVs (finest range) propose (both
     circle crossings of each pair): the local minima found, each once, the lowest chi-square
     first."""
     uavs = np.array([m for m, _ in members])
@@ -331,10 +330,10 @@ def _fits(
     )
     w = 1.0 / np.concatenate([r[:, 0], r[:, 1]])
     starts = [x0]
-    precise = np.argsort(r[:, 0], kind="stable")[:max_starts]
+    precise = np.argsort(r[:, 0], kind="stable")[: settings.max_starts]
     for i, k in itertools.combinations(sorted(precise.tolist()), 2):
         x, _ = _pair_states(uav_xy_m[uavs[i]], z[i : i + 1], uav_xy_m[uavs[k]], z[k : k + 1])
-        starts += [s for s in x if np.linalg.norm(s[2:]) <= max_speed_mps]
+        starts += [s for s in x if np.linalg.norm(s[2:]) <= settings.max_speed_mps]
     minima: list[_Fit] = []
     for fit in sorted(
         _fit_many(np.array(starts), z_flat, w, uav_xy_m[uavs]), key=lambda f: f.chi_square
@@ -381,16 +380,7 @@ def initiate(
     def verdict(p: _Proposal) -> tuple[Gaussian, Members] | None:
         members = p.members
         while len(members) >= p.required:
-            found = _fits(
-                members,
-                p.x,
-                measurements,
-                uav_xy_m,
-                eta,
-                sensing,
-                settings.max_speed_mps,
-                settings.max_starts,
-            )
+            found = _fits(members, p.x, measurements, uav_xy_m, eta, sensing, settings)
             good = [fit for fit in found if _passes(fit, settings)]
             if good:
                 best = _unique(good, gate)
@@ -435,16 +425,7 @@ def refit(
     for m, z in z_by_uav.items():
         measurements[m] = np.asarray(z, dtype=float).reshape(1, 2)
     members = tuple((m, 0) for m in sorted(z_by_uav))
-    found = _fits(
-        members,
-        x0,
-        measurements,
-        uav_xy_m,
-        eta,
-        sensing,
-        settings.max_speed_mps,
-        settings.max_starts,
-    )
+    found = _fits(members, x0, measurements, uav_xy_m, eta, sensing, settings)
     return _unique([fit for fit in found if _passes(fit, settings)], _gate(settings))
 
 
