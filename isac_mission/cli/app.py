@@ -23,7 +23,7 @@ ConfigArg = Annotated[
     Path,
     typer.Argument(
         help="Scenario YAML file (e.g. config/paper.yaml), or the name of a shipped scenario "
-        "(paper, paper-literal, constrained)."
+        "(paper, paper-literal, constrained, multi-target)."
     ),
 ]
 

@@ -95,12 +95,24 @@ def test_bad_multi_target_input_is_named(change: Any, message: str) -> None:
         parse_scenario(data, "bad")
 
 
-def test_the_closed_loops_refuse_the_multi_target_path_clearly(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "command", [["run"], ["serve"], ["sweep", "--grid", str(ROOT / "config/grids/example.yaml")]]
+)
+def test_the_live_service_and_sweep_refuse_the_multi_target_path_clearly(
+    command: list[str],
+) -> None:
+    result = CliRunner().invoke(app, [*command, str(ROOT / "config" / "multi-target.yaml")])
+    assert result.exit_code == 2
+    assert "multi-target path" in result.output and "`simulate` flies it" in result.output
+
+
+def test_simulate_refuses_a_one_target_planner_on_the_multi_target_path_by_name() -> None:
     result = CliRunner().invoke(
-        app, ["simulate", str(ROOT / "config" / "multi-target.yaml"), "--runs", "1"]
+        app,
+        ["simulate", str(ROOT / "config" / "multi-target.yaml"), "--methods", "sd,horizon"],
     )
     assert result.exit_code == 2
-    assert "multi-target path" in result.output
+    assert "'horizon' plans for one target" in result.output
 
 
 def test_check_config_accepts_and_describes_a_multi_target_scenario() -> None:

@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from isac_mission.config import Scenario
+from isac_mission.config import Scenario, single_target_problem
 from isac_mission.config.live_settings import LiveSettings
+from isac_mission.errors import ConfigError
 from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
 from isac_mission.experiment.sweep.grid import (
     GridPoint,
@@ -72,12 +73,20 @@ def plan_sweep(
     seed: int | None = None,
     live: LiveSettings | None = None,
 ) -> SweepPlan:
-    """Load both files and validate every grid point (raises ConfigError before any work);
+    """Load both files and validate every grid point (raises ConfigError before any work, a
+    multi-target scenario included: `single_target_problem`);
     with `live`, every point plans with the live settings (config/live_settings.py) applied to
     its scenario, as `simulate --live-settings` does."""
     base = load_config_mapping(config)
     grid = load_grid(grid_file)
     points = expand_grid(base, grid, str(config))
+    problems = [
+        f"grid point {p.index}: {problem}"
+        for p in points
+        if (problem := single_target_problem(p.scenario)) is not None
+    ]
+    if problems:
+        raise ConfigError(f"{config}: " + "; ".join(problems[:1]))
     if live is not None:
         points = [replace(p, scenario=live.apply(p.scenario), key=f"live:{p.key}") for p in points]
     if seed is None:
