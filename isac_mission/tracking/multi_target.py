@@ -23,6 +23,13 @@ longer happen; a confirmed track is deleted after `delete_after_misses` slots in
 hit. A candidate whose position lies inside an older track's gate (a second track on one
 target) is dropped.
 
+A ghost: where most UAVs' ranges are coarse, a track can start on a wrong minimum of its fit and
+keep taking the target's coarse measurements, while a UAV with a fine range sees the target's
+echo outside the track's gate. A report that misses a track but holds an unexplained
+measurement whose Doppler fits the track's prediction is a suspect; the track's own
+measurements of the slot with the suspect are fitted, and a passing fit outside the track's gate
+refutes the track. Two refutations in a row that agree move the track there, its ID kept.
+
 Pure: numpy and scipy. Shapes: M UAVs, T tracks, k_m measurements of UAV m.
 """
 
@@ -253,7 +260,7 @@ class MultiTargetTracker:
         self._repair(unexplained, uav_xy_m, eta, sensing)
         for t in self._tracks:
             self._step_bound(t, uav_xy_m, eta, sensing)
-        weight_of = {t.track_id: float(w) for t, w in zip(self._tracks, weights, strict=True)}
+        weight_of = {id(t): float(w) for t, w in zip(self._tracks, weights, strict=True)}
         deleted, started = self._manage(weights)
         candidates = {
             self._start(b, confirmed=False, candidate=True)
@@ -261,9 +268,7 @@ class MultiTargetTracker:
         }
         self._drop_duplicates(candidates)
         out = tuple(
-            TrackEstimate(
-                t.track_id, t.confirmed, t.belief, t.bound, weight_of.get(t.track_id, 0.0)
-            )
+            TrackEstimate(t.track_id, t.confirmed, t.belief, t.bound, weight_of.get(id(t), 0.0))
             for t in self._tracks
             if t.track_id > 0
         )
