@@ -28,7 +28,9 @@ keep taking the target's coarse measurements, while a UAV with a fine range sees
 echo outside the track's gate. A report that misses a track but holds an unexplained
 measurement whose Doppler fits the track's prediction is a suspect; the track's own
 measurements of the slot with the suspect are fitted, and a passing fit outside the track's gate
-refutes the track. Two refutations in a row that agree move the track there, its ID kept.
+refutes the track. Two refutations in a row that agree move the track there, its ID kept; a
+refuted slot is no hit for a track not yet confirmed, so a ghost is not confirmed before its
+repair.
 
 Pure: numpy and scipy. Shapes: M UAVs, T tracks, k_m measurements of UAV m.
 """
@@ -175,6 +177,7 @@ class _Track:
     own: dict[int, FloatArray] = field(default_factory=dict)
     suspects: list[tuple[int, FloatArray]] = field(default_factory=list)
     refuted: Gaussian | None = None
+    refuted_now: bool = False
 
 
 @dataclass(frozen=True)
@@ -230,7 +233,7 @@ class MultiTargetTracker:
             t.belief = ekf_predict(t.belief, s.F, s.W)
             t.x_pred = t.belief.x.copy()
             t.J_pred = predict_information(t.bound, s.F, s.bound_noise)
-            t.own, t.suspects = {}, []
+            t.own, t.suspects, t.refuted_now = {}, [], False
             if t.refuted is not None:
                 t.refuted = ekf_predict(t.refuted, s.F, s.W)
             if t.track_id > 0:
@@ -361,6 +364,7 @@ class MultiTargetTracker:
                 t.refuted = None
                 continue
             belief, m, row_index = refuted
+            t.refuted_now = True
             if t.refuted is not None and not _outside(t.refuted, belief, self._gate):
                 t.belief, t.refuted = belief, None
                 unexplained[m] = np.delete(unexplained[m], row_index, axis=0)
@@ -397,7 +401,8 @@ class MultiTargetTracker:
         deleted: list[int] = []
         started: list[int] = []
         for t, w in zip(self._tracks, weights, strict=True):
-            hit = bool(w >= s.hit_weight)
+            # A refuted slot is no hit for a track not yet confirmed: a ghost waits for its repair.
+            hit = bool(w >= s.hit_weight) and (t.confirmed or not t.refuted_now)
             t.hits.append(hit)
             t.misses_in_row = 0 if hit else t.misses_in_row + 1
             if t.track_id < 0:

@@ -261,3 +261,31 @@ def test_a_ghost_is_moved_to_its_target_after_two_refutations(
         assert max(errors[1:]) < 30, errors  # ... and is on its target at the second refutation
     else:  # refuted every other slot, never twice in a row: it stays (a single one may be chance)
         assert min(errors) > 60, errors
+
+
+def test_a_tentative_ghost_is_never_confirmed(rng: np.random.Generator) -> None:
+    # The ghost of the test above, but tentative: a refuted slot is no hit for it, so it is
+    # never confirmed; a confirmed track on the target follows instead.
+    eta = np.array([0.9, 0.025, 0.025, 0.025, 0.025])
+    xs = path(X0, 10)
+    los = (X0[:2] - UAV_XY[0]) / np.linalg.norm(X0[:2] - UAV_XY[0])
+    ghost = np.concatenate([X0[:2] + 150 * los, X0[2:]])
+    tracker = MultiTargetTracker(settings(pd=1.0))
+    ghost_id = tracker._start(Gaussian(ghost, np.diag([400.0, 400.0, 1.0, 1.0])), confirmed=False)
+    confirmed_errors = []
+    for n in range(1, 11):
+        tracker.predict()
+        z = [
+            (
+                measure(xs[n], UAV_XY[m : m + 1])
+                + np.sqrt(SENSING.variances(measure(xs[n], UAV_XY[m : m + 1])[:1], eta[m : m + 1]))
+                * rng.standard_normal(2)
+            )[None]
+            for m in range(len(UAV_XY))
+        ]
+        out = tracker.update(z, UAV_XY, eta, SENSING)
+        assert all(t.track_id != ghost_id or not t.confirmed for t in out.tracks), n
+        confirmed_errors += [
+            float(np.linalg.norm(t.belief.x[:2] - xs[n][:2])) for t in out.confirmed
+        ]
+    assert confirmed_errors and max(confirmed_errors) < 30, confirmed_errors
