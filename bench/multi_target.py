@@ -37,6 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from isac_mission.config import Scenario, load_scenario, parse_scenario
+from isac_mission.experiment.multi_target_loop import target_radar_gains
 from isac_mission.model.detections import unlabelled_detections
 from isac_mission.model.radar import SensingParams
 from isac_mission.model.run_noise import draw_multi_target_noise
@@ -96,7 +97,7 @@ def record(s: Scenario, seed: int) -> Recorded:
     noise = draw_multi_target_noise(s, seed)
     paths = target_paths(s.targets, s.dt, s.kappa, s.N, noise.target_normals)
     sensing = SensingParams.from_scenario(s)
-    gains = np.array([s.with_changes(rcs_m2=t.rcs_m2).radar_gain for t in s.targets])
+    gains = target_radar_gains(s)
     eta = np.full(s.M, 1.0 / s.M)
     assert s.detection is not None
     reports = [

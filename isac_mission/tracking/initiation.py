@@ -120,19 +120,6 @@ def _pair_states(
     return np.concatenate([points, v], axis=1)[ok], index[ok]
 
 
-def _jacobians(x: FloatArray, uav_xy: FloatArray) -> FloatArray:
-    """[L, 2, 4]: d(range, Doppler)/dx of each state x [L, 4] seen from the UAV at uav_xy [2]."""
-    r = x[:, :2] - uav_xy
-    d = np.linalg.norm(r, axis=1)
-    u = r / d[:, None]
-    v_r = np.einsum("li,li->l", u, x[:, 2:])
-    H = np.zeros((len(x), 2, 4))
-    H[:, 0, :2] = u
-    H[:, 1, :2] = (x[:, 2:] - v_r[:, None] * u) / d[:, None]
-    H[:, 1, 2:] = u
-    return H
-
-
 def _predicted(x: FloatArray, uav_xy: FloatArray) -> FloatArray:
     """[L, 2]: (range, Doppler) of each state x [L, 4] seen from uav_xy [2]."""
     r = x[:, :2] - uav_xy
@@ -189,8 +176,7 @@ def _proposals(
         x, index = x[plausible], index[plausible]
         if not len(x):
             continue
-        H = np.concatenate([_jacobians(x, uav_xy_m[a]), _jacobians(x, uav_xy_m[b])], axis=1)
-        H = H[:, [0, 2, 1, 3]]  # rows: range a, range b, Doppler a, Doppler b
+        H = _measure_many(x, uav_xy_m[[a, b]])[1]  # rows: range a, range b, Doppler a, Doppler b
         r_a = _variances(sensing, measurements[a][index[:, 0], 0], float(eta[a]))
         r_b = _variances(sensing, measurements[b][index[:, 1], 0], float(eta[b]))
         R = np.stack([r_a[:, 0], r_b[:, 0], r_a[:, 1], r_b[:, 1]], axis=1)
@@ -210,7 +196,7 @@ def _proposals(
     for c in seen:
         rows = np.flatnonzero((first[:, 0] != c) & (second[:, 0] != c))
         z_hat = _predicted(x[rows], uav_xy_m[c])
-        H_c = _jacobians(x[rows], uav_xy_m[c])
+        H_c = _measure_many(x[rows], uav_xy_m[c : c + 1])[1]
         S = np.einsum("lij,ljk,lmk->lim", H_c, Sigma[rows], H_c)
         S[:, [0, 1], [0, 1]] += _variances(sensing, z_hat[:, 0], float(eta[c]))
         nu = measurements[c][None, :, :] - z_hat[:, None, :]  # [L', k_c, 2]
@@ -403,7 +389,7 @@ def initiate(
             q for q in proposals[i + 1 :] if len(set(q.members) & set(members)) >= settings.min_uavs
         ][: settings.max_rivals]
         if not any(
-            (rival := accepted(q)) is not None and _elsewhere(belief, rival[0], gate)
+            (rival := accepted(q)) is not None and outside_gate(belief, rival[0], gate)
             for q in rivals
         ):
             out.append(belief)
@@ -468,12 +454,13 @@ def _passes(fit: _Fit, settings: InitiationSettings) -> bool:
 def _unique(good: Sequence[_Fit], gate: float) -> Gaussian | None:
     """The best of the passing fits good (lowest chi-square first), None when another lies
     outside its gate (ambiguous) or there is none."""
-    if not good or any(_elsewhere(good[0].belief, other.belief, gate) for other in good[1:]):
+    if not good or any(outside_gate(good[0].belief, other.belief, gate) for other in good[1:]):
         return None
     return good[0].belief
 
 
-def _elsewhere(a: Gaussian, b: Gaussian, gate: float) -> bool:
-    """Whether b's position lies outside a's and b's joint position gate."""
+def outside_gate(a: Gaussian, b: Gaussian, gate: float) -> bool:
+    """Whether b's position lies outside a's and b's joint position gate (chi-square value
+    gate: the tracker's test of a second track on one target, a refutation, an ambiguity)."""
     e = a.x[:2] - b.x[:2]
     return float(e @ np.linalg.solve(a.P[:2, :2] + b.P[:2, :2], e)) > gate

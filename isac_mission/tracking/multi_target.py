@@ -56,7 +56,7 @@ from isac_mission.tracking.association import (
     pda_update,
 )
 from isac_mission.tracking.ekf import ekf_predict
-from isac_mission.tracking.initiation import InitiationSettings, initiate, refit
+from isac_mission.tracking.initiation import InitiationSettings, initiate, outside_gate, refit
 from isac_mission.tracking.origin_uncertainty import (
     bound_step_with_origin,
     uav_reduction_factors,
@@ -357,7 +357,7 @@ class MultiTargetTracker:
                     if not len(row):
                         continue
                     belief = refit({**t.own, m: z}, t.belief.x, uav_xy_m, eta, sensing, s)
-                    if belief is not None and _outside(t.belief, belief, self._gate):
+                    if belief is not None and outside_gate(t.belief, belief, self._gate):
                         refuted = belief, m, int(row[0])
                         break
             if refuted is None:
@@ -365,7 +365,7 @@ class MultiTargetTracker:
                 continue
             belief, m, row_index = refuted
             t.refuted_now = True
-            if t.refuted is not None and not _outside(t.refuted, belief, self._gate):
+            if t.refuted is not None and not outside_gate(t.refuted, belief, self._gate):
                 t.belief, t.refuted = belief, None
                 unexplained[m] = np.delete(unexplained[m], row_index, axis=0)
                 repaired.append(t.track_id)
@@ -430,12 +430,7 @@ class MultiTargetTracker:
         deleted = [
             t.track_id
             for t in self._tracks
-            if t.track_id in new and any(not _outside(o.belief, t.belief, self._gate) for o in old)
+            if t.track_id in new
+            and any(not outside_gate(o.belief, t.belief, self._gate) for o in old)
         ]
         self._tracks = [t for t in self._tracks if t.track_id not in deleted]
-
-
-def _outside(a: Gaussian, b: Gaussian, gate: float) -> bool:
-    """Whether b's position lies outside the joint position gate of a and b."""
-    e = a.x[:2] - b.x[:2]
-    return float(e @ np.linalg.solve(a.P[:2, :2] + b.P[:2, :2], e)) > gate
