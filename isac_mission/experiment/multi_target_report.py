@@ -19,12 +19,7 @@ from rich.table import Table
 
 from isac_mission.config import Scenario
 from isac_mission.experiment.bootstrap import paired_bootstrap, reduction_of_means
-from isac_mission.experiment.multi_target_loop import (
-    MultiTargetSlot,
-    check_multi_target_method,
-    multi_target_kit,
-    run_multi_target,
-)
+from isac_mission.experiment.multi_target_loop import run_multi_target
 from isac_mission.experiment.multi_target_metrics import (
     RunFigures,
     TrackingSummary,
@@ -34,11 +29,12 @@ from isac_mission.experiment.multi_target_metrics import (
 from isac_mission.experiment.multi_target_plots import save_tracks_png
 from isac_mission.experiment.report import interval_cell, print_table
 from isac_mission.model.run_noise import draw_multi_target_noise
+from isac_mission.planning.multi_target import check_multi_target_method, multi_target_kit
 from isac_mission.planning.registry import LABELS
-from isac_mission.records.jsonlines import dumps_line, to_jsonable
+from isac_mission.records.jsonlines import to_jsonable
+from isac_mission.records.multi_target import TRACE_FORMAT, header_line, slot_line
 
-TRACE_FORMAT = "isac-mission multi-target trace 1"
-"""The first line's `format` of a multi-target trace (docs/trace.md)."""
+__all__ = ["TRACE_FORMAT", "multi_target_report", "run_multi_target_monte_carlo"]
 
 
 @dataclass(frozen=True)
@@ -57,42 +53,11 @@ def _one_run(s: Scenario, method: str, run: int, seed: int, trace_dir: Path | No
     result = run_multi_target(s, method, noise, kit, lambda o: lines.append(slot_line(o)))
     if trace_dir is not None:
         config = s.trace_config() | {"seed": seed + run, "method": method}
-        head = dumps_line(to_jsonable({"format": TRACE_FORMAT, "config": config}))
+        head = header_line(config)
         path = trace_dir / f"{method}_run{run:03d}.jsonl"
         path.write_text("\n".join([head, *lines]) + "\n")
     figures = run_figures(result, s.multi_tracker.gospa_cutoff_m)
     return MethodRuns(method, (figures,), tuple(o.plan.report.solve_s for o in result.slots))
-
-
-def slot_line(o: MultiTargetSlot) -> str:
-    """One slot of a multi-target trace as a JSON line (docs/trace.md)."""
-    present = np.flatnonzero(np.all(np.isfinite(o.truth), axis=1))
-    record: dict[str, Any] = {
-        "slot": o.slot,
-        "method": o.method,
-        "status": o.plan.report.status,
-        "fallback": o.plan.report.fallback,
-        "solve_ms": 1e3 * o.plan.report.solve_s,
-        "uav_xy": o.uav_xy_m,
-        "eta": o.bandwidth_share,
-        "assoc": o.plan.bs_of_uav,
-        "planned_for": o.planned_for,
-        "targets": [{"index": int(t), "state": o.truth[t]} for t in present],
-        "tracks": [
-            {
-                "id": t.track_id,
-                "confirmed": t.confirmed,
-                "x": t.belief.x,
-                "P": t.belief.P,
-                "pcrb_position_trace": float(np.trace(t.bound.C[:2, :2])),
-                "weight": t.weight,
-            }
-            for t in o.tracks
-        ],
-        "measurements": [r.measurements for r in o.reports],
-        "origins": [r.origin for r in o.reports],
-    }
-    return dumps_line(to_jsonable(record))
 
 
 def run_multi_target_monte_carlo(

@@ -27,7 +27,6 @@ from isac_mission.errors import ConfigError
 from isac_mission.experiment.multi_target_loop import (
     MultiTargetRun,
     MultiTargetSlot,
-    multi_target_kit,
     run_multi_target,
 )
 from isac_mission.experiment.multi_target_metrics import follow, run_figures
@@ -37,6 +36,7 @@ from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.radar import SensingParams
 from isac_mission.model.run_noise import draw_multi_target_noise
 from isac_mission.model.targets import TargetPaths
+from isac_mission.planning.multi_target import multi_target_kit
 from isac_mission.planning.problem import SlotInput, build_slot_problem
 from isac_mission.tracking.gospa import UNASSIGNED, gospa
 from isac_mission.tracking.multi_target import TrackEstimate
