@@ -37,11 +37,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from isac_mission.config import Scenario, load_scenario, parse_scenario
-from isac_mission.experiment.multi_target_loop import target_radar_gains
 from isac_mission.model.detections import unlabelled_detections
 from isac_mission.model.radar import SensingParams
 from isac_mission.model.run_noise import draw_multi_target_noise
-from isac_mission.model.targets import target_paths
+from isac_mission.model.targets import target_paths, target_radar_gains
 from isac_mission.tracking.gospa import gospa
 from isac_mission.tracking.initiation import InitiationSettings
 from isac_mission.tracking.multi_target import MultiTargetTracker, TrackerSettings

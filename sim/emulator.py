@@ -2,7 +2,9 @@
 
 A thin I/O wrapper around the pure `sim.sensing.Sensor`. Each slot it draws every UAV's detection
 and publishes it on `isac/<mission>/detections/<m>` (codec `detection` payload; a missed
-detection is published with null range and radial velocity). The bandwidth shares are equal
+detection is published with null range and radial velocity). On a multi-target mission
+(`draw_reports`, `publish_reports`) each UAV's unlabelled report of `sim.multi_target_scene` goes out instead, as a
+`detection_set` (an empty one when it detected nothing). The bandwidth shares are equal
 (1/M) until a plan arrives on `isac/<mission>/plan`; slot n then uses the shares of the plan
 with the largest slot <= n (plan n carries eta_n; see isac_mission/wire/models.py). A malformed
 plan (including one for a different number of UAVs or base stations) is counted in
@@ -18,8 +20,18 @@ from typing import Protocol
 import numpy as np
 
 from isac_mission.errors import MessageError
+from isac_mission.model.detections import UavReport
 from isac_mission.types import Detections, FloatArray
-from isac_mission.wire import Keys, PlanMsg, decode_plan, detection_messages, encode_detection
+from isac_mission.wire import (
+    Keys,
+    PlanMsg,
+    decode_plan,
+    detection_messages,
+    detection_set_messages,
+    encode_detection,
+    encode_detection_set,
+)
+from sim.multi_target_scene import MultiTargetScene
 from sim.sensing import Sensor, equal_shares
 
 log = logging.getLogger(__name__)
@@ -107,8 +119,34 @@ class SensingEmulator:
         for msg in detection_messages(det, t_s, eta):
             self._bus.publish(self._keys.detections(msg.uav), encode_detection(msg))
             self.detections_published += 1
-        # Plans older than the one in use can no longer be selected.
+        self._forget_old_plans(slot)
+        return det
+
+    def draw_reports(
+        self, slot: int, scene: MultiTargetScene, uav_xy_m: FloatArray
+    ) -> tuple[list[UavReport], FloatArray]:
+        """Slot `slot`'s unlabelled reports [M] (1..N, with their origins) from the UAVs'
+        actual horizontal positions [M, 2] (m), and the shares eta [M] in use."""
+        eta = self.shares_for(slot)
+        return scene.reports(slot, uav_xy_m, eta), eta
+
+    def publish_reports(
+        self,
+        slot: int,
+        t_s: float,
+        reports: list[UavReport],
+        uav_xy_m: FloatArray,
+        eta: FloatArray,
+    ) -> None:
+        """One `detection_set` per UAV of `draw_reports`' reports, stamped t_s (s)."""
+        msgs = detection_set_messages(slot, t_s, [r.measurements for r in reports], uav_xy_m, eta)
+        for msg in msgs:
+            self._bus.publish(self._keys.detections(msg.uav), encode_detection_set(msg))
+            self.detections_published += 1
+        self._forget_old_plans(slot)
+
+    def _forget_old_plans(self, slot: int) -> None:
+        """Plans older than the one in use at `slot` can no longer be selected."""
         current = self.plan_for(slot)
         if current is not None:
             self._plans = {s: p for s, p in self._plans.items() if s >= current.slot}
-        return det

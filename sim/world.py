@@ -9,7 +9,9 @@
   to gcs_port) and drives everything else;
 - at each slot boundary t = t0 + n dt it advances the target to slot n (slot 0 is x0), draws and
   publishes every UAV's detection from the vehicles' actual horizontal positions
-  (`sim.emulator.SensingEmulator`), and publishes `truth` and `clock`;
+  (`sim.emulator.SensingEmulator`), and publishes `truth` and `clock`; on a multi-target mission
+  every UAV's unlabelled report (`detection_set`) and every target's truth (`truth_set`) of
+  `sim.multi_target_scene` instead;
 - `clock` is also published every 1 / clock_rate_hz simulation seconds (slot -1 before the
   mission starts).
 
@@ -48,6 +50,7 @@ from sim.clock import SimClock
 from sim.emulator import SensingEmulator
 from sim.impaired_io import ImpairedPublisher
 from sim.lockstep import Lockstep
+from sim.multi_target_scene import MultiTargetScene
 from sim.world_assembly import (
     make_target_and_sensor,
     make_vehicles,
@@ -74,6 +77,12 @@ class World:
         self.keys = Keys(scenario.mission_id)
         self.stats = WorldStats()
         self.target, self.sensor = make_target_and_sensor(scenario, options)
+        self.scene: MultiTargetScene | None = None
+        """The targets of a multi-target mission (`simulate`'s draws for the world's seed); the
+        single `target` then stays unused."""
+        if scenario.multi_target:
+            seed = scenario.seed if options.seed is None else options.seed
+            self.scene = MultiTargetScene(scenario, seed)
         self.clock = SimClock(tick_hz=options.tick_hz, speed=options.speed)
         self.vehicles = make_vehicles(scenario, options)
         self.bus: ZenohBus | None = None
@@ -205,6 +214,9 @@ class World:
         outputs, emulator = self.outputs, self.emulator
         assert outputs is not None and emulator is not None
         t_s = self._slot_time(n)
+        if self.scene is not None:
+            self._run_multi_target_slot(n, now_s, t_s, self.scene)
+            return
         x = self.target.state if n == 0 else self.target.advance()
         if self.target.slot != n:  # the target is advanced exactly once per slot
             raise RuntimeError(f"target at slot {self.target.slot}, world at slot {n}")
@@ -217,6 +229,27 @@ class World:
         log.debug(
             "slot %d at t = %.2f s: %d/%d detections", n, t_s, det.received.sum(), len(det.received)
         )
+        if self.options.lockstep and n < self.scenario.N and emulator.latest_plan_slot < n + 1:
+            self.lockstep.hold(n, now_s)
+
+    def _run_multi_target_slot(
+        self, n: int, now_s: float, t_s: float, scene: MultiTargetScene
+    ) -> None:
+        """Slot n of a multi-target mission: every target's truth with the origins of the
+        slot's measurements (first, as on a single-target mission), then every UAV's unlabelled
+        report (slots 1..N; slot 0 is before plan 1 and has none). Past slot N the world shows
+        nothing more."""
+        outputs, emulator = self.outputs, self.emulator
+        assert outputs is not None and emulator is not None
+        if scene.covers(n):
+            xy = positions_xy_m(self.vehicles)
+            reports, eta = emulator.draw_reports(n, scene, xy) if n > 0 else ([], None)
+            outputs.publish_truth_set(n, t_s, scene.truth(n), reports)
+            self.stats.truth_published += 1
+            if eta is not None:
+                emulator.publish_reports(n, t_s, reports, xy, eta)
+        self.stats.slots = n + 1
+        self._publish_clock(now_s)
         if self.options.lockstep and n < self.scenario.N and emulator.latest_plan_slot < n + 1:
             self.lockstep.hold(n, now_s)
 

@@ -1,4 +1,5 @@
-"""What the world publishes on the bus besides the detections: `truth` once per slot and `clock`.
+"""What the world publishes on the bus besides the detections: `truth` once per slot (`truth_set`
+on a multi-target mission) and `clock`.
 
 `clock` goes out at every slot boundary, every 1 / clock_rate_hz simulation seconds on the grid
 k / clock_rate_hz (slot -1 before the mission starts), and repeated while the world holds in
@@ -11,9 +12,18 @@ from __future__ import annotations
 import math
 
 from isac_mission.bus import ZenohBus
+from isac_mission.model.detections import UavReport
 from isac_mission.timebase import UNPACED_SPEED, SlotTimeline, reached
 from isac_mission.types import FloatArray
-from isac_mission.wire import ClockMsg, Keys, TruthMsg, encode_clock, encode_truth
+from isac_mission.wire import (
+    ClockMsg,
+    Keys,
+    TruthMsg,
+    TruthSetMsg,
+    encode_clock,
+    encode_truth,
+    encode_truth_set,
+)
 
 
 class WorldOutputs:
@@ -34,6 +44,16 @@ class WorldOutputs:
     def publish_truth(self, n: int, t_s: float, x: FloatArray) -> None:
         """The target's true state x [4] (m, m/s) at slot n, time t_s (s)."""
         self._bus.publish(self._keys.truth, encode_truth(TruthMsg(slot=n, t_s=t_s, target_x=x)))
+
+    def publish_truth_set(
+        self, n: int, t_s: float, states: FloatArray, reports: list[UavReport]
+    ) -> None:
+        """Every target's state [T, 4] (m, m/s; NaN rows: not in the scene) at slot n, time
+        t_s (s), with the origin of each measurement of the slot's `reports` [M] (none at slot
+        0, which has no reports)."""
+        origins = tuple(tuple(int(o) for o in r.origin) for r in reports)
+        msg = TruthSetMsg(slot=n, t_s=t_s, states=states, origins=origins)
+        self._bus.publish(self._keys.truth, encode_truth_set(msg))
 
     def clock_due(self, now_s: float) -> bool:
         """True once the simulation time `now_s` (s) has reached the next periodic clock time."""

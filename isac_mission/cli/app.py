@@ -68,15 +68,15 @@ PublicOpt = Annotated[
 ]
 
 
-def load_or_exit(path: Path, flies: bool = True) -> Scenario:
+def load_or_exit(path: Path, single_target_only: bool = False) -> Scenario:
     """Load a scenario or print its problems (one per line) and exit with status 2; with
-    `flies`, a multi-target scenario is refused too (`single_target_problem`)."""
+    `single_target_only`, a multi-target scenario is refused too (`single_target_problem`)."""
     try:
         s = load_scenario(path)
     except ConfigError as err:
         err_console.print(f"[bold red]invalid configuration[/]\n{err}", highlight=False)
         raise typer.Exit(2) from None
-    problem = single_target_problem(s) if flies else None
+    problem = single_target_problem(s) if single_target_only else None
     if problem is not None:
         err_console.print(f"[bold red]not supported yet[/]\n{path}: {problem}", highlight=False)
         raise typer.Exit(2)

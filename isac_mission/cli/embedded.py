@@ -38,6 +38,7 @@ from isac_mission.errors import ConfigError
 if TYPE_CHECKING:
     from isac_mission.cli.mission import LiveOptions, LiveResult
     from isac_mission.config import Scenario
+    from isac_mission.records.multi_target import MultiTargetSlot
     from isac_mission.service.ground.report import SlotEvent
 
 
@@ -174,12 +175,14 @@ async def run_embedded(
     stop: asyncio.Event,
     on_slot: Callable[[SlotEvent], None] | None = None,
     on_status: Callable[[str], None] | None = None,
+    on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
 ) -> LiveResult:
-    """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh."""
+    """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh
+    (on_tracks: fly_mission's, for a multi-target scenario)."""
     from isac_mission.bus import ZenohBus
     from isac_mission.bus.security import secured_settings
     from isac_mission.cli.mission import fly_mission, ground_endpoint
-    from isac_mission.model.run_noise import draw_run_noise
+    from isac_mission.model.run_noise import draw_multi_target_noise, draw_run_noise
     from sim.world import run_world
     from sim.world_options import WorldOptions, parse_outages
 
@@ -194,6 +197,9 @@ async def run_embedded(
     # tracker starts from simulate's estimate x0 + e (sim/world_assembly.make_target).
     seed = s.seed if opts.seed is None else opts.seed
     initial_x = s.x0 + draw_run_noise(s, seed).initial_error
+    # On a multi-target scenario the world draws `simulate`'s targets and reports for the seed
+    # (sim/multi_target_scene.py), and each known target's track starts at simulate's estimate.
+    initial_errors = draw_multi_target_noise(s, seed).initial_errors if s.multi_target else None
     world_opts = WorldOptions(
         speed=opts.speed,
         lockstep=opts.lockstep,
@@ -211,7 +217,9 @@ async def run_embedded(
     with ZenohBus.open(hub) as bus:
         world = asyncio.create_task(run_world(s, world_opts, world_stop))
         try:
-            return await fly_mission(s, opts, bus, stop, on_slot, on_status, initial_x)
+            return await fly_mission(
+                s, opts, bus, stop, on_slot, on_status, initial_x, on_tracks, initial_errors
+            )
         finally:
             world_stop.set()
             async with asyncio.timeout(30.0):

@@ -33,8 +33,9 @@ from isac_mission.planning.registry import methods_help
 from isac_mission.quiet import quiet_highs_banner
 
 if TYPE_CHECKING:
-    from isac_mission.cli.mission import LiveOptions
+    from isac_mission.cli.mission import LiveOptions, LiveResult
     from isac_mission.config import Scenario
+    from isac_mission.records.multi_target import MultiTargetSlot
 
 
 def _live(
@@ -71,6 +72,15 @@ def _live(
     if method not in METHODS:
         err_console.print(f"--method: unknown {method!r}; choose from {', '.join(METHODS)}")
         raise typer.Exit(2)
+    if s.multi_target:
+        from isac_mission.errors import ConfigError
+        from isac_mission.planning.multi_target import check_multi_target_method
+
+        try:
+            check_multi_target_method(method)
+        except ConfigError as err:
+            err_console.print(f"--method: {err}", highlight=False)
+            raise typer.Exit(2) from None
     quiet_highs_banner()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     out_dir = (
@@ -175,6 +185,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
     import asyncio
     import signal
 
+    import numpy as np
     from rich.live import Live
 
     from isac_mission.cli.mission import LiveResult, run_serve, summarize_live
@@ -196,6 +207,17 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
             status["phase"] = msg
             live.update(render())
 
+        def on_tracks(o: MultiTargetSlot, latency_s: float) -> None:
+            confirmed = sum(t.confirmed for t in o.tracks)
+            present = int(np.all(np.isfinite(o.truth), axis=1).sum())
+            status["line"] = (
+                f"slot {o.slot:3d}/{s.N}  targets {present}  tracks {confirmed} confirmed, "
+                f"{len(o.tracks) - confirmed} tentative  planned for {o.planned_for or '-'}  "
+                f"solve {o.plan.report.solve_s * 1e3:6.1f} ms  det->plan {latency_s * 1e3:6.1f} ms"
+                f"  status {o.plan.report.status}"
+            )
+            live.update(render())
+
         def on_slot(ev: SlotEvent) -> None:
             r = ev.record
             err = "-" if ev.position_error_m is None else f"{ev.position_error_m:6.2f} m"
@@ -214,10 +236,10 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
                 loop.add_signal_handler(sig, stop.set)
             try:
                 if serve_only:
-                    return await run_serve(s, opts, stop, on_slot, on_status)
+                    return await run_serve(s, opts, stop, on_slot, on_status, on_tracks)
                 from isac_mission.cli.embedded import run_embedded
 
-                return await run_embedded(s, opts, stop, on_slot, on_status)
+                return await run_embedded(s, opts, stop, on_slot, on_status, on_tracks)
             finally:
                 for sig in (signal.SIGINT, signal.SIGTERM):
                     loop.remove_signal_handler(sig)
@@ -229,6 +251,9 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
             raise typer.Exit(1) from None
     console.print()
     assert isinstance(result, LiveResult)
+    if s.multi_target:
+        _multi_target_summary(s, opts, result, out_dir)
+        return
     summary = summarize_live(result)
     table = Table(title=f"{s.mission_id}: live mission summary ({opts.method})")
     table.add_column("quantity")
@@ -270,6 +295,41 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
             save_png(plot_performance({opts.method: [trace]}), out_dir / "fig3_performance.png"),
         ]
         console.print("plots: " + ", ".join(str(p) for p in written))
+    console.print(f"trace: {result.trace_path}")
+
+
+def _multi_target_summary(
+    s: Scenario, opts: LiveOptions, result: LiveResult, out_dir: Path
+) -> None:
+    """A multi-target mission's tracking tables (as `simulate` prints them, over this one run),
+    its counters, and its picture."""
+    from isac_mission.experiment.multi_target_metrics import (
+        run_figures,
+        run_of_slots,
+        summarize_tracking,
+    )
+    from isac_mission.experiment.multi_target_plots import save_tracks_png
+    from isac_mission.experiment.multi_target_report import target_table, tracking_table
+
+    slots = result.multi_target_slots
+    console.print(f"slots completed: {len(slots)}/{s.N}")
+    if slots:
+        seed = s.seed if opts.seed is None else opts.seed
+        figures = run_figures(
+            run_of_slots(opts.method, seed, slots), s.multi_tracker.gospa_cutoff_m
+        )
+        summaries = {opts.method: summarize_tracking([figures])}
+        console.print(tracking_table(s, summaries, f"{s.mission_id}: live mission, tracking"))
+        console.print(target_table(s, summaries))
+    counters = Table(title="counters")
+    counters.add_column("counter")
+    counters.add_column("value", justify="right")
+    for k, v in (*sorted(result.report.counters.items()), *result.fleet_counters.items()):
+        counters.add_row(k, str(v))
+    console.print(counters)
+    if slots:
+        png = save_tracks_png(result.trace_path, out_dir / f"tracks_{opts.method}.png")
+        console.print(f"plot: {png}")
     console.print(f"trace: {result.trace_path}")
 
 

@@ -34,10 +34,13 @@ from isac_mission.mavwire.ports import (
 from isac_mission.mavwire.serial_link import parse_vehicle_links
 from isac_mission.mavwire.signing import SIGNATURE_REJECTIONS
 from isac_mission.planning.fleet import prepare_fleet
+from isac_mission.planning.multi_target import KEEP_OUT_CAPACITY
 from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.records.multi_target import MultiTargetSlot
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.multi_target import MultiTargetGround
 from isac_mission.service.ground.planner_thread import SOLVE_LOCK
 from isac_mission.service.ground.report import GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
@@ -123,6 +126,8 @@ class LiveResult:
     setpoint_periods_s: dict[int, list[float]] = field(default_factory=dict)
     """Per vehicle: wall intervals between the stream's periodic setpoints during the mission
     (its latest bridge.TIMESTAMPS_KEPT setpoints)."""
+    multi_target_slots: list[MultiTargetSlot] = field(default_factory=list)
+    """A multi-target mission's slots (the ground loop's last SLOTS_KEPT); empty otherwise."""
 
 
 def planning_scenario(s: Scenario, opts: LiveOptions) -> Scenario:
@@ -139,15 +144,24 @@ async def fly_mission(
     on_slot: Callable[[SlotEvent], None] | None,
     on_status: Callable[[str], None] | None,
     initial_x: FloatArray | None = None,
+    on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
+    initial_errors: FloatArray | None = None,
 ) -> LiveResult:
     """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere.
-    initial_x [4]: the tracker's initial estimate (None: the scenario's x0)."""
+    initial_x [4]: the tracker's initial estimate (None: the scenario's x0). On a multi-target
+    scenario the multi-target ground loop runs instead (service/ground/multi_target.py):
+    on_tracks(slot, latency_s) after each slot; initial_errors [T, 4]: added to each known
+    target's configured state to start its track (None: none)."""
     say = on_status or (lambda _msg: None)
     planning = planning_scenario(s, opts)
-    kit = SolverKit(planning, solve_lock=SOLVE_LOCK)
+    n_keep_out = KEEP_OUT_CAPACITY if s.multi_target else 0
+    kit = SolverKit(planning, n_keep_out=n_keep_out, solve_lock=SOLVE_LOCK)
     # On a thread: the event loop meanwhile opens an embedded world's vehicles (ground stations
     # see them at once) and the bus; the kit is not used by anything else until it returns.
-    await asyncio.to_thread(prepare_fleet, kit, opts.method)
+    if s.multi_target:
+        await asyncio.to_thread(kit.warm_up, opts.method)
+    else:
+        await asyncio.to_thread(prepare_fleet, kit, opts.method)
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(
         s,
@@ -156,30 +170,28 @@ async def fly_mission(
         base_port=opts.mavlink_base_port,
         links=parse_vehicle_links(opts.vehicle_links, s.M),
     )
-    ground = GroundLoop(
-        planning,
-        bus,
-        GroundSettings(
-            method=opts.method,
-            trace_path=opts.trace_path,
-            resume=opts.resume,
-            plan_rate_factor=opts.plan_rate_factor,
-            plan_budget_s=opts.plan_budget_s,
-            wait_for_telemetry=True,  # the bridges publish it (ground/startup.py)
-            # The trace states the vehicles' real limit; the planner's budget goes beside it.
-            trace_config={
-                "v_max": s.v_max,
-                "r_th": s.r_th,
-                "d_safe": s.d_safe,
-                "plan_v_max": planning.v_max,
-                "plan_r_th": planning.r_th,
-                "plan_d_safe": planning.d_safe,
-            },
-        ),
-        kit,
-        on_slot,
-        initial_x,
+    settings = GroundSettings(
+        method=opts.method,
+        trace_path=opts.trace_path,
+        resume=opts.resume,
+        plan_rate_factor=opts.plan_rate_factor,
+        plan_budget_s=opts.plan_budget_s,
+        wait_for_telemetry=True,  # the bridges publish it (ground/startup.py)
+        # The trace states the vehicles' real limit; the planner's budget goes beside it.
+        trace_config={
+            "v_max": s.v_max,
+            "r_th": s.r_th,
+            "d_safe": s.d_safe,
+            "plan_v_max": planning.v_max,
+            "plan_r_th": planning.r_th,
+            "plan_d_safe": planning.d_safe,
+        },
     )
+    ground: GroundLoop | MultiTargetGround
+    if s.multi_target:
+        ground = MultiTargetGround(planning, bus, settings, kit, on_tracks, initial_errors)
+    else:
+        ground = GroundLoop(planning, bus, settings, kit, on_slot, initial_x)
     result = LiveResult(GroundReport(), opts.trace_path)
     async with fleet:
         # The ground loop and the plan follower listen from the start: the world announces slot 0
@@ -201,6 +213,8 @@ async def fly_mission(
                     task.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await task
+            if isinstance(ground, MultiTargetGround):
+                result.multi_target_slots = list(ground.slots)
             say("landing")
             try:
                 # Descent at about 1 m/s of simulation time, plus margin, in wall seconds.
@@ -277,8 +291,10 @@ async def run_serve(
     stop: asyncio.Event,
     on_slot: Callable[[SlotEvent], None] | None = None,
     on_status: Callable[[str], None] | None = None,
+    on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
 ) -> LiveResult:
-    """Bridges and ground loop only: the world (or vehicles and sensing) runs elsewhere."""
+    """Bridges and ground loop only: the world (or vehicles and sensing) runs elsewhere
+    (on_tracks: fly_mission's, for a multi-target scenario)."""
     settings = secured_settings(
         s.security.zenoh,
         s.mission_id,
@@ -287,7 +303,7 @@ async def run_serve(
         connect=opts.zenoh_connect,
     )
     with ZenohBus.open(settings) as bus:
-        return await fly_mission(s, opts, bus, stop, on_slot, on_status)
+        return await fly_mission(s, opts, bus, stop, on_slot, on_status, on_tracks=on_tracks)
 
 
 def ground_endpoint(s: Scenario, opts: LiveOptions) -> str:

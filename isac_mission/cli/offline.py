@@ -23,7 +23,7 @@ DEFAULT_MULTI_TARGET_METHODS = "proposed,sd,aba,crb"
 @app.command("check-config")
 def check_config(config: ConfigArg) -> None:
     """Validate a scenario and print its derived constants in SI units."""
-    s = load_or_exit(config, flies=False)
+    s = load_or_exit(config)
     table = Table(title=f"{config} (mission {s.mission_id})")
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -92,7 +92,7 @@ def simulate(
     from isac_mission.experiment.report import simulate_report
     from isac_mission.planning.registry import METHODS
 
-    s = load_or_exit(config, flies=False)
+    s = load_or_exit(config)
     if live_settings:
         s = _with_live_settings(s)
     default = DEFAULT_MULTI_TARGET_METHODS if s.multi_target else DEFAULT_METHODS
@@ -125,8 +125,8 @@ def _simulate_multi_target(
 ) -> None:
     """`simulate` on the multi-target path (experiment/multi_target_report.py)."""
     from isac_mission.errors import ConfigError
-    from isac_mission.experiment.multi_target_loop import check_multi_target_method
     from isac_mission.experiment.multi_target_report import multi_target_report
+    from isac_mission.planning.multi_target import check_multi_target_method
 
     try:
         for m in methods:
@@ -187,7 +187,7 @@ def replay(
     )
     from isac_mission.records import read_trace
 
-    s = load_or_exit(config)
+    s = load_or_exit(config, single_target_only=True)
     quiet_highs_banner()
     try:
         recorded = read_trace(trace)

@@ -48,11 +48,7 @@ def gen_users(
     from isac_mission.bus.certs import generate_users_file
     from isac_mission.config import ZenohSecurityConfig
 
-    cfg = (
-        load_or_exit(config, flies=False).security.zenoh
-        if config is not None
-        else ZenohSecurityConfig()
-    )
+    cfg = load_or_exit(config).security.zenoh if config is not None else ZenohSecurityConfig()
     try:
         names = generate_users_file(
             users_file, (u for role in cfg.roles.values() for u in role.users), force=force

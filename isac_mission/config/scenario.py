@@ -209,14 +209,14 @@ class Scenario:
 
 
 def single_target_problem(s: Scenario) -> str | None:
-    """Why `sweep`, `run` and `serve` cannot fly `s` yet, or None: the multi-target path
-    (several targets, false alarms, an SNR detection model, a target that turns, comes late or
-    must be found) has its tracker and offline closed loop (`simulate`) but not yet its live
-    service or sweep."""
+    """Why `sweep` and `replay` cannot take `s` yet, or None: the multi-target path (several
+    targets, false alarms, an SNR detection model, a target that turns, comes late or must be
+    found) has its tracker, its offline closed loop (`simulate`) and its live service (`run`,
+    `serve`, `sim`), but not yet a sweep or a replay."""
     if not s.multi_target:
         return None
     return (
         "targets/detection: this scenario takes the multi-target path (docs/model.md, "
-        "'Several targets'): `simulate` flies it; `sweep`, `run` and `serve` fly "
-        "single-target scenarios only, so far"
+        "'Several targets'): `simulate`, `run`, `serve` and `sim` fly it; `sweep` and "
+        "`replay` take single-target scenarios only, so far"
     )

@@ -17,12 +17,8 @@ from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.model.detections import unlabelled_detections
 from isac_mission.model.run_noise import MultiTargetNoise
-from isac_mission.model.targets import TargetPaths, target_paths
-from isac_mission.planning.multi_target import (
-    check_multi_target_method,
-    plan_for_tracks,
-    target_radar_gains,
-)
+from isac_mission.model.targets import TargetPaths, target_paths, target_radar_gains
+from isac_mission.planning.multi_target import check_multi_target_method, plan_for_tracks
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records.multi_target import MultiTargetSlot
 from isac_mission.tracking.multi_target import MultiTargetTracker, TrackerSettings

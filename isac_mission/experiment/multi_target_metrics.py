@@ -23,6 +23,8 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from isac_mission.experiment.multi_target_loop import MultiTargetRun
+from isac_mission.model.targets import TargetPaths
+from isac_mission.records.multi_target import MultiTargetSlot
 from isac_mission.tracking.gospa import UNASSIGNED, gospa
 from isac_mission.tracking.multi_target import TrackEstimate
 from isac_mission.types import FloatArray, IntArray
@@ -134,6 +136,17 @@ def run_figures(run: MultiTargetRun, gospa_cutoff_m: float) -> RunFigures:
     return RunFigures(
         parts[0], parts[1], parts[2], parts[3], targets, tuple(longest_false.values())
     )
+
+
+def run_of_slots(method: str, seed: int, slots: Sequence[MultiTargetSlot]) -> MultiTargetRun:
+    """A run made of slots 1.. of a mission flown elsewhere (the live ground loop's), for
+    `run_figures`: its paths are the slots' truth (slot 0's unknown: NaN)."""
+    if not slots:
+        raise ValueError("a run needs at least one slot")
+    truth = np.stack([o.truth for o in slots])
+    states = np.concatenate([np.full((1, *truth.shape[1:]), np.nan), truth])
+    paths = TargetPaths(states, np.all(np.isfinite(states), axis=2))
+    return MultiTargetRun(method, seed, paths, tuple(slots))
 
 
 def follow(truth_xy: FloatArray, tracks: Sequence[TrackEstimate]) -> IntArray:

@@ -18,12 +18,16 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from isac_mission.config.targets import TargetSpec
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.types import BoolArray, FloatArray, IntArray
+
+if TYPE_CHECKING:
+    from isac_mission.config import Scenario
 
 
 def coordinated_turn_matrix(dt_s: float, omega_radps: float) -> FloatArray:
@@ -114,3 +118,8 @@ def target_paths(
             x = F @ x + chol @ normals[t, n - 1]
             states[n, t] = x
     return TargetPaths(states, present)
+
+
+def target_radar_gains(s: Scenario) -> FloatArray:
+    """[T] each target's SNR^s d^4 (m^4) from its RCS (the scenario's radar gain at that RCS)."""
+    return np.array([s.with_changes(rcs_m2=t.rcs_m2).radar_gain for t in s.targets])

@@ -35,11 +35,6 @@ def multi_target_kit(s: Scenario) -> SolverKit:
     return SolverKit(s, n_keep_out=KEEP_OUT_CAPACITY)
 
 
-def target_radar_gains(s: Scenario) -> FloatArray:
-    """[T] each target's SNR^s d^4 (m^4) from its RCS."""
-    return np.array([s.with_changes(rcs_m2=t.rcs_m2).radar_gain for t in s.targets])
-
-
 def check_multi_target_method(method: str) -> None:
     """Raise ConfigError for a method that cannot plan for several targets."""
     if method in SINGLE_TARGET_METHODS:

@@ -11,7 +11,7 @@ and decode what they wrote, so that a sender cannot publish a payload its receiv
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import Any, Final, TypeVar
 
 import numpy as np
@@ -33,20 +33,27 @@ from isac_mission.wire.messages import (
     AnyMsg,
     ClockMsg,
     DetectionMsg,
+    DetectionSetMsg,
     HealthMsg,
     PlanMsg,
     TelemetryMsg,
+    TrackEntry,
     TrackMsg,
+    TrackSetMsg,
     TruthMsg,
+    TruthSetMsg,
 )
 from isac_mission.wire.models import (
     MODELS,
     ClockWire,
+    DetectionSetWire,
     DetectionWire,
     HealthWire,
     PlanWire,
     TelemetryWire,
+    TrackSetWire,
     TrackWire,
+    TruthSetWire,
     TruthWire,
     WireMessage,
 )
@@ -120,6 +127,75 @@ def detection_messages(d: Detections, t_s: float, eta: FloatArray) -> list[Detec
     ]
 
 
+def _pairs(values: Any, where: str) -> FloatArray:
+    """values as a float array [k, 2] ([0, 2] when empty); MessageError naming `where` if it is
+    not one."""
+    a = np.asarray(values, dtype=float)
+    if a.size == 0:
+        return np.zeros((0, 2))
+    if a.ndim != 2 or a.shape[1] != 2:
+        raise MessageError(f"{where}: shape {a.shape}, expected (k, 2)")
+    return a
+
+
+def encode_detection_set(msg: DetectionSetMsg) -> bytes:
+    """Payload of `isac/<mission>/detections/<m>` on a multi-target mission: measurements [k, 2]
+    as k [range, radial velocity] pairs (k = 0: an empty list)."""
+    obj = envelope("detection_set", msg.slot, msg.t_s)
+    obj.update(
+        uav=int(msg.uav),
+        measurements=[
+            finite_floats(row, f"detection_set.measurements[{i}]")
+            for i, row in enumerate(_pairs(msg.measurements, "detection_set.measurements"))
+        ],
+        uav_xy_m=finite_floats(msg.uav_xy_m, "detection_set.uav_xy_m"),
+        bandwidth_share=float(msg.bandwidth_share),
+    )
+    data = dumps(obj)
+    decode_detection_set(data)
+    return data
+
+
+def _detection_set(w: DetectionSetWire) -> DetectionSetMsg:
+    return DetectionSetMsg(
+        slot=w.slot,
+        t_s=w.t,
+        uav=w.uav,
+        measurements=np.array(w.measurements, dtype=float).reshape(len(w.measurements), 2),
+        uav_xy_m=np.array(w.uav_xy_m, dtype=float),
+        bandwidth_share=w.bandwidth_share,
+    )
+
+
+def decode_detection_set(payload: Payload, *, n_uavs: int | None = None) -> DetectionSetMsg:
+    """Validate a detection_set payload: at most MAX_MEASUREMENTS [range >= 0, radial velocity]
+    pairs (possibly none); n_uavs, when given, bounds the UAV index (< n_uavs)."""
+    obj = loads(payload)
+    return _detection_set(_validate(DetectionSetWire, "detection_set", obj, {"n_uavs": n_uavs}))
+
+
+def detection_set_messages(
+    slot: int,
+    t_s: float,
+    measurements_per_uav: Sequence[FloatArray],
+    uav_xy_m: FloatArray,
+    eta: FloatArray,
+) -> list[DetectionSetMsg]:
+    """One slot's unlabelled reports as per-UAV messages: measurements_per_uav [M] of [k_m, 2]
+    (range m, radial velocity m/s), uav_xy_m [M, 2] where each measured, eta [M] shares in use."""
+    return [
+        DetectionSetMsg(
+            slot=slot,
+            t_s=t_s,
+            uav=m,
+            measurements=_pairs(z, f"detection_set.measurements (uav {m})"),
+            uav_xy_m=np.asarray(uav_xy_m[m], dtype=float),
+            bandwidth_share=float(eta[m]),
+        )
+        for m, z in enumerate(measurements_per_uav)
+    ]
+
+
 def collect_detections(slot: int, msgs: Iterable[DetectionMsg], n_uavs: int) -> Detections:
     """Assemble the messages of one slot into `Detections` [M]; absent UAVs get NaN and NaN xy.
 
@@ -178,6 +254,43 @@ def _truth(w: TruthWire) -> TruthMsg:
 def decode_truth(payload: Payload) -> TruthMsg:
     """Validate a truth payload: target_x is [x, y, vx, vy]."""
     return _truth(_validate(TruthWire, "truth", loads(payload), {}))
+
+
+def encode_truth_set(msg: TruthSetMsg) -> bytes:
+    """Payload of `isac/<mission>/truth` on a multi-target mission: a NaN row of states [T, 4]
+    (a target not in the scene) is sent as null; origins as lists of target indices."""
+    states = np.asarray(msg.states, dtype=float)
+    if states.size == 0:
+        states = np.zeros((0, 4))
+    if states.ndim != 2 or states.shape[1] != 4:
+        raise MessageError(f"truth_set.targets: shape {states.shape}, expected (T, 4)")
+    obj = envelope("truth_set", msg.slot, msg.t_s)
+    obj.update(
+        targets=[
+            None if np.isnan(row).all() else finite_floats(row, f"truth_set.targets[{i}]")
+            for i, row in enumerate(states)
+        ],
+        origins=[[int(k) for k in of_uav] for of_uav in msg.origins],
+    )
+    data = dumps(obj)
+    decode_truth_set(data)
+    return data
+
+
+def _truth_set(w: TruthSetWire) -> TruthSetMsg:
+    states = np.full((len(w.targets), 4), np.nan)
+    for i, x in enumerate(w.targets):
+        if x is not None:
+            states[i] = x
+    return TruthSetMsg(
+        slot=w.slot, t_s=w.t, states=states, origins=tuple(tuple(o) for o in w.origins)
+    )
+
+
+def decode_truth_set(payload: Payload) -> TruthSetMsg:
+    """Validate a truth_set payload: at most MAX_TARGETS [x, y, vx, vy] or null; origins (optional)
+    at most MAX_UAVS lists of -1 (false alarm) to MAX_TARGETS - 1."""
+    return _truth_set(_validate(TruthSetWire, "truth_set", loads(payload), {}))
 
 
 # --------------------------------------------------------------------------- plan
@@ -317,6 +430,52 @@ def decode_track(payload: Payload) -> TrackMsg:
     return _track(_validate(TrackWire, "track", loads(payload), {}))
 
 
+def encode_track_set(msg: TrackSetMsg) -> bytes:
+    """Payload of `isac/<mission>/track` on a multi-target mission."""
+    obj = envelope("track_set", msg.slot, msg.t_s)
+    obj["tracks"] = [
+        {
+            "id": int(e.track_id),
+            "confirmed": bool(e.confirmed),
+            "x": finite_floats(e.x, f"track_set.tracks[{i}].x"),
+            "P": [
+                finite_floats(r, f"track_set.tracks[{i}].P[{j}]")
+                for j, r in enumerate(np.asarray(e.P))
+            ],
+            "pcrb_position_trace": float(e.pcrb_position_trace),
+        }
+        for i, e in enumerate(msg.tracks)
+    ]
+    if msg.published_wall_s is not None:
+        obj["published_wall_s"] = float(msg.published_wall_s)
+    data = dumps(obj)
+    decode_track_set(data)
+    return data
+
+
+def _track_set(w: TrackSetWire) -> TrackSetMsg:
+    return TrackSetMsg(
+        slot=w.slot,
+        t_s=w.t,
+        tracks=tuple(
+            TrackEntry(
+                track_id=e.id,
+                confirmed=e.confirmed,
+                x=np.array(e.x, dtype=float),
+                P=np.array(e.P, dtype=float),
+                pcrb_position_trace=e.pcrb_position_trace,
+            )
+            for e in w.tracks
+        ),
+        published_wall_s=w.published_wall_s,
+    )
+
+
+def decode_track_set(payload: Payload) -> TrackSetMsg:
+    """Validate a track_set payload: at most MAX_TRACKS tracks, ids 1 to 10^9 and distinct."""
+    return _track_set(_validate(TrackSetWire, "track_set", loads(payload), {}))
+
+
 # --------------------------------------------------------------------------- health
 
 
@@ -355,11 +514,14 @@ def decode_health(payload: Payload) -> HealthMsg:
 
 _CONVERT: Final[dict[type[BaseModel], Any]] = {
     DetectionWire: _detection,
+    DetectionSetWire: _detection_set,
     ClockWire: _clock,
     TruthWire: _truth,
+    TruthSetWire: _truth_set,
     PlanWire: _plan,
     TelemetryWire: _telemetry,
     TrackWire: _track,
+    TrackSetWire: _track_set,
     HealthWire: _health,
     ControlWire: control_msg,
     ControlReplyWire: control_reply_msg,

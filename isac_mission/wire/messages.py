@@ -115,6 +115,65 @@ class TrackMsg:
 
 
 @dataclass(frozen=True)
+class DetectionSetMsg:
+    """One UAV's unlabelled report of one slot on a multi-target mission
+    (`isac/<mission>/detections/<m>`, type `detection_set`).
+
+    measurements [k, 2]: (range m, radial velocity m/s) of every echo it detected, targets and
+    false alarms alike, in no particular order (k = 0: nothing detected, still sent so that the
+    receiver knows at once); uav_xy_m [2]: where it measured (scenario plane, m);
+    bandwidth_share: the eta in use.
+    """
+
+    slot: int
+    t_s: float
+    uav: int
+    measurements: FloatArray
+    uav_xy_m: FloatArray
+    bandwidth_share: float
+
+
+@dataclass(frozen=True)
+class TruthSetMsg:
+    """Every target's true state at a slot on a multi-target mission (`isac/<mission>/truth`,
+    type `truth_set`; evaluation only).
+
+    states [T, 4]: [x, y, vx, vy] (m, m/s) of target t = 0..T-1, NaN rows for targets not in the
+    scene; origins: per UAV the target index of each measurement of its `detection_set` of the
+    slot, in the same order (-1: a false alarm); empty when not given."""
+
+    slot: int
+    t_s: float
+    states: FloatArray
+    origins: tuple[tuple[int, ...], ...] = ()
+
+
+@dataclass(frozen=True)
+class TrackEntry:
+    """One track of a `track_set`: track_id (stable, >= 1, never reused), confirmed, x [4] state
+    (m, m/s), P [4, 4] its covariance, pcrb_position_trace: tr of the position block of its bound
+    with origin uncertainty (m^2)."""
+
+    track_id: int
+    confirmed: bool
+    x: FloatArray
+    P: FloatArray
+    pcrb_position_trace: float
+
+
+@dataclass(frozen=True)
+class TrackSetMsg:
+    """The ground's tracks after slot `slot` on a multi-target mission (`isac/<mission>/track`,
+    type `track_set`): tentative and confirmed. published_wall_s: wall clock (Unix time, s) at
+    which it was published, None when not stamped."""
+
+    slot: int
+    t_s: float
+    tracks: tuple[TrackEntry, ...]
+    published_wall_s: float | None = None
+
+
+@dataclass(frozen=True)
 class HealthMsg:
     """Service status (`isac/<mission>/health`): status word, counters by name, last error."""
 
@@ -185,6 +244,9 @@ class FleetMsg:
 
 AnyMsg = (
     DetectionMsg
+    | DetectionSetMsg
+    | TruthSetMsg
+    | TrackSetMsg
     | ClockMsg
     | TruthMsg
     | PlanMsg

@@ -18,7 +18,14 @@ from __future__ import annotations
 from typing import Annotated, Any, Final, Literal, get_args
 
 import numpy as np
-from pydantic import BeforeValidator, Field, ValidationInfo, field_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+)
 
 from isac_mission.wire.control_models import (
     CONTROL_PARAMS as CONTROL_PARAMS,
@@ -36,9 +43,17 @@ from isac_mission.wire.envelope import (
     MAX_STATUS_CHARS,
     MAX_UAVS,
     SHARE_SUM_TOL,
+    WIRE_CONFIG,
     Envelope,
 )
-from isac_mission.wire.refusal import CHOICES, int_problem, length_of, refuse
+from isac_mission.wire.refusal import (
+    CHOICES,
+    int_problem,
+    length_of,
+    message_error,
+    number_problem,
+    refuse,
+)
 
 Number = Annotated[float, Field(ge=-MAX_ABS, le=MAX_ABS)]
 NonNegative = Annotated[float, Field(ge=0.0, le=MAX_ABS)]
@@ -66,6 +81,15 @@ TELEMETRY_MODES: Final = frozenset(get_args(TelemetryMode))
 LinkState = Literal["ok", "lost"]
 LINK_STATES: Final = frozenset(get_args(LinkState))
 MAX_COUNTERS: Final = 200
+MAX_MEASUREMENTS: Final = 512
+"""Most measurements in one `detection_set` (one UAV's targets and false alarms of a slot)."""
+MAX_TARGETS: Final = 64
+"""Most targets in one `truth_set`; a measurement's origin is -1 (a false alarm) or a target
+index, 0 to MAX_TARGETS - 1."""
+MAX_TRACKS: Final = 64
+"""Most tracks in one `track_set`."""
+MAX_TRACK_ID: Final = MAX_SLOT
+"""Largest track id (ids start at 1)."""
 MAX_WALL_S: Final = 1.0e11
 """Largest wall-clock stamp accepted (Unix time, s): the year 5138."""
 PublishedWall = Annotated[
@@ -88,6 +112,14 @@ def _context(info: ValidationInfo, name: str) -> int | None:
     ctx = info.context
     value = ctx.get(name) if isinstance(ctx, dict) else None
     return value if isinstance(value, int) else None
+
+
+def _at_most(where: str, value: Any, most: int) -> Any:
+    """A before-check: an array (a list) holds at most `most` items (pydantic's own text would
+    say "expected <most>")."""
+    if isinstance(value, list) and len(value) > most:
+        raise refuse(f"{where}: {len(value)} values, expected at most {most}")
+    return value
 
 
 def _uav_in_mission(kind: str, uav: Any, info: ValidationInfo) -> Any:
@@ -120,6 +152,57 @@ class DetectionWire(Envelope):
         return _uav_in_mission("detection", uav, info)
 
 
+Measurement = Annotated[
+    list[Number],
+    Field(
+        min_length=2,
+        max_length=2,
+        json_schema_extra={
+            "prefixItems": [
+                {"type": "number", "minimum": 0.0, "maximum": MAX_ABS},
+                {"type": "number", "minimum": -MAX_ABS, "maximum": MAX_ABS},
+            ]
+        },
+    ),
+    BeforeValidator(length_of(2)),
+]
+"""[range m >= 0, radial velocity m/s]."""
+
+
+class DetectionSetWire(Envelope):
+    """One UAV's unlabelled report of one slot on a multi-target mission
+    (`isac/<mission>/detections/<m>`): every echo it detected, targets and false alarms alike, in
+    no particular order; an empty list when it detected nothing (still sent)."""
+
+    type: Literal["detection_set"]
+    uav: UavIndex = Field(description="0-based UAV index (< n_uavs when the receiver knows M).")
+    measurements: list[Measurement] = Field(
+        max_length=MAX_MEASUREMENTS,
+        description="[range m >= 0, radial velocity m/s] per echo; may be empty.",
+    )
+    uav_xy_m: PlaneXY = Field(description="Where the UAV was when it measured (m).")
+    bandwidth_share: Share = Field(description="The bandwidth share eta in use.")
+
+    @field_validator("uav", mode="before")
+    @classmethod
+    def _uav_known(cls, uav: Any, info: ValidationInfo) -> Any:
+        return _uav_in_mission("detection_set", uav, info)
+
+    @field_validator("measurements", mode="before")
+    @classmethod
+    def _few_measurements(cls, value: Any) -> Any:
+        return _at_most("detection_set.measurements", value, MAX_MEASUREMENTS)
+
+    @field_validator("measurements")
+    @classmethod
+    def _ranges_non_negative(cls, measurements: list[list[float]]) -> list[list[float]]:
+        for i, (range_m, _) in enumerate(measurements):
+            if range_m < 0.0:
+                problem = number_problem(range_m, lo=0.0)
+                raise refuse(f"detection_set.measurements[{i}][0]: {problem}")
+        return measurements
+
+
 class ClockWire(Envelope):
     """Simulation time (`isac/<mission>/clock`): slot n means t >= mission_t0 + n slot_s."""
 
@@ -137,6 +220,43 @@ class TruthWire(Envelope):
 
     type: Literal["truth"]
     target_x: State4 = Field(description="[x, y, vx, vy] (m, m/s).")
+
+
+OriginIndex = Annotated[int, Field(ge=-1, le=MAX_TARGETS - 1)]
+"""The target a measurement came from, or -1: a false alarm."""
+OriginsOfUav = Annotated[list[OriginIndex], Field(max_length=MAX_MEASUREMENTS)]
+"""One UAV's origins, one per measurement of its `detection_set`, in the same order."""
+
+
+class TruthSetWire(Envelope):
+    """Every target's true state at a slot on a multi-target mission (`isac/<mission>/truth`),
+    from the simulated world; evaluation only."""
+
+    type: Literal["truth_set"]
+    targets: list[State4 | None] = Field(
+        max_length=MAX_TARGETS,
+        description="[x, y, vx, vy] (m, m/s) of target t = 0..T-1; null: not in the scene.",
+    )
+    origins: list[OriginsOfUav] = Field(
+        default_factory=list,
+        max_length=MAX_UAVS,
+        description="Per UAV, the target index of each measurement of its detection_set of the "
+        "slot, in order (-1: a false alarm); [] when not given.",
+    )
+
+    @field_validator("targets", mode="before")
+    @classmethod
+    def _few_targets(cls, value: Any) -> Any:
+        return _at_most("truth_set.targets", value, MAX_TARGETS)
+
+    @field_validator("origins", mode="before")
+    @classmethod
+    def _few_origins(cls, value: Any) -> Any:
+        _at_most("truth_set.origins", value, MAX_UAVS)
+        if isinstance(value, list):
+            for m, of_uav in enumerate(value):
+                _at_most(f"truth_set.origins[{m}]", of_uav, MAX_MEASUREMENTS)
+        return value
 
 
 class PlanWire(Envelope):
@@ -243,6 +363,56 @@ class TrackWire(Envelope):
     published_wall_s: PublishedWall = None
 
 
+class TrackEntryWire(BaseModel):
+    """One track of a `track_set`."""
+
+    model_config = WIRE_CONFIG
+
+    id: int = Field(ge=1, le=MAX_TRACK_ID, description="Track id: stable, never reused.")
+    confirmed: bool = Field(description="Confirmed (true) or tentative (false).")
+    x: State4 = Field(description="Track state [x, y, vx, vy] (m, m/s).")
+    P: Matrix4 = Field(description="Its covariance.")
+    pcrb_position_trace: NonNegative = Field(
+        description="Trace of the position block of its bound with origin uncertainty (m^2)."
+    )
+
+
+class TrackSetWire(Envelope):
+    """The ground's tracks after slot `slot` on a multi-target mission (`isac/<mission>/track`):
+    tentative and confirmed, each id at most once."""
+
+    type: Literal["track_set"]
+    tracks: list[TrackEntryWire] = Field(max_length=MAX_TRACKS, description="The tracks.")
+    published_wall_s: PublishedWall = None
+
+    @field_validator("tracks", mode="before")
+    @classmethod
+    def _entries(cls, value: Any) -> Any:
+        """Each track is validated here, so that a refusal names it (`track_set.tracks[3].P[1]`)
+        with its field's bounds; anything but a list of objects is left to the type check."""
+        _at_most("track_set.tracks", value, MAX_TRACKS)
+        if not isinstance(value, list) or not all(isinstance(e, dict) for e in value):
+            return value
+        entries = []
+        for i, entry in enumerate(value):
+            try:
+                entries.append(TrackEntryWire.model_validate(entry, strict=True))
+            except ValidationError as err:
+                where = f"track_set.tracks[{i}]"
+                raise refuse(str(message_error(err, where, TrackEntryWire))) from None
+        return entries
+
+    @field_validator("tracks")
+    @classmethod
+    def _distinct_ids(cls, tracks: list[TrackEntryWire]) -> list[TrackEntryWire]:
+        first: dict[int, int] = {}
+        for i, track in enumerate(tracks):
+            j = first.setdefault(track.id, i)
+            if j != i:
+                raise refuse(f"track_set.tracks[{i}].id: {track.id} repeats tracks[{j}].id")
+        return tracks
+
+
 class HealthWire(Envelope):
     """Service status (`isac/<mission>/health`): counters by name, vehicle states, last error."""
 
@@ -277,11 +447,14 @@ class HealthWire(Envelope):
 
 WireMessage = Annotated[
     DetectionWire
+    | DetectionSetWire
     | ClockWire
     | TruthWire
+    | TruthSetWire
     | PlanWire
     | TelemetryWire
     | TrackWire
+    | TrackSetWire
     | HealthWire
     | ControlWire
     | ControlReplyWire
@@ -292,11 +465,14 @@ WireMessage = Annotated[
 
 MODELS: Final[dict[str, type[Envelope]]] = {
     "detection": DetectionWire,
+    "detection_set": DetectionSetWire,
     "clock": ClockWire,
     "truth": TruthWire,
+    "truth_set": TruthSetWire,
     "plan": PlanWire,
     "telemetry": TelemetryWire,
     "track": TrackWire,
+    "track_set": TrackSetWire,
     "health": HealthWire,
     "control": ControlWire,
     "control_reply": ControlReplyWire,

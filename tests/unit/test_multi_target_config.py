@@ -95,16 +95,30 @@ def test_bad_multi_target_input_is_named(change: Any, message: str) -> None:
         parse_scenario(data, "bad")
 
 
-@pytest.mark.parametrize(
-    "command", [["run"], ["serve"], ["sweep", "--grid", str(ROOT / "config/grids/example.yaml")]]
-)
-def test_the_live_service_and_sweep_refuse_the_multi_target_path_clearly(
-    command: list[str],
-) -> None:
-    result = CliRunner().invoke(app, [*command, str(ROOT / "config" / "multi-target.yaml")])
+def test_sweep_refuses_the_multi_target_path_clearly() -> None:
+    result = CliRunner().invoke(
+        app,
+        [
+            "sweep",
+            "--grid",
+            str(ROOT / "config/grids/example.yaml"),
+            str(ROOT / "config" / "multi-target.yaml"),
+        ],
+    )
     assert result.exit_code == 2
     said = " ".join(result.output.split())  # rich wraps the message at the path's length
-    assert "multi-target path" in said and "`simulate` flies it" in said
+    assert "multi-target path" in said and "`sweep` and `replay` take single-target" in said
+
+
+@pytest.mark.parametrize("command", ["run", "serve"])
+def test_the_live_service_refuses_a_one_target_planner_on_the_multi_target_path_by_name(
+    command: str,
+) -> None:
+    result = CliRunner().invoke(
+        app, [command, str(ROOT / "config" / "multi-target.yaml"), "--method", "horizon"]
+    )
+    assert result.exit_code == 2
+    assert "'horizon' plans for one target" in " ".join(result.output.split())
 
 
 def test_simulate_refuses_a_one_target_planner_on_the_multi_target_path_by_name() -> None:

@@ -10,14 +10,18 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from typing import Generic, TypeVar
 
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.timebase import SlotTimeline, reached
-from isac_mission.wire import DetectionMsg
+from isac_mission.wire import DetectionMsg, DetectionSetMsg
+
+Report = TypeVar("Report", DetectionMsg, DetectionSetMsg)
+"""A UAV's report of a slot: one detection, or an unlabelled set (multi-target missions)."""
 
 
-class DetectionAssembler:
-    """Detections by slot and UAV until their slot is processed (times: time.monotonic, s)."""
+class DetectionAssembler(Generic[Report]):
+    """Reports by slot and UAV until their slot is processed (times: time.monotonic, s)."""
 
     def __init__(
         self, n_uavs: int, n_slots: int, settings: GroundSettings, counters: Counter[str]
@@ -26,12 +30,12 @@ class DetectionAssembler:
         self.n_slots = n_slots
         self.settings = settings
         self.counters = counters
-        self.buffer: dict[int, dict[int, DetectionMsg]] = {}
+        self.buffer: dict[int, dict[int, Report]] = {}
         self.first_seen_wall: dict[int, float] = {}
         self.last_detection_wall = 0.0
         """Wall time the last accepted detection arrived."""
 
-    def add(self, msg: DetectionMsg, processed_slot: int) -> None:
+    def add(self, msg: Report, processed_slot: int) -> None:
         """Keep msg for its slot, unless it is for slot 0, an already processed slot, a slot
         beyond the mission or a UAV already heard in its slot (each counted)."""
         if msg.slot == 0:
@@ -69,7 +73,7 @@ class DetectionAssembler:
         first = self.first_seen_wall.get(n)
         return first is not None and now - first > self.settings.detection_wall_wait_s
 
-    def take(self, n: int) -> dict[int, DetectionMsg]:
+    def take(self, n: int) -> dict[int, Report]:
         """Slot n's detections by UAV (removed); missing ones counted."""
         msgs = self.buffer.pop(n, {})
         self.first_seen_wall.pop(n, None)

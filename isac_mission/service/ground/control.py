@@ -21,11 +21,12 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 from isac_mission.bus import ZenohBus
+from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.service.ground.exclusion import VehicleWatch
-from isac_mission.service.ground.mission import MissionState
 from isac_mission.service.ground.report import GroundReport
 from isac_mission.wire import (
     ControlMsg,
@@ -39,6 +40,21 @@ from isac_mission.wire import (
 )
 
 log = logging.getLogger(__name__)
+
+
+class ControlledMission(Protocol):
+    """What a request needs of the loop's mission state (service/ground/mission.py's
+    MissionState, multi_target.py's MultiTargetMission): the last processed slot, the scenario
+    planned with, and a way to plan with another from the next slot on."""
+
+    @property
+    def slot(self) -> int: ...
+
+    @property
+    def scenario(self) -> Scenario: ...
+
+    def set_scenario(self, s: Scenario) -> None: ...
+
 
 HOLD_REASON = "control: hold"
 LAND_REASON = "control: land"
@@ -81,7 +97,7 @@ class ControlDesk:
         bus: ZenohBus,
         vehicles: VehicleWatch,
         report: GroundReport,
-        state: Callable[[], MissionState],
+        state: Callable[[], ControlledMission],
         t_s: Callable[[], float],
     ) -> None:
         self.keys = keys

@@ -37,6 +37,7 @@ from isac_mission.timebase import SlotTimeline, plan_is_late
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
 from isac_mission.wire import (
     MAX_REASON_CHARS,
+    DetectionMsg,
     HealthMsg,
     Keys,
     PlanMsg,
@@ -87,7 +88,9 @@ class GroundLoop:
         self.writer: TraceWriter | None = None
         self.t_s = 0.0
         self.mission_t0_s: float | None = None
-        self.detections = DetectionAssembler(scenario.M, scenario.N, settings, self.report.counters)
+        self.detections = DetectionAssembler[DetectionMsg](
+            scenario.M, scenario.N, settings, self.report.counters
+        )
         self.vehicles = VehicleWatch(scenario.M, settings, self.report)
         self.control = ControlDesk(
             self.keys, bus, self.vehicles, self.report, lambda: self.state, lambda: self.t_s

@@ -15,9 +15,9 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable
-from typing import cast
+from typing import Any, TypeVar, cast
 
-from isac_mission.types import SlotPlan
+Result = TypeVar("Result")
 
 SOLVE_LOCK = threading.RLock()
 """The service's SolverKit.solve_lock, shared by every kit it builds: a plan that outlives its
@@ -31,20 +31,20 @@ _RUNNING: set[threading.Thread] = set()
 _RUNNING_LOCK = threading.Lock()
 
 
-def in_daemon_thread(fn: Callable[[], SlotPlan], name: str) -> asyncio.Future[SlotPlan]:
+def in_daemon_thread(fn: Callable[[], Result], name: str) -> asyncio.Future[Result]:
     """Run fn on a new daemon thread; its result as a future of the running loop. A daemon
     thread, so that a planner that never returns cannot keep the process from exiting (see
     `drain_planner_threads` for how it exits then)."""
     loop = asyncio.get_running_loop()
-    future: asyncio.Future[SlotPlan] = loop.create_future()
+    future: asyncio.Future[Result] = loop.create_future()
 
-    def settle(result: SlotPlan | None, error: BaseException | None) -> None:
+    def settle(result: Result | None, error: BaseException | None) -> None:
         if future.done():
             return
         if error is not None:
             future.set_exception(error)
         else:
-            future.set_result(cast(SlotPlan, result))
+            future.set_result(cast(Result, result))
 
     def target() -> None:
         try:
@@ -81,7 +81,7 @@ def drain_planner_threads(timeout_s: float) -> bool:
     return not planner_threads()
 
 
-def consume_result(future: asyncio.Future[SlotPlan]) -> None:
+def consume_result(future: asyncio.Future[Any]) -> None:
     """Retrieve a timed-out plan's late result or error, so that asyncio does not log it."""
     if not future.cancelled():
         future.exception()

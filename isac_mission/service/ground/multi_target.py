@@ -1,0 +1,568 @@
+"""The ground loop of a multi-target mission: unlabelled reports -> tracks -> plan, over Zenoh.
+
+The same slot recursion as the offline multi-target loop (experiment/multi_target_loop.py),
+split where the live service waits for the network: after slot n's reports are in (or waited
+for: assembler.py), every track is updated (tracking/multi_target.py), the tracks go out as a
+`track_set`, the slot's trace line is written and flushed (records/multi_target.py), and slot
+n + 1 is planned for the predicted tracks (planning/multi_target.plan_for_tracks) on the planner
+thread within the time budget. The world's `truth_set` goes into the trace only (with the
+measurements' origins, for the metrics); the tracker never reads it.
+
+What the single-target loop does and this one does too: plans wait for fresh telemetry at the
+start (startup.py's gate), a plan over budget is a hold (status "timeout"), invalid payloads are
+counted and dropped, operators' requests are answered (control.py; `set` changes R_th from the
+next slot). What it does not do yet (docs/service.md, "Several intruders"): resume a trace, and
+plan around an excluded vehicle: while any vehicle is excluded (lost, held, landed by an
+operator) the whole fleet holds, status "hold".
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+
+from isac_mission.bus import Subscription, ZenohBus
+from isac_mission.config import Scenario
+from isac_mission.errors import ConfigError, MessageError
+from isac_mission.model.detections import UavReport
+from isac_mission.planning.multi_target import (
+    check_multi_target_method,
+    hold_without_track,
+    multi_target_kit,
+    plan_for_tracks,
+)
+from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.records.multi_target import MultiTargetSlot, header_line, slot_line
+from isac_mission.service.ground.assembler import DetectionAssembler
+from isac_mission.service.ground.control import ControlDesk
+from isac_mission.service.ground.exclusion import VehicleWatch
+from isac_mission.service.ground.mission import leg_start_state
+from isac_mission.service.ground.planner_thread import consume_result, in_daemon_thread
+from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport
+from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.service.ground.startup import PlanningGate
+from isac_mission.tracking.multi_target import (
+    MultiTargetTracker,
+    TrackerSettings,
+    TrackPrediction,
+)
+from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan, SolveReport
+from isac_mission.wire import (
+    DetectionSetMsg,
+    HealthMsg,
+    Keys,
+    PlanMsg,
+    TrackEntry,
+    TrackSetMsg,
+    TruthSetMsg,
+    decode_clock,
+    decode_detection_set,
+    decode_telemetry,
+    decode_truth_set,
+    encode_health,
+    encode_plan,
+    encode_track_set,
+    rejection_reason,
+)
+
+log = logging.getLogger(__name__)
+
+NO_ORIGIN = -2
+"""A measurement's origin when the world's truth did not say (no truth_set for the slot)."""
+
+
+@dataclass(frozen=True)
+class PendingPlan:
+    """The plan of slot `slot`, made for the tracks' predictions, and the ID of the track its
+    safety rule followed (0: the fleet held)."""
+
+    slot: int
+    plan: SlotPlan
+    planned_for: int
+    start_xy: FloatArray
+    """[M, 2] m: where it was planned from."""
+
+
+class MultiTargetMission:
+    """The tracks after the last processed slot and the plan of the next (no I/O).
+
+    initial_errors [T, 4]: added to each known target's initial state to start its track (the
+    offline twin's x_hat - x; None: start at the configured state, the cue)."""
+
+    def __init__(
+        self,
+        s: Scenario,
+        kit: SolverKit,
+        method: Method,
+        initial_errors: FloatArray | None = None,
+    ) -> None:
+        check_multi_target_method(method)
+        if s.detection is None:
+            raise ConfigError(f"{s.mission_id}: a multi-target mission needs a detection model")
+        self._scenario = s
+        self.kit = kit
+        self.method: Method = method
+        self.tracker = MultiTargetTracker(TrackerSettings.from_scenario(s))
+        self.initial_errors = initial_errors
+        self.slot = 0
+        self.eta: FloatArray = np.full(s.M, 1.0 / s.M)
+        self.assoc: IntArray | None = None
+        self.pending: PendingPlan | None = None
+        self.last_plan: SlotPlan | None = None
+
+    @property
+    def scenario(self) -> Scenario:
+        return self._scenario
+
+    @property
+    def done(self) -> bool:
+        return self.slot >= self._scenario.N
+
+    def set_scenario(self, s: Scenario) -> None:
+        """Plan from now on with `s` (an operator's new R_th); same M and geometry."""
+        if s.M != self._scenario.M:
+            raise ValueError(f"the new scenario has M = {s.M}, the mission {self._scenario.M}")
+        self._scenario = s
+        self.kit = multi_target_kit(s)
+
+    def start_known_tracks(self) -> None:
+        """Start a confirmed track for every known target that enters at the current slot
+        (the offline loop's rule: before slot n + 1 is predicted, those of first slot n)."""
+        s = self._scenario
+        for t, spec in enumerate(s.targets):
+            if spec.prior_known and spec.first_slot == self.slot:
+                x = np.array(spec.x0, dtype=np.float64)
+                if self.initial_errors is not None:
+                    x = x + self.initial_errors[t]
+                self.tracker.add_confirmed(Gaussian(x=x, P=s.P0.copy()))
+
+    def predict(self) -> tuple[TrackPrediction, ...]:
+        """Every track predicted to slot + 1 (call once per slot, before planning it)."""
+        return self.tracker.predict()
+
+    def plan(
+        self,
+        predictions: tuple[TrackPrediction, ...],
+        uav_xy: FloatArray,
+        uav_v: FloatArray | None,
+        excluded: tuple[int, ...],
+    ) -> tuple[int, SlotPlan]:
+        """(the ID of the track planned around, the plan of slot + 1): thread-safe (touches only
+        its arguments and the kit)."""
+        s = self._scenario
+        if excluded:
+            plan = hold_without_track(s, uav_xy, self.eta, self.assoc)
+            why = (
+                f"hold: vehicles {list(excluded)} excluded; the multi-target path plans the "
+                "whole fleet only"
+            )
+            return 0, _with_status(plan, "hold", why)
+        return plan_for_tracks(
+            s,
+            self.method,
+            self.kit,
+            predictions,
+            uav_xy,
+            self.eta,
+            self.assoc,
+            uav_v,
+            self.last_plan,
+        )
+
+    def commit(self, slot: int, planned_for: int, plan: SlotPlan, start_xy: FloatArray) -> None:
+        """Adopt `plan` as the plan of slot `slot` = slot + 1."""
+        if slot != self.slot + 1:
+            raise ValueError(f"plan for slot {slot}, but the next slot is {self.slot + 1}")
+        self.pending = PendingPlan(slot, plan, planned_for, start_xy)
+
+    def process(
+        self,
+        n: int,
+        msgs: dict[int, DetectionSetMsg],
+        truth: TruthSetMsg | None,
+        fallback_xy: FloatArray,
+    ) -> MultiTargetSlot:
+        """Fold in slot n's reports (a UAV whose report did not arrive contributes nothing;
+        fallback_xy [M, 2] is where it was) and advance to slot n."""
+        pending = self.pending
+        if pending is None or n != pending.slot:
+            raise ValueError(f"slot {n} is not the planned slot {self.slot + 1}")
+        s = self._scenario
+        eta = pending.plan.bandwidth_share.copy()
+        uav_xy = np.array(fallback_xy, dtype=float)
+        measurements: list[FloatArray] = []
+        for m in range(s.M):
+            msg = msgs.get(m)
+            if msg is None:
+                eta[m] = 0.0  # nothing arrived: the tracker treats the UAV as not sensing
+                measurements.append(np.zeros((0, 2)))
+                continue
+            eta[m] = msg.bandwidth_share
+            uav_xy[m] = msg.uav_xy_m
+            measurements.append(msg.measurements)
+        update = self.tracker.update(measurements, uav_xy, eta, self.kit.sensing)
+        reports = tuple(
+            UavReport(z, _origins(truth, m, len(z))) for m, z in enumerate(measurements)
+        )
+        T = len(s.targets)
+        states = np.full((T, 4), np.nan) if truth is None else truth.states
+        self.slot = n
+        self.eta, self.assoc = pending.plan.bandwidth_share, pending.plan.bs_of_uav
+        self.last_plan = pending.plan
+        self.pending = None
+        return MultiTargetSlot(
+            n,
+            self.method,
+            pending.plan,
+            uav_xy,
+            eta,
+            states,
+            reports,
+            update.tracks,
+            pending.planned_for,
+        )
+
+
+def _origins(truth: TruthSetMsg | None, m: int, k: int) -> IntArray:
+    """[k] the origins of UAV m's k measurements, as the world's truth gave them."""
+    if truth is not None and m < len(truth.origins) and len(truth.origins[m]) == k:
+        return np.asarray(truth.origins[m], dtype=np.int64)
+    return np.full(k, NO_ORIGIN, dtype=np.int64)
+
+
+def _with_status(plan: SlotPlan, status: str, reason: str, solve_s: float = 0.0) -> SlotPlan:
+    """A hold plan with its status, why, and the time spent before it (s)."""
+    report = SolveReport(status, reason, solve_s=solve_s, fallback=status)
+    return replace(plan, report=report)
+
+
+def track_set_message(slot: MultiTargetSlot, t_s: float) -> TrackSetMsg:
+    """The `track_set` of a slot's tracks, stamped with the wall clock."""
+    entries = tuple(
+        TrackEntry(
+            t.track_id,
+            t.confirmed,
+            t.belief.x,
+            t.belief.P,
+            float(np.trace(t.bound.C[:2, :2])),
+        )
+        for t in slot.tracks
+    )
+    return TrackSetMsg(slot.slot, t_s, entries, time.time())
+
+
+class MultiTargetGround:
+    """Runs one multi-target mission over Zenoh: plan 1 at mission start, then slot by slot to
+    slot N. on_slot(slot, latency_s) is called after each slot's plan is out."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        bus: ZenohBus,
+        settings: GroundSettings,
+        kit: SolverKit | None = None,
+        on_slot: Callable[[MultiTargetSlot, float], None] | None = None,
+        initial_errors: FloatArray | None = None,
+    ) -> None:
+        if settings.resume:
+            raise ConfigError(
+                f"{scenario.mission_id}: a multi-target mission cannot resume a trace yet "
+                "(docs/service.md, 'Several intruders'); start it without --resume"
+            )
+        self.bus = bus
+        self.keys = Keys(scenario.mission_id)
+        self.settings = settings
+        self.state = MultiTargetMission(
+            scenario, kit or multi_target_kit(scenario), settings.method, initial_errors
+        )
+        self.on_slot = on_slot
+        self.report = GroundReport()
+        self.slots: deque[MultiTargetSlot] = deque(maxlen=SLOTS_KEPT)
+        """The last SLOTS_KEPT slots (the trace keeps every one)."""
+        self.t_s = 0.0
+        self.mission_t0_s: float | None = None
+        self.detections = DetectionAssembler[DetectionSetMsg](
+            scenario.M, scenario.N, settings, self.report.counters
+        )
+        self.vehicles = VehicleWatch(scenario.M, settings, self.report)
+        self.control = ControlDesk(
+            self.keys, bus, self.vehicles, self.report, lambda: self.state, lambda: self.t_s
+        )
+        self.truth: dict[int, TruthSetMsg] = {}
+        self.done = asyncio.Event()
+        self.planning: asyncio.Task[None] | None = None
+        self.gate = PlanningGate(scenario.M, settings)
+        self._trace: IO[str] | None = None
+
+    @property
+    def s(self) -> Scenario:
+        return self.state.scenario
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def _open_trace(self) -> None:
+        path = self.settings.trace_path
+        if path is None:
+            return
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        config = (
+            self.s.trace_config()
+            | {"seed": self.s.seed, "method": self.settings.method}
+            | self.settings.trace_config
+        )
+        self._trace = open(path, "w", encoding="utf-8")  # noqa: SIM115 (closed in run)
+        self._write_line(header_line(config))
+
+    def _write_line(self, line: str) -> None:
+        f = self._trace
+        if f is None:
+            return
+        f.write(line + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+    async def run(self, stop: asyncio.Event) -> GroundReport:
+        """Run until slot N is done or `stop` is set; the trace is closed on the way out."""
+        self._open_trace()
+        sub = self.bus.subscribe(self.keys.everything)
+        try:
+            async with asyncio.TaskGroup() as tg:
+                pump = tg.create_task(self._pump(sub))
+                ticker = tg.create_task(self._wall_ticker())
+                waiters = [
+                    asyncio.ensure_future(stop.wait()),
+                    asyncio.ensure_future(self.done.wait()),
+                ]
+                await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
+                for task in (*waiters, pump, ticker):
+                    task.cancel()
+                if self.planning is not None:
+                    self.planning.cancel()
+        finally:
+            sub.close()
+            if self._trace is not None:
+                self._trace.close()
+            self._publish_health("done" if self.state.done else "stopped")
+        return self.report
+
+    async def _pump(self, sub: Subscription) -> None:
+        prefix = self.keys.prefix + "/"
+        reply_key = self.keys.control_reply
+        handlers: dict[str, Callable[[bytes], None]] = {
+            "clock": self._on_clock,
+            "truth": self._on_truth,
+            "detections": self._on_detection,
+            "telemetry": self._on_telemetry,
+            "control": self._on_control,
+        }
+        async for key, payload in sub:
+            if key == reply_key:
+                continue
+            handler = handlers.get(key.removeprefix(prefix).split("/", 1)[0])
+            if handler is None:
+                continue
+            try:
+                handler(payload)
+            except MessageError as err:
+                self.report.count_rejected(rejection_reason(err), err)
+            self._advance_guarded()
+
+    async def _wall_ticker(self) -> None:
+        while True:
+            await asyncio.sleep(0.05)
+            self.gate.tick()
+            self._update_vehicle_states()
+            self._advance_guarded()
+
+    def _advance_guarded(self) -> None:
+        try:
+            self._advance()
+        except Exception as err:  # a bug: counted and logged, the loop goes on
+            self.report.count_internal_error(err)
+
+    # ------------------------------------------------------------------ inputs
+
+    def _on_clock(self, payload: bytes) -> None:
+        msg = decode_clock(payload)
+        self.t_s = max(self.t_s, msg.t_s)
+        if msg.mission_t0_s is not None and self.mission_t0_s is None:
+            self.mission_t0_s = msg.mission_t0_s
+
+    def _on_detection(self, payload: bytes) -> None:
+        self.detections.add(decode_detection_set(payload, n_uavs=self.s.M), self.state.slot)
+
+    def _on_truth(self, payload: bytes) -> None:
+        msg = decode_truth_set(payload)
+        if msg.slot > self.state.slot:
+            self.truth[msg.slot] = msg
+
+    def _on_telemetry(self, payload: bytes) -> None:
+        self.vehicles.on_telemetry(decode_telemetry(payload, n_uavs=self.s.M))
+        self._update_vehicle_states()
+
+    def _on_control(self, payload: bytes) -> None:
+        self.control.on_request(payload)
+        self._update_vehicle_states()
+        self._publish_health("running")
+
+    def _update_vehicle_states(self) -> None:
+        if self.vehicles.update(self.t_s):
+            self._publish_health("running")
+
+    # ------------------------------------------------------------------ the slot machine
+
+    def _uav_positions(self, det_xy: FloatArray | None = None) -> FloatArray:
+        """Where the UAVs are: fresh telemetry, else the slot's report positions, else the last
+        plan's waypoints, else the start points."""
+        xy = self.vehicles.positions(self.t_s, det_xy)
+        last = self.state.last_plan
+        fallback = self.s.uav_start_xy if last is None else last.uav_xy_m
+        return np.where(np.isfinite(xy), xy, fallback)
+
+    def _advance(self) -> None:
+        st = self.state
+        if self.done.is_set() or self.planning is not None:
+            return
+        if self.gate.closed and (
+            self.mission_t0_s is None or not self.gate.try_open(self.vehicles, self.t_s)
+        ):
+            return
+        if st.pending is None and not st.done and self.mission_t0_s is not None:
+            st.start_known_tracks()
+            self._start_planning(self._uav_positions(), None)
+        while (
+            self.planning is None
+            and st.pending is not None
+            and self.detections.ready(st.pending.slot, self.t_s, self.mission_t0_s, self.s.dt)
+        ):
+            self._process_slot(st.pending.slot)
+        if st.done and self.planning is None:
+            self.done.set()
+
+    def _process_slot(self, n: int) -> None:
+        msgs = self.detections.take(n)
+        det_xy = np.full((self.s.M, 2), np.nan)
+        for m, msg in msgs.items():
+            det_xy[m] = msg.uav_xy_m
+        truth = self.truth.pop(n, None)
+        for old in [k for k in self.truth if k < n]:
+            del self.truth[old]
+        slot = self.state.process(n, msgs, truth, self._uav_positions(det_xy))
+        self._publish(self.keys.track, lambda: encode_track_set(track_set_message(slot, self.t_s)))
+        latency_from = self.detections.last_detection_wall if msgs else None
+        if latency_from is not None:
+            self.report.last_detection_wall_s[n] = latency_from
+            self.report.last_detection_wall_s.pop(n - SLOTS_KEPT, None)
+        if self.state.done:
+            self._complete(slot, 0.0)
+            return
+        self.state.start_known_tracks()
+        self._start_planning(self._uav_positions(det_xy), latency_from, slot, det_xy)
+
+    def _start_planning(
+        self,
+        uav_xy: FloatArray,
+        latency_from: float | None,
+        done: MultiTargetSlot | None = None,
+        boundary_xy: FloatArray | None = None,
+    ) -> None:
+        st = self.state
+        excluded = tuple(sorted(self.vehicles.excluded))
+        v = self.vehicles.velocities(self.t_s)
+        if st.last_plan is not None and not excluded:
+            uav_xy, v = leg_start_state(uav_xy, v, st.last_plan, range(self.s.M), boundary_xy)
+        predictions = st.predict()
+        self.planning = asyncio.get_running_loop().create_task(
+            self._plan(st.slot + 1, predictions, uav_xy, v, excluded, latency_from, done),
+            name=f"plan-{st.slot + 1}",
+        )
+
+    async def _plan(
+        self,
+        n: int,
+        predictions: tuple[TrackPrediction, ...],
+        uav_xy: FloatArray,
+        uav_v: FloatArray,
+        excluded: tuple[int, ...],
+        latency_from: float | None,
+        done: MultiTargetSlot | None,
+    ) -> None:
+        st = self.state
+        t0 = time.perf_counter()
+        budget = self.settings.plan_budget_s
+        future = in_daemon_thread(
+            lambda: st.plan(predictions, uav_xy, uav_v, excluded), f"plan-{n}"
+        )
+        try:
+            async with asyncio.timeout(budget):
+                planned_for, plan = await asyncio.shield(future)
+        except TimeoutError:
+            self.report.counters["plans timed out"] += 1
+            why = f"timeout: planning took longer than the {budget:g} s budget; hold"
+            planned_for = 0
+            hold = hold_without_track(self.s, uav_xy, st.eta, st.assoc)
+            plan = _with_status(hold, "timeout", why, time.perf_counter() - t0)
+            future.add_done_callback(consume_result)
+            st.kit = st.kit.renewed()
+        except Exception as err:  # any planner failure: hold, say why, go on
+            self.report.counters["planner errors"] += 1
+            why = f"solver error: {type(err).__name__}: {err}; hold"
+            planned_for = 0
+            hold = hold_without_track(self.s, uav_xy, st.eta, st.assoc)
+            plan = _with_status(hold, "solver error", why, time.perf_counter() - t0)
+        self.planning = None
+        try:
+            st.commit(n, planned_for, plan, uav_xy)
+            msg = PlanMsg(n, self.t_s, plan)
+            self._publish(self.keys.plan, lambda: encode_plan(msg))
+            if plan.report.status != "ok":
+                self.report.last_error = f"slot {n}: {plan.report.reason}"
+            latency = 0.0 if latency_from is None else time.monotonic() - latency_from
+            if latency_from is not None:
+                self.report.latencies_s.append(latency)
+            if done is not None:
+                self._complete(done, latency)
+        except Exception as err:
+            self.report.count_internal_error(err)
+        self._advance_guarded()
+
+    def _complete(self, slot: MultiTargetSlot, latency_s: float) -> None:
+        """Slot n is done once plan n+1 is out: trace line, counters, health, on_slot."""
+        self._write_line(slot_line(slot, {"latency_ms": latency_s * 1e3}))
+        self.slots.append(slot)
+        self.report.counters["slots"] += 1
+        if slot.plan.report.status != "ok":
+            self.report.counters[f"slots {slot.plan.report.status}"] += 1
+        self._publish_health("running")
+        if self.on_slot is not None:
+            self.on_slot(slot, latency_s)
+
+    def _publish(self, key: str, encode: Callable[[], bytes]) -> None:
+        try:
+            payload = encode()
+        except MessageError as err:
+            kind = key.rsplit("/", 1)[-1]
+            self.report.counters[f"{kind} not published"] += 1
+            self.report.last_error = f"{kind} not published: {err}"
+            log.error("%s not published: %s", kind, err)
+            return
+        self.bus.publish(key, payload)
+
+    def _publish_health(self, status: str) -> None:
+        rep, slot = self.report, max(self.state.slot, 0)
+        msg = HealthMsg(
+            slot, self.t_s, status, dict(rep.counters), rep.last_error, self.vehicles.status()
+        )
+        try:
+            self.bus.publish(self.keys.health, encode_health(msg))
+        except Exception as err:  # the bus may already be closing at shutdown
+            log.debug("health not published: %s", err)

@@ -1,0 +1,121 @@
+"""The live ground loop's multi-target state (service/ground/multi_target.py), fed the simulated
+world's reports (sim/multi_target_scene.py) with no network between, is `simulate`'s run: the
+same targets, the same reports, the same plans and tracks, slot by slot. What the live service
+adds (waiting, vehicles that trail their plans) is then all that can make live differ."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from isac_mission.config import Scenario, load_scenario
+from isac_mission.errors import ConfigError
+from isac_mission.experiment.multi_target_loop import run_multi_target
+from isac_mission.model.run_noise import draw_multi_target_noise
+from isac_mission.planning.multi_target import multi_target_kit
+from isac_mission.records.multi_target import MultiTargetSlot, slot_line
+from isac_mission.service.ground.multi_target import MultiTargetMission
+from isac_mission.wire import DetectionSetMsg, TruthSetMsg
+from sim.multi_target_scene import MultiTargetScene
+from tests.support.live_cli import ROOT
+
+SLOTS = 8
+SEED = 3
+
+
+@pytest.fixture(scope="module")
+def scenario() -> Scenario:
+    s = load_scenario(ROOT / "config" / "multi-target.yaml")
+    return s.with_changes(N=SLOTS)
+
+
+def _without_times(line: str) -> str:
+    import json
+
+    d = json.loads(line)
+    d.pop("solve_ms")
+    return json.dumps(d, sort_keys=True)
+
+
+def _fly_the_mission_state(s: Scenario) -> list[MultiTargetSlot]:
+    """The live state's recursion, the world's reports taken at the plans' waypoints (where the
+    offline loop's UAVs are) with the plans' shares."""
+    scene = MultiTargetScene(s, SEED)
+    errors = draw_multi_target_noise(s, SEED).initial_errors
+    mission = MultiTargetMission(s, multi_target_kit(s), "proposed", errors)
+    uav_xy, velocity = s.uav_start_xy.copy(), np.zeros((s.M, 2))
+    out = []
+    for n in range(1, s.N + 1):
+        mission.start_known_tracks()
+        planned_for, plan = mission.plan(mission.predict(), uav_xy, velocity, ())
+        mission.commit(n, planned_for, plan, uav_xy)
+        velocity = (
+            plan.uav_velocity_mps
+            if plan.uav_velocity_mps is not None
+            else (plan.uav_xy_m - uav_xy) / s.dt
+        )
+        uav_xy = plan.uav_xy_m
+        reports = scene.reports(n, uav_xy, plan.bandwidth_share)
+        msgs = {
+            m: DetectionSetMsg(n, 0.0, m, r.measurements, uav_xy[m], plan.bandwidth_share[m])
+            for m, r in enumerate(reports)
+        }
+        origins = tuple(tuple(int(o) for o in r.origin) for r in reports)
+        truth = TruthSetMsg(n, 0.0, scene.truth(n), origins)
+        out.append(mission.process(n, msgs, truth, uav_xy))
+    assert mission.done
+    return out
+
+
+def test_the_live_mission_state_fed_the_worlds_reports_is_simulates_run(
+    scenario: Scenario,
+) -> None:
+    s = scenario
+    offline = run_multi_target(
+        s, "proposed", draw_multi_target_noise(s, SEED), multi_target_kit(s)
+    ).slots
+    live = _fly_the_mission_state(s)
+    assert len(live) == len(offline) == SLOTS
+    for a, b in zip(live, offline, strict=True):
+        assert _without_times(slot_line(a)) == _without_times(slot_line(b)), f"slot {a.slot}"
+    # Not vacuous: tracks were confirmed, the fleet moved and some report held a false alarm.
+    assert any(t.confirmed for t in live[-1].tracks)
+    assert not np.allclose(live[-1].uav_xy_m, s.uav_start_xy)
+    assert any(np.any(r.origin == -1) for o in live for r in o.reports)
+
+
+def test_a_missing_report_contributes_nothing_and_its_origins_are_unknown(
+    scenario: Scenario,
+) -> None:
+    s = scenario
+    scene = MultiTargetScene(s, SEED)
+    mission = MultiTargetMission(s, multi_target_kit(s), "sd")
+    mission.start_known_tracks()
+    planned_for, plan = mission.plan(mission.predict(), s.uav_start_xy, None, ())
+    mission.commit(1, planned_for, plan, s.uav_start_xy)
+    reports = scene.reports(1, plan.uav_xy_m, plan.bandwidth_share)
+    msgs = {
+        m: DetectionSetMsg(1, 0.0, m, r.measurements, plan.uav_xy_m[m], plan.bandwidth_share[m])
+        for m, r in enumerate(reports)
+        if m != 2
+    }
+    slot = mission.process(1, msgs, None, plan.uav_xy_m)
+    assert slot.bandwidth_share[2] == 0.0  # UAV 2 sensed nothing as far as the tracker knows
+    assert len(slot.reports[2].measurements) == 0
+    assert all(np.all(r.origin == -2) for r in slot.reports)  # no truth: origins unknown
+    assert np.isnan(slot.truth).all()
+
+
+def test_an_excluded_vehicle_holds_the_whole_fleet_and_says_why(scenario: Scenario) -> None:
+    s = scenario
+    mission = MultiTargetMission(s, multi_target_kit(s), "proposed")
+    mission.start_known_tracks()
+    planned_for, plan = mission.plan(mission.predict(), s.uav_start_xy, None, (4,))
+    assert planned_for == 0
+    assert plan.report.status == "hold" and "vehicles [4] excluded" in plan.report.reason
+    np.testing.assert_array_equal(plan.uav_xy_m, s.uav_start_xy)
+
+
+def test_a_one_target_planner_is_refused_by_name(scenario: Scenario) -> None:
+    with pytest.raises(ConfigError, match="'horizon' plans for one target"):
+        MultiTargetMission(scenario, multi_target_kit(scenario), "horizon")
