@@ -6,6 +6,11 @@ trail, and the time series, built from the bus messages as any observer receives
 updates to push to the pages as `(topic, data)` pairs (`console.feed`). A bad payload is counted
 by reason (`wire.rejection_reason`) and changes nothing. `snapshot()` is everything a page that
 has just connected needs. All data are JSON-ready (lists, floats, str), SI units.
+
+A multi-target mission's `track_set` and `truth_set` (docs/bus.md) become the state topics
+`tracks` (every track, with its 2-sigma ellipse and, once the slot's truth is known, each present
+target's distance to the nearest confirmed track) and `truths` (the present targets);
+`detection_set` is taken as `detection` is.
 """
 
 from __future__ import annotations
@@ -53,6 +58,8 @@ class MissionView:
         self.replies: deque[dict[str, Any]] = deque(maxlen=REPLIES_KEPT)
         self.truth_by_slot: dict[int, list[float]] = {}
         self.estimate_by_slot: dict[int, list[float]] = {}
+        self.truths_by_slot: dict[int, list[dict[str, Any]]] = {}
+        self.confirmed_by_slot: dict[int, list[list[float]]] = {}
         self.detection_wall_s: dict[int, float] = {}
         self.received: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
@@ -128,6 +135,33 @@ class MissionView:
             out += self._point({"slot": n, "error_m": error})
         return out
 
+    def _track_set(self, d: dict[str, Any], now: float) -> list[Update]:
+        n = int(d["slot"])
+        for track in d["tracks"]:
+            track["ellipse"] = ellipse_2sigma(track["P"])
+        d["received_wall_s"] = now
+        self.confirmed_by_slot[n] = [list(tr["x"]) for tr in d["tracks"] if tr["confirmed"]]
+        _trim(self.confirmed_by_slot, n)
+        truths = self.truths_by_slot.get(n)
+        if truths is not None:
+            d["target_errors"] = _target_errors(truths, self.confirmed_by_slot[n])
+        return self._state("tracks", d)
+
+    def _truth_set(self, d: dict[str, Any], now: float) -> list[Update]:
+        n = int(d["slot"])
+        present = [{"index": i, "x": list(x)} for i, x in enumerate(d["targets"]) if x is not None]
+        self.truths_by_slot[n] = present
+        _trim(self.truths_by_slot, n)
+        del d["targets"], d["origins"]  # the origins are for the trace's metrics, not the page
+        d["present"] = present
+        out = self._state("truths", d)
+        tracks = self.latest.get("tracks")
+        confirmed = self.confirmed_by_slot.get(n)
+        if tracks is not None and confirmed is not None and int(tracks["slot"]) == n:
+            tracks["target_errors"] = _target_errors(present, confirmed)
+            out += self._state("tracks", tracks)
+        return out
+
     def _detection(self, d: dict[str, Any], now: float) -> list[Update]:
         n = int(d["slot"])
         self.detection_wall_s[n] = now
@@ -176,6 +210,19 @@ class MissionView:
         }
 
 
+def _target_errors(
+    truths: list[dict[str, Any]], confirmed_xy: list[list[float]]
+) -> list[dict[str, Any]]:
+    """Per present target (`{"index", "x"}`), the distance (m) from its true position to the
+    nearest confirmed track's, None when no track is confirmed."""
+    out: list[dict[str, Any]] = []
+    for truth in truths:
+        errors = [position_error_m(xy, truth["x"]) for xy in confirmed_xy]
+        finite = [e for e in errors if e is not None]
+        out.append({"index": truth["index"], "error_m": min(finite) if finite else None})
+    return out
+
+
 def _trim(by_slot: dict[int, Any], newest: int, keep: int = 64) -> None:
     """Forget slots more than `keep` before `newest` (bounded memory over long missions)."""
     for old in [n for n in by_slot if n < newest - keep]:
@@ -188,6 +235,9 @@ _HANDLERS: Final[dict[str, Callable[[MissionView, dict[str, Any], float], list[U
     "track": MissionView._track,
     "truth": MissionView._truth,
     "detection": MissionView._detection,
+    "track_set": MissionView._track_set,
+    "truth_set": MissionView._truth_set,
+    "detection_set": MissionView._detection,  # counted, and its slot's time, as `detection`
     "control_reply": MissionView._reply,
     "health": MissionView._plain,
     "clock": MissionView._plain,

@@ -1,7 +1,8 @@
 """The console's server over a real Zenoh hub and real HTTP / WebSocket clients on loopback:
 bus messages reach a page as updates (bad ones counted, not shown), every bad web request gets a
-4xx naming the field and sends nothing, a good command goes out on `control`, and a page that
-never reads does not hold up the others."""
+4xx naming the field and sends nothing, a good command goes out on `control`, a page that
+never reads does not hold up the others, and a multi-target mission's tracks are drawn by a real
+headless Chromium."""
 
 from __future__ import annotations
 
@@ -25,7 +26,16 @@ from isac_mission.console import (
     ConsoleService,
     MissionView,
 )
-from isac_mission.wire import Keys, TelemetryMsg, decode_control, encode_telemetry
+from isac_mission.wire import (
+    Keys,
+    TelemetryMsg,
+    TrackEntry,
+    TrackSetMsg,
+    decode_control,
+    encode_telemetry,
+    encode_track_set,
+)
+from tests.support.browser import browser
 from tests.support.ports import free_tcp_port
 
 TIMEOUT_S = 30.0
@@ -134,6 +144,58 @@ async def test_console_server_pushes_bus_updates_and_validates_every_request() -
                 except TimeoutError:
                     extra = None
                 assert extra is None
+    finally:
+        server.stop()
+
+
+_RECORD_TEXT = """
+window.__drawnText = [];
+const fillText = CanvasRenderingContext2D.prototype.fillText;
+CanvasRenderingContext2D.prototype.fillText = function (text, ...rest) {
+  if (this.canvas.id === "map") window.__drawnText.push(String(text));
+  return fillText.call(this, text, ...rest);
+};
+"""
+"""Records every text the page paints on the map canvas."""
+
+
+async def test_a_page_draws_both_tracks_of_a_track_set_with_their_ids() -> None:
+    endpoint = tcp_loopback(free_tcp_port())
+    s = load_scenario("paper")
+    service = ConsoleService(MissionView(s.trace_config()), BusAccess("paper", endpoint))
+    server = ConsoleServer(service, ConsoleAddress("127.0.0.1", free_tcp_port()))
+    url = server.start()
+    P = np.diag([400.0, 100.0, 1.0, 1.0])
+    tracks = (
+        TrackEntry(3, True, np.array([400.0, 500.0, 0.0, 0.0]), P, 1.0),
+        TrackEntry(7, False, np.array([900.0, 300.0, 0.0, 0.0]), P, 2.0),
+    )
+    try:
+        async with (
+            await ZenohBus.open_async(BusSettings.hub(endpoint)) as hub,
+            browser() as b,
+        ):
+            await _until(lambda: service.status == "watching", "the console's bus")
+            page = await b.new_page()
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            await page.add_init_script(_RECORD_TEXT)
+            await page.goto(url)
+            await page.wait_for_function("window.consoleState.S.mode === 'live'")
+            await hub.wait_for_subscribers(KEYS.track, TIMEOUT_S)
+            hub.publish(KEYS.track, encode_track_set(TrackSetMsg(4, 4.0, tracks)))
+            await page.wait_for_function(
+                "(window.consoleState.M.tracksDrawn || []).length === 2",
+                timeout=TIMEOUT_S * 1000,
+            )
+            drawn = await page.evaluate("window.consoleState.M.tracksDrawn")
+            assert drawn == [
+                {"id": 3, "confirmed": True, "x": 400.0, "y": 500.0},
+                {"id": 7, "confirmed": False, "x": 900.0, "y": 300.0},
+            ]
+            texts = await page.evaluate("window.__drawnText")
+            assert "T3" in texts and "T7" in texts
+            assert errors == []
     finally:
         server.stop()
 

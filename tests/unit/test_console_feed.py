@@ -1,11 +1,13 @@
 """The console's per-page feeds: state topics coalesce to their latest value, events are kept in
 order up to a bound, a put never waits for the page; and the MissionView folds bus payloads
-into the updates it pushes (bad payloads counted, nothing changed)."""
+into the updates it pushes (bad payloads counted, nothing changed), a multi-target mission's
+`track_set`, `truth_set` and `detection_set` as well as the single-target types."""
 
 from __future__ import annotations
 
 import asyncio
 import json
+import math
 from typing import Any
 
 import numpy as np
@@ -15,7 +17,23 @@ from isac_mission.config import load_scenario
 from isac_mission.console.feed import ClientFeed, Hub, batch_text
 from isac_mission.console.geometry import ellipse_2sigma, pcrb_parts
 from isac_mission.console.state import MissionView
-from isac_mission.wire import TelemetryMsg, TrackMsg, encode_telemetry, encode_track
+from isac_mission.wire import (
+    DetectionMsg,
+    DetectionSetMsg,
+    TelemetryMsg,
+    TrackEntry,
+    TrackMsg,
+    TrackSetMsg,
+    TruthMsg,
+    TruthSetMsg,
+    encode_detection,
+    encode_detection_set,
+    encode_telemetry,
+    encode_track,
+    encode_track_set,
+    encode_truth,
+    encode_truth_set,
+)
 
 
 def _offer(feed: ClientFeed, topic: str, data: object) -> None:
@@ -159,3 +177,157 @@ def test_ellipse_and_bound_parts_of_degenerate_inputs() -> None:
     assert ellipse_2sigma(np.diag([np.nan, 1.0, 1.0, 1.0])) is None
     assert ellipse_2sigma(np.diag([-5.0, 1.0, 1.0, 1.0])) is None
     assert pcrb_parts(np.zeros((4, 4))) is None
+
+
+# ---------------------------------------------------------------- multi-target missions
+
+P_TRACK = np.diag([4.0, 1.0, 0.1, 0.1])
+"""A track covariance whose 2-sigma ellipse has semi-axes 4 m (along x) and 2 m."""
+TRUTHS = np.array(
+    [[100.0, 200.0, 1.0, 0.0], [np.nan] * 4, [300.0, 50.0, 0.0, -1.0]]
+)  # target 1 is not in the scene
+TRACKS = (  # id, confirmed, x
+    (3, True, [103.0, 204.0, 1.0, 0.0]),
+    (7, False, [300.0, 50.0, 0.0, 0.0]),  # tentative: on target 2, but never its error
+    (9, True, [310.0, 60.0, 0.0, 0.0]),
+)
+
+
+def _truth_set(slot: int) -> bytes:
+    return encode_truth_set(TruthSetMsg(slot, float(slot), TRUTHS, ((0, -1), (), (2,))))
+
+
+def _track_set(slot: int) -> bytes:
+    entries = tuple(TrackEntry(i, c, np.array(x), P_TRACK, 0.25 * i) for i, c, x in TRACKS)
+    return encode_track_set(TrackSetMsg(slot, float(slot), entries, published_wall_s=999.0))
+
+
+def _expected_errors() -> list[dict[str, Any]]:
+    """Per present target, the distance to the nearest confirmed track, computed here."""
+    out = []
+    for t in (0, 2):
+        tx, ty = TRUTHS[t, :2]
+        dist = [math.hypot(x[0] - tx, x[1] - ty) for _, c, x in TRACKS if c]
+        out.append({"index": t, "error_m": min(dist)})
+    return out
+
+
+def _check_tracks(data: dict[str, Any]) -> None:
+    assert [t["id"] for t in data["tracks"]] == [3, 7, 9]
+    assert [t["confirmed"] for t in data["tracks"]] == [True, False, True]
+    for t, (i, _, x) in zip(data["tracks"], TRACKS, strict=True):
+        assert t["x"] == x
+        assert t["P"] == P_TRACK.tolist()
+        assert t["pcrb_position_trace"] == 0.25 * i
+        assert t["ellipse"] == pytest.approx({"a_m": 4.0, "b_m": 2.0, "angle_rad": 0.0})
+    assert data["slot"] == 6 and data["received_wall_s"] == 1000.0
+    assert data["published_wall_s"] == 999.0
+
+
+def test_the_view_shows_every_track_and_each_targets_error_to_the_nearest_confirmed_track() -> None:
+    view = _view()
+    truths = view.ingest("isac/paper/truth", _truth_set(6))
+    assert [t for t, _ in truths] == ["truths"]
+    assert truths[0][1]["present"] == [
+        {"index": 0, "x": TRUTHS[0].tolist()},
+        {"index": 2, "x": TRUTHS[2].tolist()},
+    ]
+    assert "origins" not in truths[0][1] and "targets" not in truths[0][1]
+    updates = view.ingest("isac/paper/track", _track_set(6))
+    assert [t for t, _ in updates] == ["tracks"]  # no single-target topic, no series point
+    data = updates[0][1]
+    _check_tracks(data)
+    errors = data["target_errors"]
+    assert [e["index"] for e in errors] == [0, 2]
+    assert [e["error_m"] for e in errors] == pytest.approx(
+        [e["error_m"] for e in _expected_errors()]
+    )
+    assert errors[0]["error_m"] == pytest.approx(5.0)  # (3, 4) from track 3
+    snap = json.loads(json.dumps(view.snapshot(), allow_nan=False))
+    assert sorted(snap["latest"]) == ["tracks", "truths"]
+    _check_tracks(snap["latest"]["tracks"])
+    assert snap["latest"]["truths"]["present"][1]["index"] == 2
+    assert snap["series"] == []
+    assert view.received == {"truth_set": 1, "track_set": 1}
+
+
+def test_a_truth_after_its_slots_tracks_adds_the_errors_and_another_slots_does_not() -> None:
+    view = _view()
+    first = dict(view.ingest("isac/paper/track", _track_set(6)))
+    assert "target_errors" not in first["tracks"]  # the truth of slot 6 is not known yet
+    assert [t for t, _ in view.ingest("isac/paper/truth", _truth_set(5))] == ["truths"]
+    assert "target_errors" not in view.latest["tracks"]
+    updates = view.ingest("isac/paper/truth", _truth_set(6))
+    assert [t for t, _ in updates] == ["truths", "tracks"]
+    _check_tracks(updates[1][1])
+    assert [e["error_m"] for e in updates[1][1]["target_errors"]] == pytest.approx(
+        [e["error_m"] for e in _expected_errors()]
+    )
+
+
+def test_without_a_confirmed_track_each_present_target_has_no_error() -> None:
+    view = _view()
+    view.ingest("isac/paper/truth", _truth_set(2))
+    tentative = TrackEntry(4, False, np.array([100.0, 200.0, 0.0, 0.0]), P_TRACK, 1.0)
+    ((topic, data),) = view.ingest(
+        "isac/paper/track", encode_track_set(TrackSetMsg(2, 2.0, (tentative,)))
+    )
+    assert topic == "tracks" and data["published_wall_s"] is None
+    assert data["target_errors"] == [{"index": 0, "error_m": None}, {"index": 2, "error_m": None}]
+    ((_, empty),) = view.ingest("isac/paper/track", encode_track_set(TrackSetMsg(3, 3.0, ())))
+    assert empty["tracks"] == [] and "target_errors" not in empty
+
+
+def test_a_detection_set_is_taken_as_a_detection_is() -> None:
+    view = _view()
+    for m, k in ((0, 3), (2, 0)):  # a UAV that detected nothing still reports
+        msg = DetectionSetMsg(8, 8.0, m, np.full((k, 2), 50.0), np.zeros(2), 1 / 3)
+        assert view.ingest(f"isac/paper/detections/{m}", encode_detection_set(msg)) == []
+    assert view.received == {"detection_set": 2}
+    assert view.detection_wall_s == {8: 1000.0}
+    assert view.latest == {}
+
+
+def test_bad_multi_target_payloads_are_counted_and_change_nothing() -> None:
+    view = _view()
+    twice = json.loads(_track_set(6))
+    twice["tracks"][2]["id"] = 3
+    bad_uav = encode_detection_set(
+        DetectionSetMsg(8, 8.0, 0, np.zeros((0, 2)), np.zeros(2), 0.5)
+    ).replace(b'"uav":0', b'"uav":3')
+    no_targets = json.loads(_truth_set(6))
+    del no_targets["targets"]
+    for key, payload in (
+        ("track", json.dumps(twice).encode()),
+        ("detections/0", bad_uav),
+        ("truth", json.dumps(no_targets).encode()),
+    ):
+        assert view.ingest(f"isac/paper/{key}", payload) == []
+    assert view.latest == {} and view.received == {}
+    assert view.detection_wall_s == {} and view.truths_by_slot == {}
+    assert view.rejected == {
+        "track_set.tracks[2].id": 1,
+        "detection_set.uav": 1,
+        "truth_set.targets": 1,
+    }
+    assert view.last_rejection.startswith("isac/paper/truth: truth_set.targets")
+
+
+def test_a_single_target_mission_gives_the_updates_it_always_gave() -> None:
+    view = _view()
+    det = DetectionMsg(6, 6.0, 0, 120.0, 1.5, np.zeros(2), 1 / 3)
+    assert view.ingest("isac/paper/detections/0", encode_detection(det)) == []
+    truth = TruthMsg(6, 6.0, np.array([100.0, 200.0, 1.0, 0.0]))
+    assert view.ingest("isac/paper/truth", encode_truth(truth)) == [
+        ("truth", json.loads(encode_truth(truth)))
+    ]
+    J = np.diag([2.0, 4.0, 10.0, 20.0])
+    track = TrackMsg(6, 6.0, np.array([103.0, 204.0, 1.0, 0.0]), P_TRACK, J, 0.9)
+    updates = view.ingest("isac/paper/track", encode_track(track))
+    assert [t for t, _ in updates] == ["track", "series"]
+    assert updates[1][1] == pytest.approx(
+        {"slot": 6, "pcrb_trace": 0.9, "pcrb_pos": 0.75, "pcrb_vel": 0.15, "error_m": 5.0}
+    )
+    assert sorted(view.latest) == ["track", "truth"]
+    assert view.detection_wall_s == {6: 1000.0}
+    assert view.received == {"detection": 1, "truth": 1, "track": 1}

@@ -34,6 +34,8 @@ function liveScene() {
       label: "live", colour: colourOf(0), uavs,
       target: track ? { xy: track.x, ellipse: track.ellipse } : null,
       truth: truth ? truth.target_x : null,
+      tracks: S.latest.tracks ? S.latest.tracks.tracks : undefined,
+      truths: S.latest.truths ? S.latest.truths.present : undefined,
     }],
   };
 }
@@ -62,7 +64,13 @@ function replayScene() {
 function render() {
   S.dirty = false;
   const t0 = performance.now();
-  drawMap($("map"), S.mode === "replay" ? replayScene() : liveScene());
+  const scene = S.mode === "replay" ? replayScene() : liveScene();
+  drawMap($("map"), scene);
+  if (S.mode !== "replay") {  // a multi-target mission's tracks and targets, as drawn
+    const L = scene.layers[0];
+    M.tracksDrawn = (L.tracks || []).map((t) => ({ id: t.id, confirmed: t.confirmed, x: t.x[0], y: t.x[1] }));
+    M.truthsDrawn = (L.truths || []).map((t) => ({ index: t.index, x: t.x[0], y: t.x[1] }));
+  }
   const now = Date.now();
   if (M.firstMapWallMs === null && S.config) M.firstMapWallMs = now;
   for (const t of pendingTelemetry) {
@@ -130,7 +138,7 @@ function renderPanels() {
     ["solve time", plan ? fmt(plan.solve_s * 1e3, 1) + " ms" : "-"],
     ["sim time", clock ? fmt(clock.t, 1) + " s (x" + fmt(clock.speed, 1) + ")" : "-"],
     ["service", health ? health.status : "-"],
-  ]);
+  ].concat(severalTargetsRows(S.latest.tracks)));
   const veh = health ? health.vehicles || {} : {};
   const vrows = [];
   for (let m = 0; m < c.M; m++) {
@@ -147,6 +155,21 @@ function renderPanels() {
   const extra = [["console pages", String(cons.pages ?? "-")], ["console bus", cons.status || "-"]];
   for (const [k, v] of Object.entries(cons.rejected || {})) extra.push(["console rejected " + k, String(v)]);
   rows($("health"), counters.map(([k, v]) => [k, String(v)]).concat(extra, health && health.last_error ? [["last error", health.last_error]] : []));
+}
+
+// A multi-target mission's tracks (how many of each kind) and, once the slot's truth is known,
+// each present target's distance to the nearest confirmed track; nothing on a single-target one.
+function severalTargetsRows(tracks) {
+  if (!tracks) return [];
+  const confirmed = tracks.tracks.filter((t) => t.confirmed);
+  const out = [
+    ["tracks (slot " + tracks.slot + ")", confirmed.length + " confirmed, " + (tracks.tracks.length - confirmed.length) + " tentative"],
+    ["  confirmed ids", confirmed.length ? confirmed.map((t) => "T" + t.id).join(" ") : "-"],
+  ];
+  for (const e of tracks.target_errors || []) {
+    out.push(["target t" + e.index + " error", e.error_m == null ? "no confirmed track" : fmt(e.error_m, 2) + " m"]);
+  }
+  return out;
 }
 
 function showReason(plan) {

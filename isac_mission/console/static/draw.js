@@ -24,7 +24,9 @@ function mapTransform(canvas, config) {
 }
 
 // scene: {config, layers: [{label, colour, uavs: [{m, xy, trail, wp, mode, link, eta, bs}],
-//          target: {xy, ellipse} | null, truth: [x, y] | null}]}
+//          target: {xy, ellipse} | null, truth: [x, y] | null,
+//          tracks: [{id, confirmed, x, ellipse}] | undefined (a multi-target mission's),
+//          truths: [{index, x}] | undefined (its present targets)}]}
 function drawMap(canvas, scene) {
   const ctx = canvas.getContext("2d");
   const c = scene.config;
@@ -112,10 +114,42 @@ function drawMap(canvas, scene) {
       ctx.fillStyle = "#000"; ctx.beginPath();
       ctx.moveTo(x, y - 6); ctx.lineTo(x + 5, y); ctx.lineTo(x, y + 6); ctx.lineTo(x - 5, y); ctx.closePath(); ctx.fill();
     }
+    // several targets: every track (tentative ones faint and dashed) and every true target
+    for (const tr of L.tracks || []) drawTrack(ctx, T, tr, multi ? L.colour : "#d84315");
+    for (const t of L.truths || []) {
+      const x = T.px(t.x[0]), y = T.py(t.x[1]);
+      ctx.fillStyle = "#000"; ctx.beginPath();
+      ctx.moveTo(x, y - 6); ctx.lineTo(x + 5, y); ctx.lineTo(x, y + 6); ctx.lineTo(x - 5, y); ctx.closePath(); ctx.fill();
+      ctx.fillStyle = "#556"; ctx.font = "10px system-ui"; ctx.fillText("t" + t.index, x + 6, y + 13);
+    }
   }
   // legend
   ctx.font = "11px system-ui"; ctx.fillStyle = "#556";
-  ctx.fillText("\u25a0 BS   \u25cf UAV (hollow: link lost)   \u00d7 waypoint   + estimate (2\u03c3 ellipse)   \u25c6 truth", 8, canvas.height - 8);
+  const several = scene.layers.some((L) => L.tracks || L.truths);
+  ctx.fillText("\u25a0 BS   \u25cf UAV (hollow: link lost)   \u00d7 waypoint   + estimate (2\u03c3 ellipse)   \u25c6 truth" +
+    (several ? "   T<id> track (dashed: tentative)   t<i> target" : ""), 8, canvas.height - 8);
+}
+
+// One track of a multi-target mission as the single target's estimate is drawn (a cross and
+// its 2-sigma ellipse), labelled with its id; a tentative one fainter and dashed.
+function drawTrack(ctx, T, tr, colour) {
+  const x = T.px(tr.x[0]), y = T.py(tr.x[1]);
+  const e = tr.ellipse;
+  ctx.save();
+  ctx.strokeStyle = colour;
+  if (!tr.confirmed) { ctx.globalAlpha = 0.45; ctx.setLineDash([4, 3]); }
+  const alpha = ctx.globalAlpha;
+  if (e) {
+    ctx.beginPath();
+    ctx.ellipse(x, y, Math.max(T.s * e.a_m, 1), Math.max(T.s * e.b_m, 1), -e.angle_rad, 0, 2 * Math.PI);
+    ctx.globalAlpha = alpha * (tr.confirmed ? 0.15 : 0.08); ctx.fillStyle = colour; ctx.fill();
+    ctx.globalAlpha = alpha; ctx.stroke();
+  }
+  ctx.beginPath(); ctx.moveTo(x - 7, y); ctx.lineTo(x + 7, y); ctx.moveTo(x, y - 7); ctx.lineTo(x, y + 7);
+  ctx.lineWidth = tr.confirmed ? 2 : 1.5; ctx.stroke();
+  ctx.fillStyle = colour; ctx.font = (tr.confirmed ? "bold " : "") + "11px system-ui";
+  ctx.fillText("T" + tr.id, x + 8, y - 8);
+  ctx.restore();
 }
 
 // One chart: series [{label, colour, points: [[slot, value], ...]}], optional log scale.
