@@ -20,8 +20,9 @@ pair of its UAVs' crossings, since coarse ranges leave local minima: when no min
 the measurement that fits worst is dropped (a false alarm a broad gate let in) and the rest
 fitted again, down to `min_uavs`. An ambiguous fit waits: when two minima pass but lie outside
 each other's gates, or another proposal sharing `min_uavs` of the winner's measurements passes
-elsewhere (the mirror image about a line of UAVs, or a ghost), no track starts this slot and
-their measurements are spent.
+elsewhere with as many UAVs' measurements (the mirror image about a line of UAVs, or a ghost),
+no track starts this slot and their measurements are spent. A rival that passes only with fewer
+(a false alarm kept, true measurements dropped) does not hold the winner back.
 
 Pure: numpy and scipy. Shapes: M UAVs, k_m measurements of UAV m, S starts, L proposals.
 """
@@ -70,6 +71,11 @@ class InitiationSettings:
     max_pairs: int = 60
     max_rivals: int = 4
 
+
+AMBIGUOUS_LIKELIHOOD_RATIO = 20.0
+"""A second passing fit elsewhere makes a fit ambiguous unless the first is more than this many
+times as likely (the mirror image about a line of UAVs is about as likely; a far minimum that
+passes on the large variances of its own ranges is not)."""
 
 Members = tuple[tuple[int, int], ...]
 """Measurements as (UAV, index into its measurements) pairs."""
@@ -225,11 +231,15 @@ def _proposals(
 @dataclass(frozen=True)
 class _Fit:
     """A fit of some measurements: belief (x [4], P = (H^T W H)^-1), chi_square of the residual,
-    member_chi_square [n] each UAV's part of it."""
+    member_chi_square [n] each UAV's part of it, and deviance = chi_square + sum of the log
+    variances at the fit (-2 log-likelihood up to a constant: the noise of eq. 8 grows as d^4,
+    so a far minimum passes the chi-square test on its own large variances, and only the
+    likelihood tells it from the near one)."""
 
     belief: Gaussian
     chi_square: float
     member_chi_square: FloatArray
+    deviance: float = 0.0
 
 
 def _measure_many(x: FloatArray, uavs_xy: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -251,29 +261,31 @@ def _fit_many(
     starts: FloatArray, z_flat: FloatArray, w: FloatArray, uavs_xy: FloatArray, iterations: int = 40
 ) -> list[_Fit]:
     """Levenberg-Marquardt from each start [S, 4] at once on measurements z_flat [2n] (ranges,
-    then Dopplers) with weights w [2n] (inverse variances) from UAVs at uavs_xy [n, 2]; a fit
-    whose H^T W H is singular is left out."""
+    then Dopplers) with weights w [2n], or [S, 2n] one set per start (inverse variances), from
+    UAVs at uavs_xy [n, 2]; a fit whose H^T W H is singular is left out."""
     x = np.asarray(starts, dtype=float).copy()
+    W = np.broadcast_to(np.asarray(w, dtype=float), (len(x), len(z_flat)))
 
-    def costs(x: FloatArray) -> FloatArray:
+    def costs(x: FloatArray, w: FloatArray) -> FloatArray:
         res = z_flat[None] - _measure_many(x, uavs_xy)[0]
-        return np.asarray(np.einsum("sk,k,sk->s", res, w, res))
+        return np.asarray(np.einsum("sk,sk,sk->s", res, w, res))
 
-    f = costs(x)
+    f = costs(x, W)
     damping = np.full(len(x), 1e-3)
     active = np.isfinite(f)
     for _ in range(iterations):
         if not active.any():
             break
+        w_a = W[active]
         h, H = _measure_many(x[active], uavs_xy)
-        info = np.einsum("ski,k,skj->sij", H, w, H)
-        g = np.einsum("ski,k,sk->si", H, w, z_flat[None] - h)
+        info = np.einsum("ski,sk,skj->sij", H, w_a, H)
+        g = np.einsum("ski,sk,sk->si", H, w_a, z_flat[None] - h)
         lifted = info + damping[active, None, None] * (np.eye(4)[None] * info)
         ok = np.linalg.det(lifted) > 0
         step = np.zeros_like(g)
         step[ok] = np.linalg.solve(lifted[ok], g[ok][..., None])[..., 0]
         trial = x[active] + step
-        f_trial = costs(trial)
+        f_trial = costs(trial, w_a)
         better = ok & (f_trial < f[active])
         idx = np.flatnonzero(active)
         done = better & (f[active] - f_trial <= 1e-10 * np.maximum(f_trial, 1.0))
@@ -282,8 +294,8 @@ def _fit_many(
         damping[idx[~better]] *= 10
         active[idx[done | (damping[idx] > 1e9) | ~ok]] = False
     h, H = _measure_many(x, uavs_xy)
-    info = np.einsum("ski,k,skj->sij", H, w, H)
-    r2 = w[None] * (z_flat[None] - h) ** 2
+    info = np.einsum("ski,sk,skj->sij", H, W, H)
+    r2 = W * (z_flat[None] - h) ** 2
     n = len(uavs_xy)
     out = []
     for s in range(len(x)):
@@ -291,7 +303,9 @@ def _fit_many(
             continue
         P = np.linalg.inv(info[s])
         member = r2[s, :n] + r2[s, n:]
-        out.append(_Fit(Gaussian(x=x[s], P=0.5 * (P + P.T)), float(r2[s].sum()), member))
+        chi_square = float(r2[s].sum())
+        deviance = chi_square - float(np.sum(np.log(W[s])))
+        out.append(_Fit(Gaussian(x=x[s], P=0.5 * (P + P.T)), chi_square, member, deviance))
     return out
 
 
@@ -306,8 +320,8 @@ def _fits(
 ) -> list[_Fit]:
     """The fits of the members' measurements ((UAV, index) pairs) from x0 [4] and from the
     starts that the pairs of its `settings.max_starts` most precise UAVs (finest range) propose (both
-    circle crossings of each pair): the local minima found, each once, the lowest chi-square
-    first."""
+    circle crossings of each pair): the local minima found, each once, the most likely
+    (lowest deviance) first."""
     uavs = np.array([m for m, _ in members])
     z = np.array([measurements[m][j] for m, j in members])
     z_flat = np.concatenate([z[:, 0], z[:, 1]])
@@ -320,10 +334,22 @@ def _fits(
     for i, k in itertools.combinations(sorted(precise.tolist()), 2):
         x, _ = _pair_states(uav_xy_m[uavs[i]], z[i : i + 1], uav_xy_m[uavs[k]], z[k : k + 1])
         starts += [s for s in x if np.linalg.norm(s[2:]) <= settings.max_speed_mps]
+    found = _fit_many(np.array(starts), z_flat, w, uav_xy_m[uavs])
+    if found:
+        # Eq. 8's variances belong to the true range, not the measured one: a coarse range
+        # measured 30 % short had its variance taken 4x too small, and the residual of the
+        # true measurements of a far target failed its chi-square test. Fitted again from each
+        # minimum with the variances at its own predicted ranges, and tested with those.
+        at = np.array([f.belief.x for f in found])
+        predicted = _measure_many(at, uav_xy_m[uavs])[0][:, : len(uavs)]  # [S, n] ranges
+        r_at = sensing.variances(predicted.ravel(), np.tile(eta[uavs], len(at)))
+        k = predicted.size
+        w_at = 1.0 / np.concatenate(
+            [r_at[:k].reshape(predicted.shape), r_at[k:].reshape(predicted.shape)], axis=1
+        )
+        found = _fit_many(at, z_flat, w_at, uav_xy_m[uavs])
     minima: list[_Fit] = []
-    for fit in sorted(
-        _fit_many(np.array(starts), z_flat, w, uav_xy_m[uavs]), key=lambda f: f.chi_square
-    ):
+    for fit in sorted(found, key=lambda f: f.deviance):
         if not any(np.linalg.norm(fit.belief.x[:2] - m.belief.x[:2]) < 1.0 for m in minima):
             minima.append(fit)
     return minima
@@ -351,11 +377,11 @@ def initiate(
     for p in proposals:
         distinct.setdefault(frozenset(p.members), p)
     proposals = list(distinct.values())
-    verdicts: dict[frozenset[tuple[int, int]], tuple[Gaussian, Members] | None] = {}
+    verdicts: dict[frozenset[tuple[int, int]], tuple[_Fit, Members] | None] = {}
     used: set[tuple[int, int]] = set()
     out: list[Gaussian] = []
 
-    def accepted(p: _Proposal) -> tuple[Gaussian, Members] | None:
+    def accepted(p: _Proposal) -> tuple[_Fit, Members] | None:
         """The proposal's one passing fit and the measurements it used; None when none passes
         or the fit is ambiguous (once per proposal)."""
         key = frozenset(p.members)
@@ -363,7 +389,7 @@ def initiate(
             verdicts[key] = verdict(p)
         return verdicts[key]
 
-    def verdict(p: _Proposal) -> tuple[Gaussian, Members] | None:
+    def verdict(p: _Proposal) -> tuple[_Fit, Members] | None:
         members = p.members
         while len(members) >= p.required:
             found = _fits(members, p.x, measurements, uav_xy_m, eta, sensing, settings)
@@ -383,16 +409,21 @@ def initiate(
         winner = accepted(p)
         if winner is None:
             continue
-        belief, members = winner
+        fit, members = winner
         used.update(members)
         rivals = [
             q for q in proposals[i + 1 :] if len(set(q.members) & set(members)) >= settings.min_uavs
         ][: settings.max_rivals]
+        # A rival is another explanation of as many UAVs' measurements, about as likely: one
+        # that passes only after dropping some (a false alarm kept in their place) explains
+        # less, and coarse ranges give such partial fits somewhere else almost always.
         if not any(
-            (rival := accepted(q)) is not None and outside_gate(belief, rival[0], gate)
+            (rival := accepted(q)) is not None
+            and len(rival[1]) >= len(members)
+            and _rivals(fit, rival[0], gate)
             for q in rivals
         ):
-            out.append(belief)
+            out.append(fit.belief)
     return out
 
 
@@ -412,7 +443,8 @@ def refit(
         measurements[m] = np.asarray(z, dtype=float).reshape(1, 2)
     members = tuple((m, 0) for m in sorted(z_by_uav))
     found = _fits(members, x0, measurements, uav_xy_m, eta, sensing, settings)
-    return _unique([fit for fit in found if _passes(fit, settings)], _gate(settings))
+    best = _unique([fit for fit in found if _passes(fit, settings)], _gate(settings))
+    return None if best is None else best.belief
 
 
 def _required(
@@ -451,12 +483,21 @@ def _passes(fit: _Fit, settings: InitiationSettings) -> bool:
     )
 
 
-def _unique(good: Sequence[_Fit], gate: float) -> Gaussian | None:
-    """The best of the passing fits good (lowest chi-square first), None when another lies
-    outside its gate (ambiguous) or there is none."""
-    if not good or any(outside_gate(good[0].belief, other.belief, gate) for other in good[1:]):
+def _unique(good: Sequence[_Fit], gate: float) -> _Fit | None:
+    """The best of the passing fits good (the most likely first), None when a rival of it is
+    among the others (ambiguous: `_rivals`) or there is none."""
+    if not good or any(_rivals(good[0], other, gate) for other in good[1:]):
         return None
-    return good[0].belief
+    return good[0]
+
+
+def _rivals(best: _Fit, other: _Fit, gate: float) -> bool:
+    """Whether `other` is another place the target may be as well as at `best`: outside its
+    gate and at most AMBIGUOUS_LIKELIHOOD_RATIO times less likely."""
+    margin = 2.0 * math.log(AMBIGUOUS_LIKELIHOOD_RATIO)
+    return other.deviance - best.deviance <= margin and outside_gate(
+        best.belief, other.belief, gate
+    )
 
 
 def outside_gate(a: Gaussian, b: Gaussian, gate: float) -> bool:
