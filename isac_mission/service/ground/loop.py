@@ -18,46 +18,39 @@ from dataclasses import replace
 
 import numpy as np
 
-from isac_mission.bus import Subscription, ZenohBus
+from isac_mission.bus import ZenohBus
 from isac_mission.config import Scenario
-from isac_mission.errors import MessageError
 from isac_mission.planning.fleet import PlanningJob
 from isac_mission.planning.slot import SolverKit
 from isac_mission.records import SlotRecord, TraceWriter
 from isac_mission.service.ground.assembler import DetectionAssembler
-from isac_mission.service.ground.control import ControlDesk
-from isac_mission.service.ground.exclusion import VehicleWatch
+from isac_mission.service.ground.bus_loop import BusLoop
 from isac_mission.service.ground.mission import MissionState
 from isac_mission.service.ground.planner_thread import SOLVE_LOCK, consume_result, in_daemon_thread
-from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEvent
+from isac_mission.service.ground.report import SLOTS_KEPT, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
-from isac_mission.service.ground.startup import PlanningGate, skip_slot
+from isac_mission.service.ground.startup import skip_slot
 from isac_mission.service.ground.tracefile import open_trace
 from isac_mission.timebase import SlotTimeline, plan_is_late
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
 from isac_mission.wire import (
-    MAX_REASON_CHARS,
     DetectionMsg,
-    HealthMsg,
-    Keys,
     PlanMsg,
     TrackMsg,
     collect_detections,
-    decode_clock,
     decode_detection,
-    decode_telemetry,
     decode_truth,
-    encode_health,
     encode_plan,
     encode_track,
-    rejection_reason,
 )
 
 log = logging.getLogger(__name__)
 
 
-class GroundLoop:
+class GroundLoop(BusLoop):
     """Runs one mission over Zenoh: plan 1 at mission start, then slot by slot to slot N."""
+
+    state: MissionState
 
     def __init__(
         self,
@@ -70,12 +63,9 @@ class GroundLoop:
     ) -> None:
         """initial_x [4]: the tracker's initial estimate (m, m/s), with covariance P0; None:
         the scenario's x0 (the cue)."""
-        self.bus = bus
-        self.keys = Keys(scenario.mission_id)
-        self.settings = settings
+        super().__init__(scenario, bus, settings)
         self.kit = kit if kit is not None else SolverKit(scenario, solve_lock=SOLVE_LOCK)
         self.on_slot = on_slot
-        self.report = GroundReport()
         self.state = MissionState(
             scenario,
             self.kit,
@@ -86,25 +76,10 @@ class GroundLoop:
             ),
         )
         self.writer: TraceWriter | None = None
-        self.t_s = 0.0
-        self.mission_t0_s: float | None = None
         self.detections = DetectionAssembler[DetectionMsg](
             scenario.M, scenario.N, settings, self.report.counters
         )
-        self.vehicles = VehicleWatch(scenario.M, settings, self.report)
-        self.control = ControlDesk(
-            self.keys, bus, self.vehicles, self.report, lambda: self.state, lambda: self.t_s
-        )
         self.truth: dict[int, FloatArray] = {}
-        self.done = asyncio.Event()
-        self.planning: asyncio.Task[None] | None = None
-        self.gate = PlanningGate(scenario.M, settings)
-        """Plans wait for fresh telemetry at the start, on a resume and after a stall."""
-
-    @property
-    def s(self) -> Scenario:
-        """The scenario planned with (an operator's `set` changes it: control.py)."""
-        return self.state.scenario
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -117,103 +92,17 @@ class GroundLoop:
             self.gate.close("resume")
             log.info("resuming after slot %d from %s", self.state.slot, self.settings.trace_path)
 
-    async def run(self, stop: asyncio.Event) -> GroundReport:
-        """Run until slot N is done or `stop` is set; the trace is closed on the way out."""
-        self._open_trace()
-        # One subscription for everything, so that each publisher's order is kept (the world
-        # publishes a slot's truth before its detections).
-        sub = self.bus.subscribe(self.keys.everything)
-        try:
-            async with asyncio.TaskGroup() as tg:
-                pump = tg.create_task(self._pump(sub))
-                ticker = tg.create_task(self._wall_ticker())
-                waiters = [
-                    asyncio.ensure_future(stop.wait()),
-                    asyncio.ensure_future(self.done.wait()),
-                ]
-                await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
-                for task in (*waiters, pump, ticker):
-                    task.cancel()
-                if self.planning is not None:
-                    self.planning.cancel()
-        finally:
-            sub.close()
-            if self.writer is not None:
-                self.writer.close()
-            self._publish_health("done" if self.state.done else "stopped")
-        return self.report
+    def _close_trace(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
 
-    async def _pump(self, sub: Subscription) -> None:
-        prefix = self.keys.prefix + "/"
-        reply_key = self.keys.control_reply
-        handlers: dict[str, Callable[[bytes], None]] = {
-            "clock": self._on_clock,
-            "truth": self._on_truth,
-            "detections": self._on_detection,
-            "telemetry": self._on_telemetry,
-            "control": self._on_control,
-        }
-        async for key, payload in sub:
-            if key == reply_key:  # our own replies (control/... is not a control request)
-                continue
-            kind = key.removeprefix(prefix).split("/", 1)[0]
-            handler = handlers.get(kind)
-            if handler is None:  # plan, track, health: ours or another ground's
-                continue
-            try:
-                handler(payload)
-            except MessageError as err:
-                self._reject(err)
-            self._advance_guarded()
-
-    async def _wall_ticker(self) -> None:
-        """Wakes the loop so that a wall-clock deadline can pass without traffic."""
-        while True:
-            await asyncio.sleep(0.05)
-            self.gate.tick()
-            self._update_vehicle_states()
-            self._advance_guarded()
-
-    def _advance_guarded(self) -> None:
-        """_advance, with a bug in it counted and logged instead of ending the service."""
-        try:
-            self._advance()
-        except Exception as err:
-            self._internal_error(err)
-
-    def _internal_error(self, err: Exception) -> None:
-        """A bug: counted, logged with its traceback, and the loop goes on."""
-        self.report.count_internal_error(err)
-
-    def _reject(self, err: MessageError) -> None:
-        """An invalid payload: counted by reason, kept as the last error, logged (report.py)."""
-        self.report.count_rejected(rejection_reason(err), err)
+    def _handlers(self) -> dict[str, Callable[[bytes], None]]:
+        return {"truth": self._on_truth, "detections": self._on_detection}
 
     # ------------------------------------------------------------------ inputs
 
-    def _on_clock(self, payload: bytes) -> None:
-        msg = decode_clock(payload)
-        self.t_s = max(self.t_s, msg.t_s)
-        if msg.mission_t0_s is not None and self.mission_t0_s is None:
-            self.mission_t0_s = msg.mission_t0_s
-
     def _on_detection(self, payload: bytes) -> None:
         self.detections.add(decode_detection(payload, n_uavs=self.s.M), self.state.slot)
-
-    def _on_telemetry(self, payload: bytes) -> None:
-        self.vehicles.on_telemetry(decode_telemetry(payload, n_uavs=self.s.M))
-        self._update_vehicle_states()
-
-    def _on_control(self, payload: bytes) -> None:
-        """An operator's request (control.py): executed or refused, always answered."""
-        self.control.on_request(payload)
-        self._update_vehicle_states()
-        self._publish_health("running")
-
-    def _update_vehicle_states(self) -> None:
-        """Exclude or re-admit vehicles (exclusion.py); a change is announced in health."""
-        if self.vehicles.update(self.t_s):
-            self._publish_health("running")
 
     def _on_truth(self, payload: bytes) -> None:
         msg = decode_truth(payload)
@@ -412,26 +301,3 @@ class GroundLoop:
         reason = f"{why}; {plan.report.reason}" if plan.report.reason else why
         report = replace(plan.report, reason=reason, fallback=plan.report.fallback or "late")
         return replace(plan, report=report)
-
-    def _publish(self, key: str, encode: Callable[[], bytes]) -> None:
-        """Publish encode() on `key`; a message that fails its own validation is counted and
-        logged, and the slot goes on (the trace keeps everything)."""
-        try:
-            payload = encode()
-        except MessageError as err:
-            kind = key.rsplit("/", 1)[-1]
-            self.report.counters[f"{kind} not published"] += 1
-            self.report.last_error = f"{kind} not published: {err}"[:MAX_REASON_CHARS]
-            log.error("%s not published: %s", kind, err)
-            return
-        self.bus.publish(key, payload)
-
-    def _publish_health(self, status: str) -> None:
-        rep, slot = self.report, max(self.state.slot, 0)
-        msg = HealthMsg(
-            slot, self.t_s, status, dict(rep.counters), rep.last_error, self.vehicles.status()
-        )
-        try:
-            self.bus.publish(self.keys.health, encode_health(msg))
-        except Exception as err:  # the bus may already be closing at shutdown
-            log.debug("health not published: %s", err)

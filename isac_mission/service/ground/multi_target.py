@@ -30,9 +30,9 @@ from typing import IO
 
 import numpy as np
 
-from isac_mission.bus import Subscription, ZenohBus
+from isac_mission.bus import ZenohBus
 from isac_mission.config import Scenario
-from isac_mission.errors import ConfigError, MessageError
+from isac_mission.errors import ConfigError
 from isac_mission.model.detections import UavReport
 from isac_mission.planning.multi_target import (
     check_multi_target_method,
@@ -43,13 +43,11 @@ from isac_mission.planning.multi_target import (
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records.multi_target import MultiTargetSlot, header_line, slot_line
 from isac_mission.service.ground.assembler import DetectionAssembler
-from isac_mission.service.ground.control import ControlDesk
-from isac_mission.service.ground.exclusion import VehicleWatch
+from isac_mission.service.ground.bus_loop import BusLoop
 from isac_mission.service.ground.mission import leg_start_state
 from isac_mission.service.ground.planner_thread import consume_result, in_daemon_thread
-from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport
+from isac_mission.service.ground.report import SLOTS_KEPT
 from isac_mission.service.ground.settings import GroundSettings
-from isac_mission.service.ground.startup import PlanningGate
 from isac_mission.tracking.multi_target import (
     MultiTargetTracker,
     TrackerSettings,
@@ -58,20 +56,14 @@ from isac_mission.tracking.multi_target import (
 from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan, SolveReport
 from isac_mission.wire import (
     DetectionSetMsg,
-    HealthMsg,
-    Keys,
     PlanMsg,
     TrackEntry,
     TrackSetMsg,
     TruthSetMsg,
-    decode_clock,
     decode_detection_set,
-    decode_telemetry,
     decode_truth_set,
-    encode_health,
     encode_plan,
     encode_track_set,
-    rejection_reason,
 )
 
 log = logging.getLogger(__name__)
@@ -260,9 +252,11 @@ def track_set_message(slot: MultiTargetSlot, t_s: float) -> TrackSetMsg:
     return TrackSetMsg(slot.slot, t_s, entries, time.time())
 
 
-class MultiTargetGround:
+class MultiTargetGround(BusLoop):
     """Runs one multi-target mission over Zenoh: plan 1 at mission start, then slot by slot to
     slot N. on_slot(slot, latency_s) is called after each slot's plan is out."""
+
+    state: MultiTargetMission
 
     def __init__(
         self,
@@ -278,34 +272,18 @@ class MultiTargetGround:
                 f"{scenario.mission_id}: a multi-target mission cannot resume a trace yet "
                 "(docs/service.md, 'Several intruders'); start it without --resume"
             )
-        self.bus = bus
-        self.keys = Keys(scenario.mission_id)
-        self.settings = settings
+        super().__init__(scenario, bus, settings)
         self.state = MultiTargetMission(
             scenario, kit or multi_target_kit(scenario), settings.method, initial_errors
         )
         self.on_slot = on_slot
-        self.report = GroundReport()
         self.slots: deque[MultiTargetSlot] = deque(maxlen=SLOTS_KEPT)
         """The last SLOTS_KEPT slots (the trace keeps every one)."""
-        self.t_s = 0.0
-        self.mission_t0_s: float | None = None
         self.detections = DetectionAssembler[DetectionSetMsg](
             scenario.M, scenario.N, settings, self.report.counters
         )
-        self.vehicles = VehicleWatch(scenario.M, settings, self.report)
-        self.control = ControlDesk(
-            self.keys, bus, self.vehicles, self.report, lambda: self.state, lambda: self.t_s
-        )
         self.truth: dict[int, TruthSetMsg] = {}
-        self.done = asyncio.Event()
-        self.planning: asyncio.Task[None] | None = None
-        self.gate = PlanningGate(scenario.M, settings)
         self._trace: IO[str] | None = None
-
-    @property
-    def s(self) -> Scenario:
-        return self.state.scenario
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -322,6 +300,10 @@ class MultiTargetGround:
         self._trace = open(path, "w", encoding="utf-8")  # noqa: SIM115 (closed in run)
         self._write_line(header_line(config))
 
+    def _close_trace(self) -> None:
+        if self._trace is not None:
+            self._trace.close()
+
     def _write_line(self, line: str) -> None:
         f = self._trace
         if f is None:
@@ -330,72 +312,10 @@ class MultiTargetGround:
         f.flush()
         os.fsync(f.fileno())
 
-    async def run(self, stop: asyncio.Event) -> GroundReport:
-        """Run until slot N is done or `stop` is set; the trace is closed on the way out."""
-        self._open_trace()
-        sub = self.bus.subscribe(self.keys.everything)
-        try:
-            async with asyncio.TaskGroup() as tg:
-                pump = tg.create_task(self._pump(sub))
-                ticker = tg.create_task(self._wall_ticker())
-                waiters = [
-                    asyncio.ensure_future(stop.wait()),
-                    asyncio.ensure_future(self.done.wait()),
-                ]
-                await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
-                for task in (*waiters, pump, ticker):
-                    task.cancel()
-                if self.planning is not None:
-                    self.planning.cancel()
-        finally:
-            sub.close()
-            if self._trace is not None:
-                self._trace.close()
-            self._publish_health("done" if self.state.done else "stopped")
-        return self.report
-
-    async def _pump(self, sub: Subscription) -> None:
-        prefix = self.keys.prefix + "/"
-        reply_key = self.keys.control_reply
-        handlers: dict[str, Callable[[bytes], None]] = {
-            "clock": self._on_clock,
-            "truth": self._on_truth,
-            "detections": self._on_detection,
-            "telemetry": self._on_telemetry,
-            "control": self._on_control,
-        }
-        async for key, payload in sub:
-            if key == reply_key:
-                continue
-            handler = handlers.get(key.removeprefix(prefix).split("/", 1)[0])
-            if handler is None:
-                continue
-            try:
-                handler(payload)
-            except MessageError as err:
-                self.report.count_rejected(rejection_reason(err), err)
-            self._advance_guarded()
-
-    async def _wall_ticker(self) -> None:
-        while True:
-            await asyncio.sleep(0.05)
-            self.gate.tick()
-            self._update_vehicle_states()
-            self._advance_guarded()
-
-    def _advance_guarded(self) -> None:
-        try:
-            self._advance()
-        except Exception as err:  # a bug: counted and logged, the loop goes on
-            self.report.count_internal_error(err)
+    def _handlers(self) -> dict[str, Callable[[bytes], None]]:
+        return {"truth": self._on_truth, "detections": self._on_detection}
 
     # ------------------------------------------------------------------ inputs
-
-    def _on_clock(self, payload: bytes) -> None:
-        msg = decode_clock(payload)
-        self.t_s = max(self.t_s, msg.t_s)
-        if msg.mission_t0_s is not None and self.mission_t0_s is None:
-            self.mission_t0_s = msg.mission_t0_s
 
     def _on_detection(self, payload: bytes) -> None:
         self.detections.add(decode_detection_set(payload, n_uavs=self.s.M), self.state.slot)
@@ -404,19 +324,6 @@ class MultiTargetGround:
         msg = decode_truth_set(payload)
         if msg.slot > self.state.slot:
             self.truth[msg.slot] = msg
-
-    def _on_telemetry(self, payload: bytes) -> None:
-        self.vehicles.on_telemetry(decode_telemetry(payload, n_uavs=self.s.M))
-        self._update_vehicle_states()
-
-    def _on_control(self, payload: bytes) -> None:
-        self.control.on_request(payload)
-        self._update_vehicle_states()
-        self._publish_health("running")
-
-    def _update_vehicle_states(self) -> None:
-        if self.vehicles.update(self.t_s):
-            self._publish_health("running")
 
     # ------------------------------------------------------------------ the slot machine
 
@@ -532,7 +439,7 @@ class MultiTargetGround:
             if done is not None:
                 self._complete(done, latency)
         except Exception as err:
-            self.report.count_internal_error(err)
+            self._internal_error(err)
         self._advance_guarded()
 
     def _complete(self, slot: MultiTargetSlot, latency_s: float) -> None:
@@ -545,24 +452,3 @@ class MultiTargetGround:
         self._publish_health("running")
         if self.on_slot is not None:
             self.on_slot(slot, latency_s)
-
-    def _publish(self, key: str, encode: Callable[[], bytes]) -> None:
-        try:
-            payload = encode()
-        except MessageError as err:
-            kind = key.rsplit("/", 1)[-1]
-            self.report.counters[f"{kind} not published"] += 1
-            self.report.last_error = f"{kind} not published: {err}"
-            log.error("%s not published: %s", kind, err)
-            return
-        self.bus.publish(key, payload)
-
-    def _publish_health(self, status: str) -> None:
-        rep, slot = self.report, max(self.state.slot, 0)
-        msg = HealthMsg(
-            slot, self.t_s, status, dict(rep.counters), rep.last_error, self.vehicles.status()
-        )
-        try:
-            self.bus.publish(self.keys.health, encode_health(msg))
-        except Exception as err:  # the bus may already be closing at shutdown
-            log.debug("health not published: %s", err)
