@@ -203,6 +203,9 @@ def main() -> None:
         for k in keys:
             off = np.array([r[k] for r in sides["offline"]])
             liv = np.array([r[k] for r in sides["live"]])
+            if not off.any():  # a figure that is 0 offline (SD's parked UAVs' step)
+                cells.append("(0 offline)" if off.sum() == 0 and not liv.any() else "-")
+                continue
             iv = deviation(off, liv)
             cells.append(f"{iv.estimate:+.1f} % [{iv.low:+.1f}, {iv.high:+.1f}]")
         print(f"| {method} | " + " | ".join(cells) + " |")

@@ -77,6 +77,10 @@ AMBIGUOUS_LIKELIHOOD_RATIO = 20.0
 times as likely (the mirror image about a line of UAVs is about as likely; a far minimum that
 passes on the large variances of its own ranges is not)."""
 
+REFIT_ITERATIONS = 15
+"""Levenberg-Marquardt steps of the refit at the predicted ranges' variances: it starts at a
+minimum of the first fit, a few metres from its own."""
+
 Members = tuple[tuple[int, int], ...]
 """Measurements as (UAV, index into its measurements) pairs."""
 
@@ -334,7 +338,7 @@ def _fits(
     for i, k in itertools.combinations(sorted(precise.tolist()), 2):
         x, _ = _pair_states(uav_xy_m[uavs[i]], z[i : i + 1], uav_xy_m[uavs[k]], z[k : k + 1])
         starts += [s for s in x if np.linalg.norm(s[2:]) <= settings.max_speed_mps]
-    found = _fit_many(np.array(starts), z_flat, w, uav_xy_m[uavs])
+    found = _distinct(_fit_many(np.array(starts), z_flat, w, uav_xy_m[uavs]))
     if found:
         # Eq. 8's variances belong to the true range, not the measured one: a coarse range
         # measured 30 % short had its variance taken 4x too small, and the residual of the
@@ -347,9 +351,15 @@ def _fits(
         w_at = 1.0 / np.concatenate(
             [r_at[:k].reshape(predicted.shape), r_at[k:].reshape(predicted.shape)], axis=1
         )
-        found = _fit_many(at, z_flat, w_at, uav_xy_m[uavs])
+        found = _fit_many(at, z_flat, w_at, uav_xy_m[uavs], iterations=REFIT_ITERATIONS)
+    return _distinct(sorted(found, key=lambda f: f.deviance))
+
+
+def _distinct(fits: Sequence[_Fit]) -> list[_Fit]:
+    """The fits in their order, each place once (a fit within 1 m of an earlier one dropped:
+    several starts reach the same minimum)."""
     minima: list[_Fit] = []
-    for fit in sorted(found, key=lambda f: f.deviance):
+    for fit in fits:
         if not any(np.linalg.norm(fit.belief.x[:2] - m.belief.x[:2]) < 1.0 for m in minima):
             minima.append(fit)
     return minima
