@@ -158,10 +158,7 @@ async def fly_mission(
     kit = SolverKit(planning, n_keep_out=n_keep_out, solve_lock=SOLVE_LOCK)
     # On a thread: the event loop meanwhile opens an embedded world's vehicles (ground stations
     # see them at once) and the bus; the kit is not used by anything else until it returns.
-    if s.multi_target:
-        await asyncio.to_thread(kit.warm_up, opts.method)
-    else:
-        await asyncio.to_thread(prepare_fleet, kit, opts.method)
+    await asyncio.to_thread(prepare_fleet, kit, opts.method, n_keep_out)
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(
         s,

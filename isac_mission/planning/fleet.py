@@ -32,10 +32,15 @@ class KitCache:
     size share their IPOPT problems (they depend on the fleet's size and the number of keep-out
     points, not on which vehicles), kept in the full kit so that renewed kits keep them too."""
 
-    def __init__(self, full: SolverKit, method: Method = "proposed") -> None:
-        """method: what the kits are warmed up for (the mission's planning method)."""
+    def __init__(
+        self, full: SolverKit, method: Method = "proposed", base_keep_out: int = 0
+    ) -> None:
+        """method: what the kits are warmed up for (the mission's planning method);
+        base_keep_out: the keep-out points every kit has besides the excluded vehicles (the
+        full kit's own: the other tracks of a multi-target mission, planning/multi_target.py)."""
         self.full = full
         self.method: Method = method
+        self.base_keep_out = base_keep_out
         self._kits: dict[tuple[int, ...], SolverKit] = {}
 
     @property
@@ -68,10 +73,12 @@ class KitCache:
         s = self.full.scenario
         idx = list(active)
         sub = s.with_changes(M=len(idx), uav_start_xy=s.uav_start_xy[idx])
+        n_keep_out = self.base_keep_out + s.M - len(idx)
         kit = SolverKit(
-            sub, fast=self.full.fast, n_keep_out=s.M - len(idx), solve_lock=self.full.solve_lock
+            sub, fast=self.full.fast, n_keep_out=n_keep_out, solve_lock=self.full.solve_lock
         )
-        kit.share_built(self.full.built(f"problems of {len(idx)} of {s.M} vehicles", dict))
+        shared = f"problems of {len(idx)} of {s.M} vehicles, {n_keep_out} keep-out points"
+        kit.share_built(self.full.built(shared, dict))
         return kit
 
 
@@ -129,38 +136,7 @@ class PlanningJob:
         plan = planner(inp, kit, self.method)
         if not self.excluded:
             return plan
-        return self._widen(plan, idx)
-
-    def _widen(self, sub: SlotPlan, idx: list[int]) -> SlotPlan:
-        M = self.kits.scenario.M
-        xy = np.array(self.uav_xy, dtype=float)
-        xy[idx] = sub.uav_xy_m
-        eta = np.zeros(M)
-        eta[idx] = sub.bandwidth_share
-        assoc = np.full(M, NO_BS, dtype=np.int64)
-        assoc[idx] = sub.bs_of_uav
-        note = f"vehicles {list(self.excluded)} excluded (health says why), holding"
-        reason = f"{sub.report.reason}; {note}" if sub.report.reason else note
-        velocity = None
-        if sub.uav_velocity_mps is not None:  # a holding vehicle's planned velocity is 0
-            velocity = np.zeros((M, 2))
-            velocity[idx] = sub.uav_velocity_mps
-        horizon = None
-        if sub.horizon is not None:
-            h = sub.horizon
-            L = h.uav_xy_m.shape[0]
-            h_xy = np.repeat(np.asarray(self.uav_xy, dtype=float)[None], L, axis=0)
-            h_xy[:, idx] = h.uav_xy_m
-            h_eta = np.zeros((L, M))
-            h_eta[:, idx] = h.bandwidth_share
-            h_v = None
-            if h.uav_velocity_mps is not None:
-                h_v = np.zeros((L, M, 2))
-                h_v[:, idx] = h.uav_velocity_mps
-            horizon = HorizonPlan(h_xy, h_v, h_eta, h.pcrb_trace)
-        return SlotPlan(
-            xy, assoc, eta, sub.pcrb_trace, replace(sub.report, reason=reason), velocity, horizon
-        )
+        return widen_plan(plan, self.uav_xy, self.excluded)
 
     def hold(self, reason: str, status: str, solve_s: float = 0.0) -> SlotPlan:
         """Every vehicle holds where it is (planning/fallback.hold_plan)."""
@@ -202,6 +178,43 @@ class PlanningJob:
         )
 
 
+def widen_plan(sub: SlotPlan, uav_xy: FloatArray, excluded: tuple[int, ...]) -> SlotPlan:
+    """A plan of the active vehicles (all but the sorted `excluded`) widened to the whole fleet
+    at uav_xy [M, 2] (m): an excluded vehicle holds where it is (its waypoint its position, no
+    share, no BS, velocity 0), and the reason says which vehicles are out. The inverse of
+    `active_part`."""
+    M = len(uav_xy)
+    idx = [m for m in range(M) if m not in excluded]
+    xy = np.array(uav_xy, dtype=float)
+    xy[idx] = sub.uav_xy_m
+    eta = np.zeros(M)
+    eta[idx] = sub.bandwidth_share
+    assoc = np.full(M, NO_BS, dtype=np.int64)
+    assoc[idx] = sub.bs_of_uav
+    note = f"vehicles {list(excluded)} excluded (health says why), holding"
+    reason = f"{sub.report.reason}; {note}" if sub.report.reason else note
+    velocity = None
+    if sub.uav_velocity_mps is not None:  # a holding vehicle's planned velocity is 0
+        velocity = np.zeros((M, 2))
+        velocity[idx] = sub.uav_velocity_mps
+    horizon = None
+    if sub.horizon is not None:
+        h = sub.horizon
+        L = h.uav_xy_m.shape[0]
+        h_xy = np.repeat(np.asarray(uav_xy, dtype=float)[None], L, axis=0)
+        h_xy[:, idx] = h.uav_xy_m
+        h_eta = np.zeros((L, M))
+        h_eta[:, idx] = h.bandwidth_share
+        h_v = None
+        if h.uav_velocity_mps is not None:
+            h_v = np.zeros((L, M, 2))
+            h_v[:, idx] = h.uav_velocity_mps
+        horizon = HorizonPlan(h_xy, h_v, h_eta, h.pcrb_trace)
+    return SlotPlan(
+        xy, assoc, eta, sub.pcrb_trace, replace(sub.report, reason=reason), velocity, horizon
+    )
+
+
 def active_part(plan: SlotPlan, active: tuple[int, ...]) -> SlotPlan:
     """The part of a plan over all M vehicles that concerns the `active` ones (sorted indices):
     the inverse of PlanningJob's widening, so that the planner's prev_plan is over the vehicles
@@ -232,9 +245,9 @@ def active_part(plan: SlotPlan, active: tuple[int, ...]) -> SlotPlan:
     )
 
 
-def prepare_fleet(kit: SolverKit, method: Method) -> None:
+def prepare_fleet(kit: SolverKit, method: Method, base_keep_out: int = 0) -> None:
     """Warm the full fleet's kit up for `method` and build, ahead, the problems of the fleet
-    with one vehicle out (KitCache.build_ahead): no plan of the mission then builds an IPOPT
-    problem until a second vehicle leaves the plan."""
+    with one vehicle out (KitCache.build_ahead; base_keep_out as KitCache's): no plan of the
+    mission then builds an IPOPT problem until a second vehicle leaves the plan."""
     kit.warm_up(method)
-    KitCache(kit, method).build_ahead()
+    KitCache(kit, method, base_keep_out).build_ahead()

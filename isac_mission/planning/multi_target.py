@@ -54,13 +54,18 @@ def plan_for_tracks(
     assoc: IntArray | None,
     velocity: FloatArray | None,
     prev_plan: SlotPlan | None,
+    extra_keep_out_xy: FloatArray | None = None,
 ) -> tuple[int, SlotPlan]:
     """(the ID of the track planned around, 0 when the fleet holds; the slot's plan) for the
     tracks' predictions, from the UAVs at uav_xy [M, 2] (m) with velocities [M, 2] (m/s),
-    last slot's shares eta [M] and BSs assoc [M] (None: none yet). `kit` from
-    `multi_target_kit`."""
-    if kit.n_keep_out != KEEP_OUT_CAPACITY:
-        raise ValueError(f"the kit must be built with n_keep_out={KEEP_OUT_CAPACITY}")
+    last slot's shares eta [M] and BSs assoc [M] (None: none yet). extra_keep_out_xy [E, 2]:
+    more points every UAV keeps D_s from (the vehicles outside the plan). `kit` from
+    `multi_target_kit` (E = 0), or built with KEEP_OUT_CAPACITY + E keep-out points."""
+    extra = np.zeros((0, 2)) if extra_keep_out_xy is None else np.asarray(extra_keep_out_xy)
+    if kit.n_keep_out != KEEP_OUT_CAPACITY + len(extra):
+        raise ValueError(
+            f"the kit must be built with n_keep_out={KEEP_OUT_CAPACITY} + {len(extra)}"
+        )
     confirmed = [p for p in predictions if p.confirmed]
     if not confirmed:
         return 0, hold_without_track(s, uav_xy, eta, assoc)
@@ -70,9 +75,10 @@ def plan_for_tracks(
 
     primary = min(confirmed, key=fleet_distance)
     others = sorted((p for p in predictions if p is not primary), key=fleet_distance)
-    keep_out = np.full((KEEP_OUT_CAPACITY, 2), FAR_AWAY_M)
+    keep_out = np.full((KEEP_OUT_CAPACITY + len(extra), 2), FAR_AWAY_M)
     for i, p in enumerate(others[:KEEP_OUT_CAPACITY]):
         keep_out[i] = p.prediction.x[:2]
+    keep_out[KEEP_OUT_CAPACITY:] = extra
     inp = SlotInput(
         prev_xy_m=uav_xy,
         prev_bandwidth_share=eta,

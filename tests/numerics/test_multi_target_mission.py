@@ -12,7 +12,11 @@ from isac_mission.config import Scenario, load_scenario
 from isac_mission.errors import ConfigError
 from isac_mission.experiment.multi_target_loop import run_multi_target
 from isac_mission.model.run_noise import draw_multi_target_noise
-from isac_mission.planning.multi_target import multi_target_kit
+from isac_mission.planning.multi_target import (
+    KEEP_OUT_CAPACITY,
+    multi_target_kit,
+    plan_for_tracks,
+)
 from isac_mission.records.multi_target import MultiTargetSlot, slot_line
 from isac_mission.service.ground.multi_target import MultiTargetMission
 from isac_mission.wire import DetectionSetMsg, TruthSetMsg
@@ -106,14 +110,32 @@ def test_a_missing_report_contributes_nothing_and_its_origins_are_unknown(
     assert np.isnan(slot.truth).all()
 
 
-def test_an_excluded_vehicle_holds_the_whole_fleet_and_says_why(scenario: Scenario) -> None:
+def test_an_excluded_vehicle_holds_and_the_others_plan_around_it(scenario: Scenario) -> None:
     s = scenario
     mission = MultiTargetMission(s, multi_target_kit(s), "proposed")
     mission.start_known_tracks()
-    planned_for, plan = mission.plan(mission.predict(), s.uav_start_xy, None, (4,))
-    assert planned_for == 0
-    assert plan.report.status == "hold" and "vehicles [4] excluded" in plan.report.reason
-    np.testing.assert_array_equal(plan.uav_xy_m, s.uav_start_xy)
+    predictions = mission.predict()
+    xy = s.uav_start_xy.copy()
+    xy[4] = xy[1] + np.array([40.0, 0.0])  # vehicle 4 lost 40 m from vehicle 1
+    planned_for, plan = mission.plan(predictions, xy, None, (4,))
+    assert planned_for == 1
+    assert plan.report.status == "ok" and "vehicles [4] excluded" in plan.report.reason
+    np.testing.assert_array_equal(plan.uav_xy_m[4], xy[4])  # it holds where it was seen
+    assert plan.bandwidth_share[4] == 0.0 and plan.bs_of_uav[4] == -1
+    assert plan.bandwidth_share.sum() == pytest.approx(1.0)
+    # Every other vehicle keeps D_s from it (a keep-out point beside the tracks').
+    others = np.delete(plan.uav_xy_m, 4, axis=0)
+    assert np.linalg.norm(others - xy[4], axis=1).min() >= s.d_safe - 1e-6
+    # The others' plan is the five-vehicle planner's, with vehicle 4 as one more keep-out point.
+    idx = [0, 1, 2, 3, 5]
+    five = mission.kits.for_active(tuple(idx))
+    assert five.n_keep_out == KEEP_OUT_CAPACITY + 1
+    eta = mission.eta[idx] / mission.eta[idx].sum()
+    _, alone = plan_for_tracks(
+        five.scenario, "proposed", five, predictions, xy[idx], eta, None, None, None, xy[[4]]
+    )
+    np.testing.assert_allclose(plan.uav_xy_m[idx], alone.uav_xy_m, atol=1e-6)
+    np.testing.assert_allclose(plan.bandwidth_share[idx], alone.bandwidth_share, atol=1e-9)
 
 
 def test_a_one_target_planner_is_refused_by_name(scenario: Scenario) -> None:

@@ -11,9 +11,9 @@ measurements' origins, for the metrics); the tracker never reads it.
 What the single-target loop does and this one does too: plans wait for fresh telemetry at the
 start (startup.py's gate), a plan over budget is a hold (status "timeout"), invalid payloads are
 counted and dropped, operators' requests are answered (control.py; `set` changes R_th from the
-next slot). What it does not do yet (docs/service.md, "Several intruders"): resume a trace, and
-plan around an excluded vehicle: while any vehicle is excluded (lost, held, landed by an
-operator) the whole fleet holds, status "hold".
+next slot), a vehicle out of the plan holds and the others plan around it (planning/fleet.py's
+kits and widening). What it does not do yet (docs/service.md, "Several intruders"): resume a
+trace.
 """
 
 from __future__ import annotations
@@ -34,7 +34,9 @@ from isac_mission.bus import ZenohBus
 from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.model.detections import UavReport
+from isac_mission.planning.fleet import KitCache, active_part, widen_plan
 from isac_mission.planning.multi_target import (
+    KEEP_OUT_CAPACITY,
     check_multi_target_method,
     hold_without_track,
     multi_target_kit,
@@ -102,6 +104,9 @@ class MultiTargetMission:
             raise ConfigError(f"{s.mission_id}: a multi-target mission needs a detection model")
         self._scenario = s
         self.kit = kit
+        self.kits = KitCache(kit, method, KEEP_OUT_CAPACITY)
+        """Kits for the fleet without the excluded vehicles (their positions keep-out points
+        beside the tracks')."""
         self.method: Method = method
         self.tracker = MultiTargetTracker(TrackerSettings.from_scenario(s))
         self.initial_errors = initial_errors
@@ -110,6 +115,8 @@ class MultiTargetMission:
         self.assoc: IntArray | None = None
         self.pending: PendingPlan | None = None
         self.last_plan: SlotPlan | None = None
+        self.last_excluded: tuple[int, ...] = ()
+        """The vehicles the last committed plan left out (its prev_plan role needs the same)."""
 
     @property
     def scenario(self) -> Scenario:
@@ -124,7 +131,12 @@ class MultiTargetMission:
         if s.M != self._scenario.M:
             raise ValueError(f"the new scenario has M = {s.M}, the mission {self._scenario.M}")
         self._scenario = s
-        self.kit = multi_target_kit(s)
+        self.renew_kits(multi_target_kit(s))
+
+    def renew_kits(self, kit: SolverKit | None = None) -> None:
+        """Plan on fresh kits from now on (a timed-out planner thread keeps the old)."""
+        self.kit = kit if kit is not None else self.kit.renewed()
+        self.kits = KitCache(self.kit, self.method, KEEP_OUT_CAPACITY)
 
     def start_known_tracks(self) -> None:
         """Start a confirmed track for every known target that enters at the current slot
@@ -149,32 +161,53 @@ class MultiTargetMission:
         excluded: tuple[int, ...],
     ) -> tuple[int, SlotPlan]:
         """(the ID of the track planned around, the plan of slot + 1): thread-safe (touches only
-        its arguments and the kit)."""
+        its arguments and the kits). The `excluded` vehicles (sorted) are left out: the others
+        are planned with them as keep-out points (planning/fleet.py), and they hold."""
         s = self._scenario
-        if excluded:
-            plan = hold_without_track(s, uav_xy, self.eta, self.assoc)
-            why = (
-                f"hold: vehicles {list(excluded)} excluded; the multi-target path plans the "
-                "whole fleet only"
+        prev = self.last_plan if self.last_excluded == excluded else None
+        if not excluded:
+            return plan_for_tracks(
+                s, self.method, self.kit, predictions, uav_xy, self.eta, self.assoc, uav_v, prev
             )
-            return 0, _with_status(plan, "hold", why)
-        return plan_for_tracks(
-            s,
+        active = tuple(m for m in range(s.M) if m not in excluded)
+        if not active:
+            hold = hold_without_track(s, uav_xy, self.eta, self.assoc)
+            return 0, _with_status(hold, "no vehicles", "hold: every vehicle is excluded")
+        idx = list(active)
+        kit = self.kits.for_active(active)
+        eta = self.eta[idx]
+        eta = eta / eta.sum() if eta.sum() > 0 else np.full(len(idx), 1.0 / len(idx))
+        assoc = None if self.assoc is None else self.assoc[idx]
+        if assoc is not None and np.any(assoc < 0):
+            assoc = None
+        planned_for, sub = plan_for_tracks(
+            kit.scenario,
             self.method,
-            self.kit,
+            kit,
             predictions,
-            uav_xy,
-            self.eta,
-            self.assoc,
-            uav_v,
-            self.last_plan,
+            uav_xy[idx],
+            eta,
+            assoc,
+            None if uav_v is None else uav_v[idx],
+            None if prev is None else active_part(prev, active),
+            extra_keep_out_xy=uav_xy[list(excluded)],
         )
+        return planned_for, widen_plan(sub, uav_xy, excluded)
 
-    def commit(self, slot: int, planned_for: int, plan: SlotPlan, start_xy: FloatArray) -> None:
-        """Adopt `plan` as the plan of slot `slot` = slot + 1."""
+    def commit(
+        self,
+        slot: int,
+        planned_for: int,
+        plan: SlotPlan,
+        start_xy: FloatArray,
+        excluded: tuple[int, ...] = (),
+    ) -> None:
+        """Adopt `plan` as the plan of slot `slot` = slot + 1, made without the `excluded`
+        vehicles."""
         if slot != self.slot + 1:
             raise ValueError(f"plan for slot {slot}, but the next slot is {self.slot + 1}")
         self.pending = PendingPlan(slot, plan, planned_for, start_xy)
+        self.last_excluded = excluded
 
     def process(
         self,
@@ -419,7 +452,7 @@ class MultiTargetGround(BusLoop):
             hold = hold_without_track(self.s, uav_xy, st.eta, st.assoc)
             plan = _with_status(hold, "timeout", why, time.perf_counter() - t0)
             future.add_done_callback(consume_result)
-            st.kit = st.kit.renewed()
+            st.renew_kits()
         except Exception as err:  # any planner failure: hold, say why, go on
             self.report.counters["planner errors"] += 1
             why = f"solver error: {type(err).__name__}: {err}; hold"
@@ -428,7 +461,7 @@ class MultiTargetGround(BusLoop):
             plan = _with_status(hold, "solver error", why, time.perf_counter() - t0)
         self.planning = None
         try:
-            st.commit(n, planned_for, plan, uav_xy)
+            st.commit(n, planned_for, plan, uav_xy, excluded)
             msg = PlanMsg(n, self.t_s, plan)
             self._publish(self.keys.plan, lambda: encode_plan(msg))
             if plan.report.status != "ok":
