@@ -154,7 +154,15 @@ class Scenario:
         return self.wavelength**2 * self.Pu * self.rcs_m2 / ((4 * math.pi) ** 3 * self.noise_w)
 
     def with_changes(self, **changes: Any) -> Scenario:
-        """A copy with some fields replaced (no re-validation: for studies and tests)."""
+        """A copy with some fields replaced (no re-validation: for studies and tests). A new N
+        keeps a target that was in the scene to the end in it to the new end (a longer mission
+        of paper.yaml is still its one plain target, not the multi-target path)."""
+        if "N" in changes and "targets" not in changes:
+            n_slots = int(changes["N"])
+            changes["targets"] = tuple(
+                dataclasses.replace(t, last_slot=n_slots) if t.last_slot >= self.N else t
+                for t in self.targets
+            )
         return replace(self, **changes)
 
     def trace_config(self) -> dict[str, Any]:

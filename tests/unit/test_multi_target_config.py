@@ -134,3 +134,16 @@ def test_check_config_accepts_and_describes_a_multi_target_scenario() -> None:
     result = CliRunner().invoke(app, ["check-config", str(ROOT / "config" / "multi-target.yaml")])
     assert result.exit_code == 0, result.output
     assert "target turning" in result.output and "coordinated_turn" in result.output
+
+
+def test_a_longer_or_shorter_paper_mission_keeps_its_one_plain_target() -> None:
+    # with_changes(N=...) keeps a target that is in the scene to the end in it to the new end:
+    # a 120-slot paper.yaml is still single-target (it took the multi-target path, and the live
+    # service its multi-target ground loop, when the target "left" at the old slot 60).
+    s = load_scenario(ROOT / "config" / "paper.yaml")
+    for n in (30, 120):
+        longer = s.with_changes(N=n)
+        assert not longer.multi_target
+        assert longer.targets[0].last_slot == n
+    late = load_scenario(ROOT / "config" / "multi-target.yaml").with_changes(N=90)
+    assert [t.last_slot for t in late.targets] == [90, 90, 90]
