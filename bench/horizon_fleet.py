@@ -10,8 +10,11 @@ Per M and method: build (SolverKit.warm_up, cold: there is no disk cache), media
 plan time (report.solve_s), and for `horizon` IPOPT's iterations (median, max) and the slots
 converged (its answer flown), stopped at the iteration cap on a feasible, lower iterate (flown),
 at the cap otherwise (the per-slot plan flown instead) and fallen back for another reason; the
-mission-mean tr(PCRB) of each method's own closed loop and their ratio. With --compare-tree the package in DIR runs the same cells, interleaved with this tree's
-(old, new per seed), so both see the same load.
+mission-mean tr(PCRB) of each method's own closed loop and their ratio. With --compare-tree the
+package in DIR runs the same cells, interleaved with this tree's (old, new per seed), so both see
+the same load. With --compiled this tree also runs them with its IPOPT problems compiled
+(isac_mission/nlp_cache.py, in a cache of the bench's own that starts empty: the first seed's
+build is cold, compile included, the next ones load it; `cold s` is the largest build).
 
 Safety, per M and method: the slots flown on the best effort (infeasible) or by the evasion guard
 (evasive), and the smallest UAV-UAV and UAV-to-true-target distances along the flown legs
@@ -30,6 +33,7 @@ import os
 import re
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -37,6 +41,8 @@ from pathlib import Path
 import numpy as np
 
 METHODS = ("proposed", "horizon")
+COMPILED_ENV = "BENCH_COMPILED"
+"""Set in a cell's environment: plan with compiled IPOPT problems."""
 AT_CAP_NOTE = "its last iterate kept"
 """planning/horizon.py's note of a capped iterate flown (a literal: the cells may import an
 older package, which has none)."""
@@ -98,7 +104,12 @@ def run_cell(
     s = fleet_scenario(m, slots)
     out: dict[str, dict[str, object]] = {}
     for method in methods:
-        kit = SolverKit(s)
+        if os.environ.get(COMPILED_ENV):
+            from isac_mission.nlp_cache import CompiledNlpCache
+
+            kit = SolverKit(s, ipopt=CompiledNlpCache(compile="now"))
+        else:
+            kit = SolverKit(s)
         t0 = time.perf_counter()
         kit.warm_up(method)
         build_s = time.perf_counter() - t0
@@ -150,13 +161,17 @@ class MethodRun:
 
 
 def collect(
-    tree: str, m: int, slots: int, seed: int, methods: tuple[str, ...]
+    tree: str, m: int, slots: int, seed: int, methods: tuple[str, ...], compiled_cache: str = ""
 ) -> dict[str, MethodRun]:
-    """run_cell in a subprocess with the package of `tree`."""
+    """run_cell in a subprocess with the package of `tree`; with compiled_cache (a directory),
+    its IPOPT problems compiled and cached there."""
+    env = {**os.environ, "PYTHONPATH": tree}
+    if compiled_cache:
+        env.update({COMPILED_ENV: "1", "ISAC_MISSION_NLP_CACHE": compiled_cache})
     out = subprocess.run(
         [sys.executable, __file__, "--cell", str(m), str(slots), str(seed), *methods],
         cwd=tree,
-        env={**os.environ, "PYTHONPATH": tree},
+        env=env,
         capture_output=True,
         text=True,
         check=True,
@@ -168,7 +183,8 @@ def collect(
 def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
     """Print one line per (tree, M, method)."""
     print(
-        f"{'tree':<7} {'M':>3} {'method':<9} {'slots':>5} {'build s':>8} {'median ms':>9} "
+        f"{'tree':<8} {'M':>3} {'method':<9} {'slots':>5} {'build s':>8} {'cold s':>7} "
+        f"{'median ms':>9} "
         f"{'p95 ms':>8} {'it med':>6} {'it max':>6} {'conv':>5} {'kept':>4} {'cap':>4} {'other':>5} "
         f"{'inf':>4} {'evas':>4} {'gap m':>6} {'<D_s':>4} {'tgt m':>6} "
         f"{'tr(PCRB)':>10} {'/ prop.':>7} {'t / prop.':>9}"
@@ -192,14 +208,16 @@ def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
                 f"{kinds.count('infeasible'):>4d} {kinds.count('evasive'):>4d} "
                 f"{min(gaps):>6.1f} {below:>4d} {target:>6.1f}"
             )
+            builds = [c.build_s for c in runs]
             print(
-                f"{tree:<7} {m:>3} {method:<9} {len(times):>5} "
-                f"{np.median([c.build_s for c in runs]):>8.1f} {np.median(times):>9.1f} "
+                f"{tree:<8} {m:>3} {method:<9} {len(times):>5} "
+                f"{np.median(builds):>8.1f} {max(builds):>7.1f} {np.median(times):>9.1f} "
                 f"{np.percentile(times, 95):>8.1f} {counts} {safety} {pcrb:>10.4g} "
                 f"{pcrb / proposed_pcrb:>7.3f} {np.median(times) / proposed_ms:>9.1f}"
             )
     print(
-        "build: SolverKit.warm_up (cold), median over seeds; it: IPOPT's iterations; conv: "
+        "build: SolverKit.warm_up, median over seeds (cold s: the largest; compiled: the first "
+        "seed compiles); it: IPOPT's iterations; conv: "
         "IPOPT converged, its answer flown; kept: IPOPT at max_iterations, its feasible, lower "
         "last iterate flown; cap: at max_iterations, the per-slot plan flown; other: "
         "fallen back for another reason; inf, evas: slots whose fallback is infeasible (the best "
@@ -218,6 +236,9 @@ def main() -> None:
     ap.add_argument("--seeds", default="1,2,3", help="noise seeds (comma-separated)")
     ap.add_argument("--methods", default=",".join(METHODS), help="proposed and/or horizon")
     ap.add_argument("--compare-tree", metavar="DIR", help="also the isac_mission package in DIR")
+    ap.add_argument(
+        "--compiled", action="store_true", help="also this tree with compiled IPOPT problems"
+    )
     ap.add_argument("--cell", nargs="+", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.cell:
@@ -228,9 +249,11 @@ def main() -> None:
     if "proposed" not in methods or not set(methods) <= set(METHODS):
         ap.error(f"--methods: proposed and a subset of {', '.join(METHODS)}")
     here = str(Path(__file__).resolve().parent.parent)
-    trees = {"after": here}
+    trees = {"after": (here, "")}
     if args.compare_tree:
-        trees = {"before": str(Path(args.compare_tree).resolve()), "after": here}
+        trees = {"before": (str(Path(args.compare_tree).resolve()), ""), "after": (here, "")}
+    if args.compiled:
+        trees["compiled"] = (here, tempfile.mkdtemp(prefix="bench-nlp-cache-"))
     t_start = time.perf_counter()
     rows = []
     for m in (int(v) for v in args.sizes.split(",")):
@@ -238,8 +261,8 @@ def main() -> None:
             t: {method: [] for method in methods} for t in trees
         }
         for seed in (int(v) for v in args.seeds.split(",")):
-            for name, tree in trees.items():
-                for method, cell in collect(tree, m, args.slots, seed, methods).items():
+            for name, (tree, cache) in trees.items():
+                for method, cell in collect(tree, m, args.slots, seed, methods, cache).items():
                     cells[name][method].append(cell)
         rows += [(name, m, cells[name]) for name in trees]
     table(rows)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 import socket
 import subprocess
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,12 @@ import pytest
 
 from isac_mission.config import Scenario, load_scenario
 from tests.support import ports
+
+# The planner's compiled-problem cache (isac_mission/nlp_cache.py): no background compiles in
+# the suite (a compile takes a core for seconds to minutes), and no developer's cache read;
+# inherited by every process a test starts. tests/integration/test_nlp_cache.py sets its own.
+os.environ.setdefault("ISAC_MISSION_COMPILE", "off")
+os.environ.setdefault("ISAC_MISSION_NLP_CACHE", tempfile.mkdtemp(prefix="isac-mission-nlp-"))
 
 ROOT = Path(__file__).resolve().parent.parent
 TESTS = ROOT / "tests"

@@ -452,3 +452,48 @@ def serve(
         console_address=None if no_console else console_address,
         console_public=console_public,
     )
+
+
+@app.command("compile")
+def compile_problems(
+    config: ConfigArg,
+    method: MethodOpt = "horizon",
+    live_settings: Annotated[
+        bool,
+        typer.Option(
+            "--live-settings/--scenario-settings",
+            help="Compile what `run` and `serve` plan with (the live settings), or what "
+            "`simulate` plans with without --live-settings.",
+        ),
+    ] = True,
+) -> None:
+    """Compile the planner's IPOPT problems for CONFIG's fleet (and the fleet with one vehicle
+    out) into the cache ($ISAC_MISSION_NLP_CACHE, default ~/.cache/isac-mission/nlp), so that
+    `run` and `serve` plan with compiled functions from their first slot (docs/performance.md,
+    "Compiled problems"). Without it they compile in the background on their first run."""
+    from isac_mission.config.live_settings import LIVE_SETTINGS
+    from isac_mission.nlp_cache import CompiledNlpCache
+    from isac_mission.planning.fleet import prepare_fleet
+    from isac_mission.planning.multi_target import KEEP_OUT_CAPACITY
+    from isac_mission.planning.registry import METHODS
+    from isac_mission.planning.slot import SolverKit
+
+    s = load_or_exit(config)
+    if method not in METHODS:
+        err_console.print(f"--method: unknown {method!r}; choose from {', '.join(METHODS)}")
+        raise typer.Exit(2)
+    cache = CompiledNlpCache(compile="now")
+    if cache.compiler is None:
+        err_console.print(
+            "no C compiler (gcc or cc on PATH, or $ISAC_MISSION_CC), or ISAC_MISSION_COMPILE=off: "
+            "nothing compiled; the planner runs interpreted"
+        )
+        raise typer.Exit(2)
+    planning = LIVE_SETTINGS.apply(s) if live_settings else s
+    n_keep_out = KEEP_OUT_CAPACITY if s.multi_target else 0
+    kit = SolverKit(planning, n_keep_out=n_keep_out, ipopt=cache)
+    quiet_highs_banner()
+    prepare_fleet(kit, method, n_keep_out)
+    for line in cache.events:
+        console.print(line, highlight=False)
+    console.print(f"cache: {cache.directory}", highlight=False)

@@ -33,6 +33,7 @@ from isac_mission.mavwire.ports import (
 )
 from isac_mission.mavwire.serial_link import parse_vehicle_links
 from isac_mission.mavwire.signing import SIGNATURE_REJECTIONS
+from isac_mission.nlp_cache import CompiledNlpCache
 from isac_mission.planning.fleet import prepare_fleet
 from isac_mission.planning.multi_target import KEEP_OUT_CAPACITY
 from isac_mission.planning.slot import Method, SolverKit
@@ -155,10 +156,15 @@ async def fly_mission(
     say = on_status or (lambda _msg: None)
     planning = planning_scenario(s, opts)
     n_keep_out = KEEP_OUT_CAPACITY if s.multi_target else 0
-    kit = SolverKit(planning, n_keep_out=n_keep_out, solve_lock=SOLVE_LOCK)
+    # IPOPT problems compiled and cached on disk (isac_mission/nlp_cache.py): loaded when there,
+    # else interpreted until a background compile has written them.
+    compiled = CompiledNlpCache()
+    kit = SolverKit(planning, n_keep_out=n_keep_out, solve_lock=SOLVE_LOCK, ipopt=compiled)
     # On a thread: the event loop meanwhile opens an embedded world's vehicles (ground stations
     # see them at once) and the bus; the kit is not used by anything else until it returns.
     await asyncio.to_thread(prepare_fleet, kit, opts.method, n_keep_out)
+    for line in compiled.events:
+        say(line)
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(
         s,

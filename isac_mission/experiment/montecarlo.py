@@ -30,6 +30,7 @@ from isac_mission.experiment.closed_loop import (
     run_closed_loop,
 )
 from isac_mission.experiment.comparison import pooled, run_figures
+from isac_mission.nlp_cache import CompiledNlpCache
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord, TraceWriter
 
@@ -167,11 +168,13 @@ _KITS: dict[int, SolverKit] = {}
 
 
 def _kit_for(s: Scenario) -> SolverKit:
-    """One SolverKit per scenario per process (building one compiles the cvxpy problems)."""
+    """One SolverKit per scenario per process (building one compiles the cvxpy problems); its
+    IPOPT problems compiled where the cache has them (isac_mission/nlp_cache.py: the same
+    numbers, faster; `isac-mission compile CONFIG --scenario-settings` fills it)."""
     key = id(s)
     if key not in _KITS:
         _KITS.clear()
-        _KITS[key] = SolverKit(s)
+        _KITS[key] = SolverKit(s, ipopt=CompiledNlpCache(compile="never"))
     return _KITS[key]
 
 

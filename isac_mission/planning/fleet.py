@@ -75,7 +75,11 @@ class KitCache:
         sub = s.with_changes(M=len(idx), uav_start_xy=s.uav_start_xy[idx])
         n_keep_out = self.base_keep_out + s.M - len(idx)
         kit = SolverKit(
-            sub, fast=self.full.fast, n_keep_out=n_keep_out, solve_lock=self.full.solve_lock
+            sub,
+            fast=self.full.fast,
+            n_keep_out=n_keep_out,
+            solve_lock=self.full.solve_lock,
+            ipopt=self.full.ipopt,
         )
         shared = f"problems of {len(idx)} of {s.M} vehicles, {n_keep_out} keep-out points"
         kit.share_built(self.full.built(shared, dict))

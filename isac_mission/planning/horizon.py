@@ -256,7 +256,9 @@ def kept_at_cap(
 
 def horizon_nlp(kit: SolverKit) -> HorizonNLP:
     """The kit's receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept."""
-    return kit.built("horizon", lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock))
+    return kit.built(
+        "horizon", lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock, kit.ipopt)
+    )
 
 
 def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: float) -> SlotPlan:

@@ -49,11 +49,14 @@ from isac_mission.planning.margins import (
     sag_m,
 )
 from isac_mission.planning.nlp_model import (
+    IpoptFactory,
     NlpRows,
+    NlpSolver,
     SolveLock,
     add_clearance_row,
     add_uav_rows,
     information_terms,
+    plain_ipopt,
     predicted_target_point,
     scaled_inverse_sx,
     straight_leg_point,
@@ -127,8 +130,10 @@ class HorizonNLP:
         scenario: Scenario,
         n_keep_out: int = 0,
         lock: SolveLock | None = None,
+        ipopt: IpoptFactory = plain_ipopt,
     ) -> None:
-        """lock: held around IPOPT's construction and every solve (SolverKit.solve_lock)."""
+        """lock: held around IPOPT's construction and every solve (SolverKit.solve_lock); ipopt:
+        what builds the solver (SolverKit.ipopt)."""
         lock = lock if lock is not None else contextlib.nullcontext()
         s = scenario
         cfg = s.planner.horizon
@@ -283,7 +288,7 @@ class HorizonNLP:
             "ipopt": {**IPOPT_OPTIONS, "max_iter": cfg.max_iterations},
         }
         with lock:
-            self.solver = ca.nlpsol("horizon", "ipopt", nlp, opts)
+            self.solver: NlpSolver = ipopt("horizon", nlp, opts)
         self.lock: SolveLock = lock
         # For tests and the start point's scale: the weighted objective itself and its gradient.
         self.objective = ca.Function("f", [x, p], [objective])

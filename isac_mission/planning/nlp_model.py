@@ -2,13 +2,15 @@
 
 Eq. 8's information terms (`information_terms`, from model/radar.SensingParams, the same code the
 numpy objective runs), the constraint rows and their bounds (`NlpRows`, the 14a row
-`relative_rate`), 4 x 4 inverses of symbols, and the solve lock's type."""
+`relative_rate`), 4 x 4 inverses of symbols, the solve lock's type, and how an NLP becomes an
+IPOPT solver (`IpoptFactory`: `plain_ipopt`, or compiled and cached on disk by
+isac_mission/nlp_cache.py)."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from contextlib import AbstractContextManager
-from typing import Any
+from typing import Any, Protocol
 
 import casadi as ca
 import numpy as np
@@ -22,6 +24,29 @@ SolveLock = AbstractContextManager[Any]
 """What SolverKit.solve_lock is: held around every IPOPT construction and solve. The live service
 passes one threading lock to all its kits (IPOPT's MUMPS keeps global state: two solves at once,
 a timed-out plan's thread beside the next slot's, corrupt memory); offline it is a null context."""
+
+
+class NlpSolver(Protocol):
+    """An IPOPT solver as the NLPs use it: a call with x0, p, lbx, ubx, lbg, ubg, and the stats of
+    the last call (a casadi nlpsol Function is one)."""
+
+    def __call__(self, **arguments: Any) -> Any: ...
+
+    def stats(self) -> Any: ...
+
+
+class IpoptFactory(Protocol):
+    """Builds the solver of an NLP {"x", "p", "f", "g"} (SX) with nlpsol's options. The solvers it
+    returns evaluate the same functions: a compiled one (isac_mission/nlp_cache.py) gives the
+    same numbers as the interpreted one (tests/numerics/test_nlp_cache.py)."""
+
+    def __call__(self, name: str, nlp: dict[str, Any], options: dict[str, Any]) -> NlpSolver: ...
+
+
+def plain_ipopt(name: str, nlp: dict[str, Any], options: dict[str, Any]) -> NlpSolver:
+    """IPOPT through CasADi's interpreted functions (no compiler, no files)."""
+    solver: NlpSolver = ca.nlpsol(name, "ipopt", nlp, options)
+    return solver
 
 
 class NlpRows:

@@ -74,7 +74,9 @@ def polish_nlp(kit: SolverKit) -> PolishNLP:
     s = kit.scenario
     return kit.built(
         "polish",
-        lambda: PolishNLP(s, kit.n_keep_out, s.planner.polish_max_iterations, kit.solve_lock),
+        lambda: PolishNLP(
+            s, kit.n_keep_out, s.planner.polish_max_iterations, kit.solve_lock, kit.ipopt
+        ),
     )
 
 

@@ -49,11 +49,14 @@ from isac_mission.planning.margins import (
     rule_on,
 )
 from isac_mission.planning.nlp_model import (
+    IpoptFactory,
     NlpRows,
+    NlpSolver,
     SolveLock,
     add_clearance_row,
     add_uav_rows,
     information_terms,
+    plain_ipopt,
     predicted_target_point,
     straight_leg_point,
 )
@@ -103,9 +106,11 @@ class PolishNLP:
         n_keep_out: int = 0,
         max_iterations: int = 50,
         lock: SolveLock | None = None,
+        ipopt: IpoptFactory = plain_ipopt,
     ) -> None:
         """max_iterations: IPOPT's iteration cap (planner.polish_max_iterations); lock: held
-        around IPOPT's construction and every solve (SolverKit.solve_lock)."""
+        around IPOPT's construction and every solve (SolverKit.solve_lock); ipopt: what builds
+        the solver (SolverKit.ipopt)."""
         self.lock: SolveLock = lock if lock is not None else contextlib.nullcontext()
         s = scenario
         M = s.M
@@ -175,7 +180,7 @@ class PolishNLP:
             "ipopt": {**IPOPT_OPTIONS, "max_iter": max_iterations},
         }
         with self.lock:
-            self.solver = ca.nlpsol("polish", "ipopt", nlp, opts)
+            self.solver: NlpSolver = ipopt("polish", nlp, opts)
         # For tests: the objective tr(C) itself (not divided by f_scale), its gradient and Hessian
         # with respect to x = (z [M, 2] column-major, eta [M]).
         self.objective = ca.Function("f", [x, p], [f_true])

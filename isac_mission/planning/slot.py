@@ -18,7 +18,7 @@ from isac_mission.config import Scenario
 from isac_mission.planning.association import AssociationLP
 from isac_mission.planning.bandwidth import BandwidthSubproblem
 from isac_mission.planning.fallback import evade_target, kept_viable
-from isac_mission.planning.nlp_model import SolveLock
+from isac_mission.planning.nlp_model import IpoptFactory, SolveLock, plain_ipopt
 from isac_mission.planning.positions import PositionSubproblem
 from isac_mission.planning.problem import SlotInput, slot_clearance_m, with_end_velocity
 from isac_mission.planning.registry import METHODS, SlotPlanner, planner
@@ -51,6 +51,7 @@ class SolverKit:
         fast: bool = True,
         n_keep_out: int = 0,
         solve_lock: SolveLock | None = None,
+        ipopt: IpoptFactory = plain_ipopt,
     ) -> None:
         """fast=False is the reference path (the planner before docs/performance.md): (P1.1.2)
         through cvxpy instead of a direct Clarabel call, (P1.2.1) by the cvxpy LP instead of its
@@ -58,7 +59,9 @@ class SolverKit:
         batches. Both paths solve the same problems; they differ by solver tolerance.
         n_keep_out: the number of keep-out points (SlotInput.keep_out_xy) each slot carries.
         solve_lock: held around every IPOPT construction and solve (planning/nlp_model.SolveLock;
-        the live service shares one threading lock between its kits); None: a null context."""
+        the live service shares one threading lock between its kits); None: a null context.
+        ipopt: what builds the IPOPT problems (planning/nlp_model.IpoptFactory; compiled and
+        cached on disk: isac_mission/nlp_cache.py)."""
         s = scenario
         self.scenario = s
         self.fast = fast
@@ -70,6 +73,7 @@ class SolverKit:
         self.solve_lock: SolveLock = (
             solve_lock if solve_lock is not None else contextlib.nullcontext()
         )
+        self.ipopt = ipopt
         self._built: dict[str, object] = {}
 
     def built(self, key: str, build: Callable[[], T]) -> T:
@@ -90,7 +94,11 @@ class SolverKit:
         once: their solves are serialised by solve_lock). A horizon kit rebuilt after every
         timeout spent its next plan's budget on the build, and the timeouts cascaded."""
         kit = SolverKit(
-            self.scenario, fast=self.fast, n_keep_out=self.n_keep_out, solve_lock=self.solve_lock
+            self.scenario,
+            fast=self.fast,
+            n_keep_out=self.n_keep_out,
+            solve_lock=self.solve_lock,
+            ipopt=self.ipopt,
         )
         kit._built = self._built
         return kit

@@ -29,7 +29,7 @@ def test_every_command_is_registered_in_help_order() -> None:
         c.name or getattr(c.callback, "__name__", "").replace("_", "-")
         for c in app.registered_commands
     ]
-    assert names[:9] == [
+    assert names[:10] == [
         "check-config",
         "simulate",
         "replay",
@@ -37,6 +37,7 @@ def test_every_command_is_registered_in_help_order() -> None:
         "sim",
         "run",
         "serve",
+        "compile",
         "gen-certs",
         "gen-users",
     ]

@@ -24,6 +24,7 @@ from isac_mission.experiment.sweep.grid import (
     load_config_mapping,
     load_grid,
 )
+from isac_mission.nlp_cache import CompiledNlpCache
 from isac_mission.planning.slot import Method, SolverKit
 
 
@@ -115,7 +116,7 @@ def kit_for(key: str, s: Scenario) -> SolverKit:
     if kit is None:
         if len(_KITS) >= _MAX_KITS:
             _KITS.clear()
-        kit = _KITS[key] = SolverKit(s)
+        kit = _KITS[key] = SolverKit(s, ipopt=CompiledNlpCache(compile="never"))
     return kit
 
 

@@ -184,7 +184,12 @@ class MissionState:
         if self.kit.scenario is self.scenario:
             self.kit = self.kit.renewed()
         else:
-            self.kit = SolverKit(self.scenario, fast=self.kit.fast, solve_lock=self.kit.solve_lock)
+            self.kit = SolverKit(
+                self.scenario,
+                fast=self.kit.fast,
+                solve_lock=self.kit.solve_lock,
+                ipopt=self.kit.ipopt,
+            )
         self.kits = KitCache(self.kit, self.method)
 
     def set_scenario(self, s: Scenario) -> None:

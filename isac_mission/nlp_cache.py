@@ -1,0 +1,326 @@
+"""Compiled IPOPT problems, cached on disk: an IpoptFactory (planning/nlp_model.py) for the CLI.
+
+CasADi evaluates an NLP's functions (objective, constraints, their Jacobian and the Lagrangian's
+Hessian) in its interpreter; compiled to C they run the same operations in the same order, about
+ten times faster at M = 3 (docs/performance.md, "Compiled problems"), and give the same numbers
+(tests/integration/test_nlp_cache.py). A compile takes a C compiler and long (about 20 s for the
+horizon at M = 3, minutes at M = 12), so it never runs inside a plan:
+
+- `CompiledNlpCache(directory, compile=...)` loads a problem's compiled solver from the cache when
+  it is there (a file per problem: its key hashes the NLP's expressions, options, CasADi's version
+  and the compiler flags, so any change of scenario or code is a new file);
+- otherwise it returns the interpreted solver at once and, with `compile="background"`, compiles
+  in a child process (niced, one at a time) and switches to the compiled solver at its first solve
+  after the file is written; with `compile="now"` it compiles before returning
+  (`isac-mission compile`);
+- with no C compiler (the project's Docker image has none), `ISAC_MISSION_COMPILE=off`, or a
+  cache file that does not load, the interpreted solver plans as before.
+
+I/O (files, a compiler, a child process) lives here, not in planning/.
+"""
+
+from __future__ import annotations
+
+import atexit
+import hashlib
+import json
+import logging
+import os
+import queue
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import casadi as ca
+
+from isac_mission.planning.nlp_model import NlpSolver, plain_ipopt
+
+LOG = logging.getLogger(__name__)
+
+CACHE_ENV = "ISAC_MISSION_NLP_CACHE"
+"""Environment variable: the cache directory (default: $XDG_CACHE_HOME/isac-mission/nlp, or
+~/.cache/isac-mission/nlp)."""
+
+COMPILE_ENV = "ISAC_MISSION_COMPILE"
+"""Environment variable: `off` turns compiling off (cached problems still load)."""
+
+COMPILER_ENV = "ISAC_MISSION_CC"
+"""Environment variable: the C compiler (default: gcc, else cc, on PATH)."""
+
+JIT_FLAGS = ("-O1",)
+"""-O1: at M = 3 the horizon's evaluations as fast as with -O2 (3.7 against 4.0 ms a solve)
+at a fifth of the compile time (21 against 110 s); -O0 compiles in half the time of -O1 but at
+M = 12 evaluated slower than the interpreter."""
+
+FORMAT = 1
+"""Bumped when what a cache file holds changes."""
+
+CompileMode = Literal["never", "background", "now"]
+
+
+def default_cache_dir() -> Path:
+    """$ISAC_MISSION_NLP_CACHE, else $XDG_CACHE_HOME/isac-mission/nlp, else
+    ~/.cache/isac-mission/nlp."""
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV])
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "isac-mission" / "nlp"
+
+
+def find_compiler() -> str | None:
+    """The C compiler to use: $ISAC_MISSION_CC (if it runs), else gcc or cc on PATH; None if
+    there is none or ISAC_MISSION_COMPILE=off."""
+    if os.environ.get(COMPILE_ENV, "").strip().lower() == "off":
+        return None
+    named = os.environ.get(COMPILER_ENV)
+    for candidate in [named] if named else ["gcc", "cc"]:
+        path = shutil.which(candidate)
+        if path:
+            return path
+    return None
+
+
+def jit_options(compiler: str, directory: Path) -> dict[str, Any]:
+    """nlpsol's options that compile its functions with `compiler` into `directory` and keep the
+    shared object there (the saved solver links to it: loading needs no compiler)."""
+    return {
+        "jit": True,
+        "compiler": "shell",
+        "jit_options": {
+            "compiler": compiler,
+            "linker": compiler,
+            "flags": list(JIT_FLAGS),
+            "cleanup": False,
+            "directory": str(directory),
+        },
+        "jit_serialize": "link",
+        "jit_name": "nlp",
+        "jit_temp_suffix": False,
+        "jit_cleanup": False,
+    }
+
+
+def nlp_function(name: str, nlp: dict[str, Any]) -> ca.Function:
+    """The NLP {"x", "p", "f", "g"} as one Function (x, p) -> (f, g): what a child compiles and
+    what the key hashes."""
+    return ca.Function(name, [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
+
+
+def problem_key(name: str, function: ca.Function, options: dict[str, Any]) -> str:
+    """sha256 (hex) of everything the compiled solver depends on."""
+    digest = hashlib.sha256()
+    header = {
+        "format": FORMAT,
+        "casadi": ca.CasadiMeta.version(),
+        "name": name,
+        "flags": JIT_FLAGS,
+        "options": options,
+    }
+    digest.update(json.dumps(header, sort_keys=True, default=str).encode())
+    digest.update(function.serialize().encode())
+    return digest.hexdigest()
+
+
+def compile_solver(
+    name: str, function: ca.Function, options: dict[str, Any], compiler: str, out: Path
+) -> None:
+    """Build the solver of `function` with its functions compiled, its shared object in the
+    directory `out` without its suffix, and save it to `out` (written to a temporary file
+    first, then renamed: a reader never sees half a file). Changes the working directory
+    (CasADi writes its C source there): the child process's job only."""
+    binary_dir = out.with_suffix("")
+    binary_dir.mkdir(parents=True, exist_ok=True)
+    os.chdir(binary_dir)
+    solver = ca.nlpsol(name, "ipopt", function, {**options, **jit_options(compiler, binary_dir)})
+    for source in [*binary_dir.glob("*.c"), *binary_dir.glob("*.o")]:
+        source.unlink(missing_ok=True)
+    partial = binary_dir / "solver.partial"
+    solver.save(str(partial))
+    os.replace(partial, out)
+
+
+class UpgradingSolver:
+    """The interpreted solver until the compiled one is in the cache, then the compiled one
+    (checked at each call, which the NLP makes under its solve lock)."""
+
+    def __init__(self, plain: NlpSolver, job: CompileJob, cache: CompiledNlpCache) -> None:
+        self._current = plain
+        self._job: CompileJob | None = job
+        self._cache = cache
+        self._loaded = False
+
+    @property
+    def compiled(self) -> bool:
+        """True once the compiled solver is the one that solves."""
+        return self._loaded
+
+    def _upgrade(self) -> None:
+        job = self._job
+        if job is None or not job.done.is_set():
+            return
+        self._job = None
+        loaded = self._cache.load(job.path)
+        if loaded is not None:
+            self._current = loaded
+            self._loaded = True
+
+    def wait(self, timeout_s: float) -> bool:
+        """Wait for the compile (tests, `isac-mission compile`); True once the compiled solver is
+        in use."""
+        job = self._job
+        if job is not None:
+            job.done.wait(timeout_s)
+        self._upgrade()
+        return self._loaded
+
+    def __call__(self, **arguments: Any) -> Any:
+        self._upgrade()
+        return self._current(**arguments)
+
+    def stats(self) -> Any:
+        return self._current.stats()
+
+
+@dataclass
+class CompileJob:
+    """One compile for the background worker: the NLP's Function, options, target file."""
+
+    name: str
+    function: ca.Function
+    options: dict[str, Any]
+    path: Path
+    done: threading.Event = field(default_factory=threading.Event)
+    error: str = ""
+
+
+@dataclass
+class CompiledNlpCache:
+    """An IpoptFactory that loads compiled solvers from `directory` and compiles missing ones
+    (module docstring). `events` lists what it did, one line each, for logs and tests."""
+
+    directory: Path = field(default_factory=default_cache_dir)
+    compile: CompileMode = "background"
+    compiler: str | None = field(default_factory=find_compiler)
+    events: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self._queue: queue.Queue[CompileJob] = queue.Queue()
+        self._worker: threading.Thread | None = None
+        self._child: subprocess.Popen[bytes] | None = None
+        self._lock = threading.Lock()
+
+    def path(self, name: str, key: str) -> Path:
+        return self.directory / f"{name}-{key[:32]}.casadi"
+
+    def __call__(self, name: str, nlp: dict[str, Any], options: dict[str, Any]) -> NlpSolver:
+        function = nlp_function(name, nlp)
+        path = self.path(name, problem_key(name, function, options))
+        loaded = self.load(path)
+        if loaded is not None:
+            return loaded
+        if self.compiler is None or self.compile == "never":
+            why = "no C compiler" if self.compiler is None else "compiling is off"
+            self._say(f"{name}: interpreted ({why}; {path.name} not in the cache)")
+            return plain_ipopt(name, nlp, options)
+        job = CompileJob(name, function, options, path)
+        self._submit(job)
+        if self.compile == "now":
+            job.done.wait()
+            compiled = self.load(path)
+            return compiled if compiled is not None else plain_ipopt(name, nlp, options)
+        self._say(f"{name}: interpreted until {path.name} is compiled (in the background)")
+        return UpgradingSolver(plain_ipopt(name, nlp, options), job, self)
+
+    def load(self, path: Path) -> NlpSolver | None:
+        """The compiled solver in `path`, or None (absent; a file that does not load is removed,
+        and said)."""
+        if not path.exists():
+            return None
+        try:
+            solver: NlpSolver = ca.Function.load(str(path))
+        except RuntimeError as err:
+            self._say(f"{path.name}: could not be loaded ({str(err).splitlines()[0]}); removed")
+            path.unlink(missing_ok=True)
+            return None
+        self._say(f"{path.stem}: compiled, loaded from the cache")
+        return solver
+
+    def _say(self, line: str) -> None:
+        self.events.append(line)
+        LOG.info("%s", line)
+
+    def _submit(self, job: CompileJob) -> None:
+        with self._lock:
+            self._queue.put(job)
+            if self._worker is None:
+                self._worker = threading.Thread(target=self._work, name="nlp-compile", daemon=True)
+                self._worker.start()
+                atexit.register(self.stop)
+
+    def _work(self) -> None:
+        while True:
+            job = self._queue.get()
+            try:
+                self._compile_in_child(job)
+            finally:
+                job.done.set()
+
+    def _compile_in_child(self, job: CompileJob) -> None:
+        """Compile `job` in a niced child process (CasADi holds no Python lock there, and a
+        crash of the compiler cannot take the service down)."""
+        assert self.compiler is not None
+        self.directory.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=self.directory) as work:
+            function_file = Path(work) / "nlp.casadi"
+            job.function.save(str(function_file))
+            command = [
+                sys.executable,
+                "-m",
+                "isac_mission.nlp_cache",
+                job.name,
+                str(function_file),
+                json.dumps(job.options),
+                self.compiler,
+                str(job.path),
+            ]
+            started = time.perf_counter()
+            with self._lock:
+                self._child = subprocess.Popen(
+                    command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+                )
+            _, err = self._child.communicate()
+            code = self._child.returncode
+            with self._lock:
+                self._child = None
+        if code == 0 and job.path.exists():
+            self._say(f"{job.name}: compiled in {time.perf_counter() - started:.1f} s")
+        else:
+            last = err.decode(errors="replace").strip().splitlines()[-1:] or ["no output"]
+            job.error = f"compiler exited with {code}: {last[0]}"
+            self._say(f"{job.name}: not compiled ({job.error}); stays interpreted")
+
+    def stop(self) -> None:
+        """Stop a running compile (at exit: a child must not outlive the service)."""
+        with self._lock:
+            child = self._child
+        if child is not None and child.poll() is None:
+            child.terminate()
+
+
+def _main(argv: list[str]) -> int:
+    """The child: NAME NLP_FILE OPTIONS_JSON COMPILER OUT."""
+    name, function_file, options_json, compiler, out = argv
+    os.nice(10)
+    function = ca.Function.load(function_file)
+    compile_solver(name, function, json.loads(options_json), compiler, Path(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main(sys.argv[1:]))

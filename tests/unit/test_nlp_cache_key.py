@@ -1,0 +1,32 @@
+"""The compiled-problem cache's key (isac_mission/nlp_cache.py): the same problem always finds
+its file, and any change of expressions, options or name is another file."""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from isac_mission.nlp_cache import nlp_function, problem_key
+
+
+def toy(weight: float) -> dict[str, ca.SX]:
+    x, p = ca.SX.sym("x", 2), ca.SX.sym("p")
+    return {"x": x, "p": p, "f": weight * ca.sumsqr(x - p), "g": x[0] * x[1]}
+
+
+OPTIONS = {"print_time": False, "ipopt": {"max_iter": 60, "tol": 1e-7}}
+
+
+def test_the_same_problem_built_twice_has_the_same_key() -> None:
+    first = problem_key("horizon", nlp_function("horizon", toy(2.0)), OPTIONS)
+    again = problem_key("horizon", nlp_function("horizon", toy(2.0)), dict(OPTIONS))
+    assert first == again and len(first) == 64
+
+
+def test_expressions_options_and_name_each_change_the_key() -> None:
+    base = problem_key("horizon", nlp_function("horizon", toy(2.0)), OPTIONS)
+    other_constant = problem_key("horizon", nlp_function("horizon", toy(3.0)), OPTIONS)
+    other_cap = problem_key(
+        "horizon", nlp_function("horizon", toy(2.0)), {**OPTIONS, "ipopt": {"max_iter": 61}}
+    )
+    other_name = problem_key("polish", nlp_function("polish", toy(2.0)), OPTIONS)
+    assert len({base, other_constant, other_cap, other_name}) == 4
