@@ -17,7 +17,15 @@ commands, so `isac-mission --version` and `--help` are fast.
 from __future__ import annotations
 
 import importlib
+import os
 import sys
+
+# IPOPT's MUMPS (through the OpenBLAS bundled with CasADi) spreads each factorisation over every
+# core and gains nothing at the planner's sizes: at M = 12 the horizon's plans took the same wall
+# time on one thread as on two, with twice the CPU (docs/performance.md, "Compiled problems").
+# On the service's two cores that second core belongs to the world and the bridges. Set before
+# any BLAS loads (the command modules import numpy and CasADi lazily); a user's value stands.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from isac_mission.cli.app import app
 
