@@ -162,7 +162,8 @@ async def fly_mission(
     kit = SolverKit(planning, n_keep_out=n_keep_out, solve_lock=SOLVE_LOCK, ipopt=compiled)
     # On a thread: the event loop meanwhile opens an embedded world's vehicles (ground stations
     # see them at once) and the bus; the kit is not used by anything else until it returns.
-    await asyncio.to_thread(prepare_fleet, kit, opts.method, n_keep_out)
+    ahead = await asyncio.to_thread(prepare_fleet, kit, opts.method, n_keep_out)
+    say(f"planner problems built for {planning.M} vehicles, and ahead for {ahead}")
     for line in compiled.events:
         say(line)
     time_source = ClockSimTime()

@@ -13,6 +13,7 @@ nothing but the job and its kit. `hold` is the plan of last resort: no solver at
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -25,6 +26,11 @@ from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.types import FloatArray, Gaussian, HorizonPlan, IntArray, SlotPlan
 
 Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
+
+BUILD_AHEAD_BUDGET_S = 10.0
+"""Start-up seconds `prepare_fleet` may spend on the fleets with two or more vehicles out (the
+one-out fleet is always built): every size at M = 3 and 6 (well under a second each), the first
+one or two beyond the one-out fleet at M = 12 (about 5 s each, interpreted)."""
 
 
 class KitCache:
@@ -61,13 +67,23 @@ class KitCache:
             self._kits[active] = kit
         return kit
 
-    def build_ahead(self) -> None:
-        """Build the IPOPT problems of the fleet with one vehicle out (an operator's HOLD, a lost
-        link: the size a mission reaches most), so that the first plan without it builds none.
-        Smaller fleets are built on their first plan."""
+    def build_ahead(self, budget_s: float = BUILD_AHEAD_BUDGET_S) -> list[int]:
+        """Build the IPOPT problems of the fleets with one, two, ... vehicles out (an operator's
+        HOLD, a lost link), so that the first plan without them builds none: the one-out fleet
+        always, each smaller one while the time spent, plus the last build's, stays within
+        budget_s (smaller fleets build faster). Returns the fleet sizes built; the others are
+        built on their first plan."""
         s = self.full.scenario
-        if s.M > 1:
-            planner(self.method).prepare(self._sub_kit(tuple(range(s.M - 1))))
+        built: list[int] = []
+        started_s = last_s = time.perf_counter()
+        for size in range(s.M - 1, 0, -1):
+            now_s = time.perf_counter()
+            if built and (now_s - started_s) + (now_s - last_s) > budget_s:
+                break
+            last_s = now_s
+            planner(self.method).prepare(self._sub_kit(tuple(range(size))))
+            built.append(size)
+        return built
 
     def _sub_kit(self, active: tuple[int, ...]) -> SolverKit:
         s = self.full.scenario
@@ -249,9 +265,15 @@ def active_part(plan: SlotPlan, active: tuple[int, ...]) -> SlotPlan:
     )
 
 
-def prepare_fleet(kit: SolverKit, method: Method, base_keep_out: int = 0) -> None:
-    """Warm the full fleet's kit up for `method` and build, ahead, the problems of the fleet
-    with one vehicle out (KitCache.build_ahead; base_keep_out as KitCache's): no plan of the
-    mission then builds an IPOPT problem until a second vehicle leaves the plan."""
+def prepare_fleet(
+    kit: SolverKit,
+    method: Method,
+    base_keep_out: int = 0,
+    budget_s: float = BUILD_AHEAD_BUDGET_S,
+) -> list[int]:
+    """Warm the full fleet's kit up for `method` and build, ahead, the problems of the smaller
+    fleets the mission can reach when vehicles leave the plan (KitCache.build_ahead, within
+    budget_s; base_keep_out as KitCache's). Returns the fleet sizes built ahead: no plan of the
+    mission builds an IPOPT problem until more vehicles than those leave the plan."""
     kit.warm_up(method)
-    KitCache(kit, method, base_keep_out).build_ahead()
+    return KitCache(kit, method, base_keep_out).build_ahead(budget_s)

@@ -176,23 +176,20 @@ def test_the_compile_command_fills_the_cache_for_run(tmp_path: Path) -> None:
     config.write_text(yaml.safe_dump(paper))
     env = {**os.environ, "ISAC_MISSION_NLP_CACHE": str(tmp_path / "cache")}
     env.pop(COMPILE_ENV, None)
-    done = subprocess.run(
-        cli("compile", str(config)),
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=COMPILE_TIMEOUT_S,
-    )
+
+    def compile_command(env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            cli("compile", str(config)),
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=COMPILE_TIMEOUT_S,
+        )
+
+    done = compile_command(env)
     assert done.returncode == 0, done.stderr
     # The fleet and the fleet with one vehicle out, horizon and polish each.
     assert done.stdout.count("compiled in") == 4, done.stdout
     assert len(list((tmp_path / "cache").glob("*.casadi"))) == 4
-    off = {**env, COMPILE_ENV: "off"}
-    refused = subprocess.run(
-        cli("compile", str(config)),
-        env=off,
-        capture_output=True,
-        text=True,
-        timeout=COMPILE_TIMEOUT_S,
-    )
+    refused = compile_command({**env, COMPILE_ENV: "off"})
     assert refused.returncode == 2 and "no C compiler" in refused.stderr

@@ -420,14 +420,15 @@ def test_a_start_whose_uavs_miss_the_rate_gets_shares_that_meet_it() -> None:
 
 
 @pytest.mark.parametrize("ahead", [True, False])
+@pytest.mark.parametrize("excluded", [(1,), (0, 2)])
 def test_a_fleet_size_reached_mid_mission_plans_without_a_build_inside_the_plan(
-    ahead: bool, monkeypatch: pytest.MonkeyPatch
+    ahead: bool, excluded: tuple[int, ...], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     s = _vehicle(load_scenario("paper"))
     inp = _inputs(s, "proposed")[4]
     kit = SolverKit(s)
     if ahead:
-        prepare_fleet(kit, "horizon")
+        assert prepare_fleet(kit, "horizon") == [2, 1]  # every smaller fleet, within the budget
     else:
         kit.warm_up("horizon")  # the full fleet only: the control that this test can fail
     builds: list[str] = []
@@ -449,7 +450,7 @@ def test_a_fleet_size_reached_mid_mission_plans_without_a_build_inside_the_plan(
         prev_assoc=inp.prev_bs_of_uav,
         prediction=Gaussian(inp.target_state_pred, np.asarray(inp.target_cov_pred)),
         J_pred=inp.prior_information,
-        excluded=(1,),  # vehicle 1 leaves the plan (an operator's HOLD)
+        excluded=excluded,  # vehicles leave the plan (an operator's HOLD, a lost link)
     )
     plan = job.run()
     assert plan.uav_xy_m.shape == (s.M, 2)
@@ -458,3 +459,11 @@ def test_a_fleet_size_reached_mid_mission_plans_without_a_build_inside_the_plan(
         assert plan.report.status == "ok"
     else:
         assert "HorizonNLP" in builds
+
+
+def test_the_build_ahead_budget_stops_after_the_one_out_fleet() -> None:
+    s = _vehicle(load_scenario("paper"))
+    kit = SolverKit(s)
+    kit.warm_up("proposed")
+    assert KitCache(kit, "proposed").build_ahead(budget_s=0.0) == [2]  # the one-out fleet always
+    assert KitCache(kit, "proposed").build_ahead(budget_s=60.0) == [2, 1]
