@@ -1,8 +1,9 @@
 """Compiled IPOPT problems, cached on disk: an IpoptFactory (planning/nlp_model.py) for the CLI.
 
 CasADi evaluates an NLP's functions (objective, constraints, their Jacobian and the Lagrangian's
-Hessian) in its interpreter; compiled to C they run the same operations in the same order, about
-ten times faster at M = 3 (docs/performance.md, "Compiled problems"), and give the same numbers
+Hessian) in its interpreter; compiled to C they run the same operations in the same order (the
+horizon's evaluations at M = 3 about twelve times faster, its plans 1.7 times: docs/performance.md,
+"Compiled problems"), and give the same numbers
 (tests/integration/test_nlp_cache.py). A compile takes a C compiler and long (about 20 s for the
 horizon at M = 3, minutes at M = 12), so it never runs inside a plan:
 

@@ -467,8 +467,8 @@ def compile_problems(
         ),
     ] = True,
 ) -> None:
-    """Compile the planner's IPOPT problems for CONFIG's fleet (and the fleet with one vehicle
-    out) into the cache ($ISAC_MISSION_NLP_CACHE, default ~/.cache/isac-mission/nlp), so that
+    """Compile the planner's IPOPT problems for CONFIG's fleet (and the smaller fleets `run`
+    builds ahead: the fleet with one vehicle out, at least) into the cache ($ISAC_MISSION_NLP_CACHE, default ~/.cache/isac-mission/nlp), so that
     `run` and `serve` plan with compiled functions from their first slot (docs/performance.md,
     "Compiled problems"). Without it they compile in the background on their first run."""
     from isac_mission.config.live_settings import LIVE_SETTINGS
