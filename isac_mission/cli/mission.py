@@ -129,6 +129,9 @@ class LiveResult:
     (its latest bridge.TIMESTAMPS_KEPT setpoints)."""
     multi_target_slots: list[MultiTargetSlot] = field(default_factory=list)
     """A multi-target mission's slots (the ground loop's last SLOTS_KEPT); empty otherwise."""
+    planner_problems: list[str] = field(default_factory=list)
+    """How the planner's IPOPT problems were built: the fleet sizes built ahead, and each
+    problem interpreted, loaded compiled or compiled in the background (nlp_cache.py)."""
 
 
 def planning_scenario(s: Scenario, opts: LiveOptions) -> Scenario:
@@ -163,9 +166,7 @@ async def fly_mission(
     # On a thread: the event loop meanwhile opens an embedded world's vehicles (ground stations
     # see them at once) and the bus; the kit is not used by anything else until it returns.
     ahead = await asyncio.to_thread(prepare_fleet, kit, opts.method, n_keep_out)
-    say(f"planner problems built for {planning.M} vehicles, and ahead for {ahead}")
-    for line in compiled.events:
-        say(line)
+    say(f"planner problems built for {planning.M} vehicles and, ahead, for {ahead}")
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(
         s,
@@ -197,6 +198,9 @@ async def fly_mission(
     else:
         ground = GroundLoop(planning, bus, settings, kit, on_slot, initial_x)
     result = LiveResult(GroundReport(), opts.trace_path)
+    # The list itself: a background compile appends to it while the mission flies.
+    result.planner_problems = compiled.events
+    compiled.events.insert(0, f"built for {planning.M} vehicles and, ahead, for {ahead}")
     async with fleet:
         # The ground loop and the plan follower listen from the start: the world announces slot 0
         # as soon as every vehicle is in place, and in lockstep it then waits for plan 1.
