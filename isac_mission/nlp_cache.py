@@ -197,7 +197,6 @@ class CompileJob:
     options: dict[str, Any]
     path: Path
     done: threading.Event = field(default_factory=threading.Event)
-    error: str = ""
 
 
 @dataclass
@@ -291,20 +290,18 @@ class CompiledNlpCache:
                 str(job.path),
             ]
             started = time.perf_counter()
+            child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
             with self._lock:
-                self._child = subprocess.Popen(
-                    command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
-                )
-            _, err = self._child.communicate()
-            code = self._child.returncode
+                self._child = child
+            _, err = child.communicate()
             with self._lock:
                 self._child = None
-        if code == 0 and job.path.exists():
+        if child.returncode == 0 and job.path.exists():
             self._say(f"{job.name}: compiled in {time.perf_counter() - started:.1f} s")
         else:
             last = err.decode(errors="replace").strip().splitlines()[-1:] or ["no output"]
-            job.error = f"compiler exited with {code}: {last[0]}"
-            self._say(f"{job.name}: not compiled ({job.error}); stays interpreted")
+            why = f"compiler exited with {child.returncode}: {last[0]}"
+            self._say(f"{job.name}: not compiled ({why}); stays interpreted")
 
     def stop(self) -> None:
         """Stop a running compile (at exit: a child must not outlive the service)."""

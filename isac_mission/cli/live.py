@@ -251,7 +251,8 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
             raise typer.Exit(1) from None
     console.print()
     assert isinstance(result, LiveResult)
-    for line in result.planner_problems:
+    ahead = f"built for {s.M} vehicles and, ahead, for {result.sizes_built_ahead}"
+    for line in [ahead, *result.planner_problems]:
         console.print(f"planner problems: {line}", highlight=False)
     if s.multi_target:
         _multi_target_summary(s, opts, result, out_dir)

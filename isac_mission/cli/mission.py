@@ -129,9 +129,11 @@ class LiveResult:
     (its latest bridge.TIMESTAMPS_KEPT setpoints)."""
     multi_target_slots: list[MultiTargetSlot] = field(default_factory=list)
     """A multi-target mission's slots (the ground loop's last SLOTS_KEPT); empty otherwise."""
+    sizes_built_ahead: list[int] = field(default_factory=list)
+    """The smaller fleets whose planner problems were built before the mission (prepare_fleet)."""
     planner_problems: list[str] = field(default_factory=list)
-    """How the planner's IPOPT problems were built: the fleet sizes built ahead, and each
-    problem interpreted, loaded compiled or compiled in the background (nlp_cache.py)."""
+    """How each IPOPT problem was built: interpreted, loaded compiled, or compiled in the
+    background (nlp_cache.py's events; the cache's own list, appended to while the mission flies)."""
 
 
 def planning_scenario(s: Scenario, opts: LiveOptions) -> Scenario:
@@ -199,8 +201,8 @@ async def fly_mission(
         ground = GroundLoop(planning, bus, settings, kit, on_slot, initial_x)
     result = LiveResult(GroundReport(), opts.trace_path)
     # The list itself: a background compile appends to it while the mission flies.
+    result.sizes_built_ahead = ahead
     result.planner_problems = compiled.events
-    compiled.events.insert(0, f"built for {planning.M} vehicles and, ahead, for {ahead}")
     async with fleet:
         # The ground loop and the plan follower listen from the start: the world announces slot 0
         # as soon as every vehicle is in place, and in lockstep it then waits for plan 1.
