@@ -211,6 +211,15 @@ class HorizonConfig(Section):
         le=16,
         description="Points per leg (interior and end) at which the safety distances are kept.",
     )
+    pair_band: int = Field(
+        4,
+        ge=1,
+        description="UAV-UAV rows of the horizon NLP: a fleet of more than 2 pair_band + 1 UAVs "
+        "is planned on two problems with the rows of only the pairs up to pair_band and up to "
+        "2 pair_band apart in an order of the fleet that every pair within reach fits; a slot "
+        "whose pairs within reach fit neither flies the per-slot plan (planning/pairs.py; "
+        "docs/model.md, 'Receding horizon: the pairs within reach').",
+    )
 
 
 class PlannerConfig(Section):

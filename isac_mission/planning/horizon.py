@@ -43,6 +43,12 @@ from isac_mission.planning.margins import (
     sag_m,
     target_clearance_m,
 )
+from isac_mission.planning.pairs import (
+    banded_order,
+    horizon_reach_m,
+    pair_bands,
+    pairs_within_reach,
+)
 from isac_mission.planning.per_slot import Proposed, polish_nlp
 from isac_mission.planning.problem import PlansOnceToWarmUp, SlotInput, with_end_velocity
 from isac_mission.tracking.pcrb import (
@@ -52,7 +58,7 @@ from isac_mission.tracking.pcrb import (
     predict_information,
     scaled_inverse,
 )
-from isac_mission.types import FloatArray, HorizonPlan, SlotPlan
+from isac_mission.types import FloatArray, HorizonPlan, IntArray, SlotPlan
 
 if TYPE_CHECKING:
     from isac_mission.planning.slot import SolverKit
@@ -254,11 +260,37 @@ def kept_at_cap(
     return start_infeasible or value(sol.uav_xy_m, sol.bandwidth_share) < start_value
 
 
-def horizon_nlp(kit: SolverKit) -> HorizonNLP:
-    """The kit's receding-horizon NLP (planning/horizon_nlp.py), built on first use and kept."""
+def horizon_nlp(kit: SolverKit, pair_band: int | None = None) -> HorizonNLP:
+    """The kit's receding-horizon NLP (planning/horizon_nlp.py) with the UAV-UAV rows of
+    pair_band (None: every pair), built on first use and kept."""
+    M = kit.scenario.M
+    band = M - 1 if pair_band is None else min(pair_band, M - 1)
     return kit.built(
-        "horizon", lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock, kit.ipopt)
+        "horizon" if band == M - 1 else f"horizon-band{band}",
+        lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock, kit.ipopt, band),
     )
+
+
+def kit_pair_bands(kit: SolverKit) -> tuple[int, ...]:
+    """The bands of the kit's horizon NLPs (planning/pairs.py, `pair_bands`)."""
+    s = kit.scenario
+    return pair_bands(s.M, s.planner.horizon.pair_band)
+
+
+def ordered_nlp(kit: SolverKit, data: HorizonSlotData) -> tuple[HorizonNLP | None, IntArray, int]:
+    """(the NLP of the narrowest band that the slot's pairs within reach fit, or None if none
+    does; the fleet's order for it: UAV order[a] in the NLP's UAV slot a; the order's
+    bandwidth). A fleet with the full problem alone keeps its own order."""
+    s = kit.scenario
+    bands = kit_pair_bands(kit)
+    if bands == (s.M - 1,):
+        return horizon_nlp(kit), np.arange(s.M), s.M - 1
+    narrowest = horizon_nlp(kit, bands[0])
+    reach = horizon_reach_m(data.prev_velocity, s.v_max, s.dt, narrowest.length)
+    within = pairs_within_reach(data.prev_xy, reach, narrowest.pair_clearance_m)
+    order, width = banded_order(within)
+    fits = [band for band in bands if band >= width]
+    return (horizon_nlp(kit, fits[0]) if fits else None), order, width
 
 
 def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: float) -> SlotPlan:
@@ -268,13 +300,12 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
 
     base: the `proposed` plan of inp; started_s: the perf_counter time the slot's planning
     started (for solve_s)."""
-    nlp = horizon_nlp(kit)
     sensing = kit.sensing
     x_pred, J_pred, prev_plan = inp.target_state_pred, inp.prior_information, inp.prev_plan
     cov = inp.target_cov_pred
     target_cov_pred = scaled_inverse(J_pred) if cov is None else cov
-    s = nlp.scenario
-    M, L, dt = s.M, nlp.length, s.dt
+    s = kit.scenario
+    M, L, dt = s.M, s.planner.horizon.length, s.dt
     v = inp.prev_velocity_mps
     prev_v = np.zeros((M, 2)) if v is None else np.asarray(v)
     prev_v = planned_start_velocity(s, inp.prev_xy_m, prev_v, prev_plan)
@@ -285,6 +316,11 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
     if base.report.status != "ok":
         return fall_back("the per-slot plan is infeasible", "per-slot plan infeasible")
     data = horizon_slot_data(s, inp, prev_v, target_cov_pred, base, L)
+    nlp, order, width = ordered_nlp(kit, data)
+    if nlp is None:
+        why = f"its pairs within reach need a band of {width} (pair_band {kit_pair_bands(kit)})"
+        return fall_back(why, "pairs beyond the band")
+    ordered = data.in_order(order)
     serving = data.serving_xy
     v1 = (
         base.uav_velocity_mps
@@ -306,22 +342,26 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
     def velocities(v: FloatArray | None) -> FloatArray | None:
         return v if nlp.vehicle_model else None
 
+    # In the NLP's order of the fleet (a permutation of the UAV axis, which the value ignores).
+    starts_ordered = [(q[:, order], v[:, order], e[:, order]) for q, v, e in starts]
     # Feasible starts first, then the lower objective.
     scored = sorted(
         (
-            (not nlp.satisfies(st[0], velocities(st[1]), st[2], data), value(st[0], st[2]), i)
-            for i, st in enumerate(starts)
+            (not nlp.satisfies(st[0], velocities(st[1]), st[2], ordered), value(st[0], st[2]), i)
+            for i, st in enumerate(starts_ordered)
         )
     )
     start_infeasible, start_value, first = scored[0]
-    start = starts[first]
-    sol = nlp.solve(start[0], velocities(start[1]), start[2], data)
+    start = starts_ordered[first]
+    sol = nlp.solve(start[0], velocities(start[1]), start[2], ordered)
     note = f"IPOPT {sol.status} in {sol.iterations} it"
     if not sol.success:
-        if not kept_at_cap(nlp, sol, data, start_infeasible, start_value, value):
+        if not kept_at_cap(nlp, sol, ordered, start_infeasible, start_value, value):
             why = f"IPOPT {sol.status} after {sol.iterations} it"
             return fall_back(why, f"IPOPT {sol.status}")
         note += f", {AT_CAP_NOTE}"
+    sol = sol.in_order(np.argsort(order))
+    start = starts[first]
     if not start_infeasible and value(sol.uav_xy_m, sol.bandwidth_share) > start_value:
         # A local solver may end above a feasible start: the start is a valid horizon then.
         sol = replace(
@@ -388,5 +428,6 @@ class Horizon(PlansOnceToWarmUp):
         polish), then one slot planned."""
         if kit.scenario.planner.polish:
             polish_nlp(kit)
-        horizon_nlp(kit)
+        for band in kit_pair_bands(kit):
+            horizon_nlp(kit, band)
         super().prepare(kit)

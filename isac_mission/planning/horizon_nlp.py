@@ -33,7 +33,7 @@ tightened by SOLVER_MARGIN_M.
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import casadi as ca
@@ -62,7 +62,7 @@ from isac_mission.planning.nlp_model import (
     straight_leg_point,
 )
 from isac_mission.tracking.pcrb import SensingParams, measurement_information, scaled_inverse
-from isac_mission.types import FloatArray
+from isac_mission.types import FloatArray, IntArray
 
 IPOPT_OPTIONS: dict[str, Any] = {
     "print_level": 0,
@@ -108,6 +108,16 @@ class HorizonSlotData:
     J_pred: FloatArray
     clearance_m: FloatArray
 
+    def in_order(self, order: IntArray) -> HorizonSlotData:
+        """The same slot with UAV order[a] in the NLP's UAV slot a."""
+        return replace(
+            self,
+            prev_xy=self.prev_xy[order],
+            prev_velocity=self.prev_velocity[order],
+            serving_xy=self.serving_xy[order],
+            control_xy=self.control_xy[order],
+        )
+
 
 @dataclass(frozen=True)
 class HorizonSolution:
@@ -121,6 +131,16 @@ class HorizonSolution:
     success: bool
     iterations: int
 
+    def in_order(self, order: IntArray) -> HorizonSolution:
+        """The same plan with the UAVs in `order` (UAV slot a holds UAV order[a])."""
+        velocity = self.uav_velocity_mps
+        return replace(
+            self,
+            uav_xy_m=self.uav_xy_m[:, order],
+            uav_velocity_mps=None if velocity is None else velocity[:, order],
+            bandwidth_share=self.bandwidth_share[:, order],
+        )
+
 
 class HorizonNLP:
     """The horizon problem for the scenario's M UAVs and n_keep_out keep-out points."""
@@ -131,15 +151,19 @@ class HorizonNLP:
         n_keep_out: int = 0,
         lock: SolveLock | None = None,
         ipopt: IpoptFactory = plain_ipopt,
+        pair_band: int | None = None,
     ) -> None:
         """lock: held around IPOPT's construction and every solve (SolverKit.solve_lock); ipopt:
-        what builds the solver (SolverKit.ipopt)."""
+        what builds the solver (SolverKit.ipopt); pair_band: the UAV-UAV rows only of the UAV
+        slots a < b with b - a <= pair_band (planning/pairs.py; the caller orders the fleet so
+        that every pair within reach is among them), None: every pair."""
         lock = lock if lock is not None else contextlib.nullcontext()
         s = scenario
         cfg = s.planner.horizon
         M, L, K = s.M, cfg.length, cfg.leg_samples
         self.scenario = s
         self.n_keep_out = n_keep_out
+        self.pair_band = band = M - 1 if pair_band is None else min(pair_band, M - 1)
         self.length = L
         self.vehicle_model = s.planner.vehicle_model
         self.step_m = S = s.v_max * s.dt
@@ -201,7 +225,9 @@ class HorizonNLP:
         sag = sag_m(s.a_max, gap_s) if self.vehicle_model else 0.0
         sep = margins.separation_m if s.d_safe > 0 else 0.0
         keep2 = ((float(chord_point_clearance_m(sep, s.v_max * gap_s)) + sag) / S) ** 2
-        pair2 = ((float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag) / S) ** 2
+        self.pair_clearance_m = float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag
+        """The distance the UAV-UAV rows keep at each leg sample, m."""
+        pair2 = (self.pair_clearance_m / S) ** 2
         fracs = [(k + 1) / K for k in range(K)]
         weights = horizon_weights(L, cfg.discount, cfg.terminal_weight)
         # The bound's recursion lifted (docs/model.md, "Receding horizon"): the scaled predicted
@@ -246,7 +272,7 @@ class HorizonNLP:
                         gap = along(h, m, frac) - keep_out[2 * k : 2 * k + 2]
                         add_clearance_row(rows, gap, keep2, S)
             for i in range(M):
-                for j in range(i + 1, M):
+                for j in range(i + 1, min(M, i + band + 1)):
                     for frac in fracs:
                         add_clearance_row(rows, along(h, i, frac) - along(h, j, frac), pair2, S)
             add(ca.sum1(eta[h * M : (h + 1) * M]), 1.0, 1.0)
@@ -288,7 +314,8 @@ class HorizonNLP:
             "ipopt": {**IPOPT_OPTIONS, "max_iter": cfg.max_iterations},
         }
         with lock:
-            self.solver: NlpSolver = ipopt("horizon", nlp, opts)
+            name = "horizon" if band == M - 1 else f"horizon_band{band}"
+            self.solver: NlpSolver = ipopt(name, nlp, opts)
         self.lock: SolveLock = lock
         # For tests and the start point's scale: the weighted objective itself and its gradient.
         self.objective = ca.Function("f", [x, p], [objective])
