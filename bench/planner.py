@@ -29,7 +29,13 @@ one of proposed, sd, aba, crb, horizon that planning.slot.METHODS has) and each 
 p95 plan time and the ratio of its median to the proposed method's at the same M, all from this
 one run. --methods-only times just those cells (no solver, reference or polish cells).
 
+With --fleet: the receding horizon beside `proposed` on the fleets of bench/horizon_fleet.py,
+M = 3, 6, 12, 24, 48, each with its IPOPT problems interpreted and compiled (cold build in an
+empty cache, then warm): median and p95 plan time, build time, IPOPT's iterations, the slots
+converged, kept at the cap and fallen back, the mission's tr(PCRB) against `proposed`'s.
+
 Run: python bench/planner.py [--slots 20] [--slots-24 6] [--quick] [--methods proposed,horizon]
+     python bench/planner.py --fleet [--slots 60] [--seeds 1,2,3] [--sizes ...] [--compare-tree DIR]
      python bench/planner.py --methods-only [--methods ...]   (the per-method table alone)
      python bench/planner.py --compare-tree DIR [--rounds 3] [--methods ...]   (before/after)
      python bench/planner.py --profile M                       (cProfile of the proposed method)
@@ -284,7 +290,19 @@ def main() -> None:
         metavar="M",
         help="instead: cProfile one closed-loop run of the proposed method at M UAVs",
     )
+    ap.add_argument(
+        "--fleet",
+        nargs=argparse.REMAINDER,
+        metavar="ARGS",
+        help="instead: the horizon beside `proposed` on fleets of M = 3 .. 48 with compiled "
+        "problems, cold and warm builds (bench/horizon_fleet.py --sizes 3,6,12,24,48 --compiled "
+        "ARGS; e.g. --fleet --slots 60 --seeds 1,2,3 --compare-tree DIR)",
+    )
     args = ap.parse_args()
+    if args.fleet is not None:
+        fleet = Path(__file__).with_name("horizon_fleet.py")
+        command = [sys.executable, str(fleet), "--sizes", "3,6,12,24,48", "--compiled"]
+        sys.exit(subprocess.run([*command, *args.fleet], check=False).returncode)
     if args.profile:
         profile(args.profile, args.slots_24 if args.profile >= 24 else args.slots)
         return
