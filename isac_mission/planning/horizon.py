@@ -50,7 +50,12 @@ from isac_mission.planning.pairs import (
     pairs_within_reach,
 )
 from isac_mission.planning.per_slot import Proposed, polish_nlp
-from isac_mission.planning.problem import PlansOnceToWarmUp, SlotInput, with_end_velocity
+from isac_mission.planning.problem import (
+    PlansOnceToWarmUp,
+    SlotInput,
+    slot_association,
+    with_end_velocity,
+)
 from isac_mission.tracking.pcrb import (
     Bound,
     SensingParams,
@@ -58,7 +63,7 @@ from isac_mission.tracking.pcrb import (
     predict_information,
     scaled_inverse,
 )
-from isac_mission.types import FloatArray, HorizonPlan, IntArray, SlotPlan
+from isac_mission.types import FloatArray, HorizonPlan, IntArray, SlotPlan, SolveReport
 
 if TYPE_CHECKING:
     from isac_mission.planning.slot import SolverKit
@@ -163,20 +168,22 @@ def horizon_slot_data(
     inp: SlotInput,
     start_velocity_mps: FloatArray,
     target_cov_pred: FloatArray,
-    base: SlotPlan,
+    bs_of_uav: IntArray,
+    waypoints_xy_m: FloatArray,
     length: int,
 ) -> HorizonSlotData:
-    """The horizon NLP's data for this slot: the per-slot plan's association kept (serving BS),
-    the BS nearest its waypoints as the control BS (14b), the clearances along the horizon;
-    start_velocity_mps [M, 2]: what the first legs start with (`planned_start_velocity`)."""
-    nearest = np.argmin(np.linalg.norm(base.uav_xy_m[:, None, :] - s.bs_xy[None], axis=-1), axis=1)
+    """The horizon NLP's data for this slot: the association bs_of_uav [M] kept (serving BS),
+    the BS nearest waypoints_xy_m [M, 2] (the first slot's of the start) as the control BS
+    (14b), the clearances along the horizon; start_velocity_mps [M, 2]: what the first legs
+    start with (`planned_start_velocity`)."""
+    nearest = np.argmin(np.linalg.norm(waypoints_xy_m[:, None, :] - s.bs_xy[None], axis=-1), axis=1)
     keep_out, x_pred = inp.keep_out_xy_m, inp.target_state_pred
     return HorizonSlotData(
         prev_xy=np.asarray(inp.prev_xy_m, dtype=float),
         prev_velocity=np.asarray(start_velocity_mps, dtype=float)
         if s.planner.vehicle_model
         else np.zeros((s.M, 2)),
-        serving_xy=s.bs_xy[base.bs_of_uav],
+        serving_xy=s.bs_xy[bs_of_uav],
         control_xy=s.bs_xy[nearest],
         keep_out_xy=np.zeros((0, 2)) if keep_out is None else np.asarray(keep_out),
         x_pred=np.asarray(x_pred, dtype=float),
@@ -293,13 +300,21 @@ def ordered_nlp(kit: SolverKit, data: HorizonSlotData) -> tuple[HorizonNLP | Non
     return (horizon_nlp(kit, fits[0]) if fits else None), order, width
 
 
-def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: float) -> SlotPlan:
-    """The horizon plan of this slot, or `base` (the polished per-slot plan, already feasible
-    or already the best effort) with the reason when the horizon's answer is not kept
-    (planning/fallback.py, `per_slot_instead`).
+Start = tuple[FloatArray, FloatArray, FloatArray]
+"""A horizon start: waypoints [L, M, 2], velocities [L, M, 2], shares [L, M]."""
 
-    base: the `proposed` plan of inp; started_s: the perf_counter time the slot's planning
-    started (for solve_s)."""
+
+def plan_horizon(
+    inp: SlotInput, per_slot: Callable[[], SlotPlan], kit: SolverKit, started_s: float
+) -> SlotPlan:
+    """The horizon plan of this slot, or the polished per-slot plan (already feasible or already
+    the best effort) with the reason when the horizon's answer is not kept (planning/fallback.py,
+    `per_slot_instead`).
+
+    per_slot: computes the `proposed` plan of inp, called only when it is needed: as a start
+    when last slot's horizon shifted is none or does not meet the horizon's rows, and as the
+    fallback (docs/model.md, "Receding horizon", "Start points"); started_s: the perf_counter
+    time the slot's planning started (for solve_s)."""
     sensing = kit.sensing
     x_pred, J_pred, prev_plan = inp.target_state_pred, inp.prior_information, inp.prev_plan
     cov = inp.target_cov_pred
@@ -309,35 +324,64 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
     v = inp.prev_velocity_mps
     prev_v = np.zeros((M, 2)) if v is None else np.asarray(v)
     prev_v = planned_start_velocity(s, inp.prev_xy_m, prev_v, prev_plan)
+    computed: list[SlotPlan] = []
+
+    def base_plan() -> SlotPlan:
+        if not computed:
+            computed.append(per_slot())
+        return computed[0]
 
     def fall_back(why: str, kind: str) -> SlotPlan:
-        return per_slot_instead(base, "horizon", why, kind, time.perf_counter() - started_s)
+        plan = base_plan()
+        return per_slot_instead(plan, "horizon", why, kind, time.perf_counter() - started_s)
 
-    if base.report.status != "ok":
-        return fall_back("the per-slot plan is infeasible", "per-slot plan infeasible")
-    data = horizon_slot_data(s, inp, prev_v, target_cov_pred, base, L)
-    nlp, order, width = ordered_nlp(kit, data)
-    if nlp is None:
-        why = f"its pairs within reach need a band of {width} (pair_band {kit_pair_bands(kit)})"
-        return fall_back(why, "pairs beyond the band")
-    ordered = data.in_order(order)
-    serving = data.serving_xy
-    v1 = (
-        base.uav_velocity_mps
-        if base.uav_velocity_mps is not None
-        else (base.uav_xy_m - data.prev_xy) / dt
-    )
-    starts = [_continue(base.uav_xy_m, v1, base.bandwidth_share, L, dt, s)]
-    if prev_plan is not None and prev_plan.horizon is not None:
-        shifted = _shifted(prev_plan.horizon, L, M, dt, s)
-        if shifted is not None:
-            starts.append(shifted)
-    link_m = nlp.margins.link_m
-    starts = [(q, v, _shares_meeting_rates(s, q, e, serving, link_m)) for q, v, e in starts]
     weights = horizon_weights(L, s.planner.horizon.discount, s.planner.horizon.terminal_weight)
 
     def value(xy: FloatArray, eta: FloatArray) -> float:
         return float(weights @ horizon_bound_traces(s, J_pred, x_pred, xy, eta, sensing))
+
+    def meeting_rates(starts: list[Start], data: HorizonSlotData, link_m: float) -> list[Start]:
+        return [
+            (q, v, _shares_meeting_rates(s, q, e, data.serving_xy, link_m)) for q, v, e in starts
+        ]
+
+    shifted = None
+    if prev_plan is not None and prev_plan.horizon is not None:
+        shifted = _shifted(prev_plan.horizon, L, M, dt, s)
+    starts: list[Start] = []
+    if shifted is not None:
+        # Last slot's horizon shifted, alone, where it meets the rows: the per-slot plan was the
+        # lower start on few slots (docs/model.md, "Start points") and costs a third of a slot.
+        assoc = slot_association(inp, kit)
+        data = horizon_slot_data(s, inp, prev_v, target_cov_pred, assoc, shifted[0][0], L)
+        nlp, order, width = ordered_nlp(kit, data)
+        if nlp is not None:
+            starts = meeting_rates([shifted], data, nlp.margins.link_m)
+            q, v, e = (x[:, order] for x in starts[0])
+            velocity = v if nlp.vehicle_model else None
+            if not nlp.satisfies(q, velocity, e, data.in_order(order)):
+                starts = []
+    if not starts:
+        base = base_plan()
+        if base.report.status != "ok":
+            return fall_back("the per-slot plan is infeasible", "per-slot plan infeasible")
+        assoc = base.bs_of_uav
+        data = horizon_slot_data(s, inp, prev_v, target_cov_pred, assoc, base.uav_xy_m, L)
+        nlp, order, width = ordered_nlp(kit, data)
+        v1 = (
+            base.uav_velocity_mps
+            if base.uav_velocity_mps is not None
+            else (base.uav_xy_m - data.prev_xy) / dt
+        )
+        starts = [_continue(base.uav_xy_m, v1, base.bandwidth_share, L, dt, s)]
+        if shifted is not None:
+            starts.append(shifted)
+        if nlp is not None:
+            starts = meeting_rates(starts, data, nlp.margins.link_m)
+    if nlp is None:
+        why = f"its pairs within reach need a band of {width} (pair_band {kit_pair_bands(kit)})"
+        return fall_back(why, "pairs beyond the band")
+    ordered = data.in_order(order)
 
     def velocities(v: FloatArray | None) -> FloatArray | None:
         return v if nlp.vehicle_model else None
@@ -374,7 +418,7 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
     xy1, eta1 = sol.uav_xy_m[0], sol.bandwidth_share[0]
     cons = SlotConstraints(
         data.prev_xy,
-        serving,
+        data.serving_xy,
         s.bs_xy,
         data.x_pred[:2],
         s,
@@ -391,16 +435,18 @@ def plan_horizon(inp: SlotInput, base: SlotPlan, kit: SolverKit, started_s: floa
         if not legs_ok(s, data.prev_xy, prev_v, xy1, velocity1):
             return fall_back("IPOPT's first leg breaks the vehicle limits", "leg limits")
     traces = horizon_bound_traces(s, J_pred, x_pred, sol.uav_xy_m, sol.bandwidth_share, sensing)
+    summary = f"horizon: {note}, objective {start_value:.6g} -> {float(weights @ traces):.6g}"
+    base_report = computed[0].report if computed else SolveReport(status="ok")
     report = replace(
-        base.report,
+        base_report,
         reason="",
         solve_s=time.perf_counter() - started_s,
-        polish=f"horizon: {note}, objective {start_value:.6g} -> {float(weights @ traces):.6g}",
-        objective_history=(*base.report.objective_history, float(traces[0])),
+        polish=summary if computed else f"{summary}, from the shifted horizon alone",
+        objective_history=(*base_report.objective_history, float(traces[0])),
     )
     return SlotPlan(
         uav_xy_m=xy1,
-        bs_of_uav=base.bs_of_uav,
+        bs_of_uav=assoc,
         bandwidth_share=eta1,
         pcrb_trace=float(traces[0]),
         report=report,
@@ -420,8 +466,11 @@ class Horizon(PlansOnceToWarmUp):
 
     def plan(self, inp: SlotInput, kit: SolverKit) -> SlotPlan:
         started_s = time.perf_counter()
-        base = with_end_velocity(Proposed().plan(inp, kit), inp, kit.scenario)
-        return plan_horizon(inp, base, kit, started_s)
+
+        def per_slot() -> SlotPlan:
+            return with_end_velocity(Proposed().plan(inp, kit), inp, kit.scenario)
+
+        return plan_horizon(inp, per_slot, kit, started_s)
 
     def prepare(self, kit: SolverKit) -> None:
         """The polish's NLP and the horizon's built (the warm-up slot need not reach the

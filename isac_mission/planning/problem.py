@@ -127,6 +127,17 @@ class SlotProblem:
         )
 
 
+def slot_association(inp: SlotInput, kit: SolverKit) -> IntArray:
+    """The slot's UAV-BS association [M]: P1-F.1 with rounding from q_n-1, or last slot's with
+    planner.association "keep" (docs/model.md)."""
+    s = kit.scenario
+    if s.planner.association == "keep" and inp.prev_bs_of_uav is not None:
+        return inp.prev_bs_of_uav
+    return associate(
+        inp.prev_xy_m, s.bs_xy, capacity=s.n_a, dH=s.dH, rho0=s.rho0, B=s.B, lp=kit.association
+    )
+
+
 def build_slot_problem(
     inp: SlotInput, kit: SolverKit, *, moves: bool = True, measurement_only: bool = False
 ) -> SlotProblem:
@@ -138,12 +149,7 @@ def build_slot_problem(
     n_keep_out = 0 if inp.keep_out_xy_m is None else len(inp.keep_out_xy_m)
     if n_keep_out != kit.n_keep_out:
         raise ValueError(f"{n_keep_out} keep-out points, but the kit is built for {kit.n_keep_out}")
-    if cfg.association == "keep" and inp.prev_bs_of_uav is not None:
-        assoc = inp.prev_bs_of_uav
-    else:
-        assoc = associate(
-            inp.prev_xy_m, s.bs_xy, capacity=s.n_a, dH=s.dH, rho0=s.rho0, B=s.B, lp=kit.association
-        )
+    assoc = slot_association(inp, kit)
     serving = s.bs_xy[assoc]
     ballistic = None
     reach_m = VehicleModel.of(s).reach_radius_m if cfg.vehicle_model else np.inf

@@ -3,6 +3,8 @@ fallback, vehicle limits; each checked against something computed independently.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -23,6 +25,7 @@ from isac_mission.planning.horizon import (
     horizon_nlp,
     horizon_slot_data,
     legs_ok,
+    plan_horizon,
     planned_start_velocity,
 )
 from isac_mission.planning.horizon_nlp import (
@@ -30,8 +33,9 @@ from isac_mission.planning.horizon_nlp import (
     HorizonSlotData,
     horizon_weights,
 )
-from isac_mission.planning.per_slot import polish_nlp
+from isac_mission.planning.per_slot import Proposed, polish_nlp
 from isac_mission.planning.polish import PolishNLP
+from isac_mission.planning.problem import with_end_velocity
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.records import read_trace
 from isac_mission.tracking.pcrb import SensingParams
@@ -217,7 +221,9 @@ def test_horizon_plans_carry_their_horizon_and_beat_the_per_slot_start() -> None
         w = horizon_weights(L, cfg.discount, cfg.terminal_weight)
         assert inp.target_cov_pred is not None
         assert inp.keep_out_xy_m is None
-        data = horizon_slot_data(s, inp, np.zeros((s.M, 2)), inp.target_cov_pred, base, L)
+        data = horizon_slot_data(
+            s, inp, np.zeros((s.M, 2)), inp.target_cov_pred, base.bs_of_uav, base.uav_xy_m, L
+        )
         if horizon_nlp(kit).satisfies(cont, None, eta, data):
             compared += 1
             start = w @ horizon_bound_traces(
@@ -256,7 +262,9 @@ def test_a_horizon_solve_at_its_iteration_cap_flies_a_better_feasible_iterate_or
         kinds.append("kept")
         assert f"Maximum_Iterations_Exceeded in 3 it, {AT_CAP_NOTE}" in plan.report.polish
         assert inp.target_cov_pred is not None
-        data = horizon_slot_data(s, inp, np.zeros((s.M, 2)), inp.target_cov_pred, base, L)
+        data = horizon_slot_data(
+            s, inp, np.zeros((s.M, 2)), inp.target_cov_pred, base.bs_of_uav, base.uav_xy_m, L
+        )
         h = plan.horizon
         assert nlp.satisfies(h.uav_xy_m, None, h.bandwidth_share, data, CAP_FEASIBILITY_TOL)
         # Its only start (no previous horizon): the per-slot plan continued, rates restored.
@@ -467,3 +475,33 @@ def test_the_build_ahead_budget_stops_after_the_one_out_fleet() -> None:
     kit.warm_up("proposed")
     assert KitCache(kit, "proposed").build_ahead(budget_s=0.0) == [2]  # the one-out fleet always
     assert KitCache(kit, "proposed").build_ahead(budget_s=60.0) == [2, 1]
+
+
+def test_the_per_slot_plan_is_computed_only_when_the_shifted_horizon_does_not_do() -> None:
+    """With last slot's horizon shifted as a start that meets the rows, the slot is planned from
+    it alone and the per-slot plan is not computed; the first slot (no horizon yet) and a
+    fallback compute it."""
+    s = _scenario()
+    kit = SolverKit(s)
+    inputs = _inputs(s)
+    calls: list[int] = []
+
+    def per_slot_counted(inp: SlotInput) -> Callable[[], SlotPlan]:
+        def per_slot() -> SlotPlan:
+            calls.append(1)
+            return with_end_velocity(Proposed().plan(inp, kit), inp, s)
+
+        return per_slot
+
+    first = plan_horizon(inputs[0], per_slot_counted(inputs[0]), kit, time.perf_counter())
+    assert len(calls) == 1 and first.report.fallback == ""
+    later = [inp for inp in inputs[5:] if inp.prev_plan is not None and inp.prev_plan.horizon]
+    plans = [plan_horizon(inp, per_slot_counted(inp), kit, time.perf_counter()) for inp in later]
+    alone = [p for p in plans if p.report.polish.endswith("from the shifted horizon alone")]
+    assert len(alone) >= len(later) // 2, [p.report.polish for p in plans]
+    assert len(calls) == 1 + len(plans) - len(alone)
+    # A fallback needs the per-slot plan: a cap of one iteration.
+    capped = SolverKit(_scenario(max_iterations=1))
+    calls.clear()
+    plan = plan_horizon(later[0], per_slot_counted(later[0]), capped, time.perf_counter())
+    assert plan.report.fallback.startswith("horizon: IPOPT") and len(calls) == 1
