@@ -30,9 +30,10 @@ p95 plan time and the ratio of its median to the proposed method's at the same M
 one run. --methods-only times just those cells (no solver, reference or polish cells).
 
 With --fleet: the receding horizon beside `proposed` on the fleets of bench/horizon_fleet.py,
-M = 3, 6, 12, 24, 48, each with its IPOPT problems interpreted and compiled (cold build in an
-empty cache, then warm): median and p95 plan time, build time, IPOPT's iterations, the slots
-converged, kept at the cap and fallen back, the mission's tr(PCRB) against `proposed`'s.
+M = 3, 6, 12, 24, 48 (with --compiled also with the IPOPT problems compiled: the first seed's
+build cold in an empty cache, the next ones warm): median and p95 plan time, build time, IPOPT's
+iterations, the slots converged, kept at the cap and fallen back, the mission's tr(PCRB)
+against `proposed`'s.
 
 Run: python bench/planner.py [--slots 20] [--slots-24 6] [--quick] [--methods proposed,horizon]
      python bench/planner.py --fleet [--slots 60] [--seeds 1,2,3] [--sizes ...] [--compare-tree DIR]
@@ -294,14 +295,14 @@ def main() -> None:
         "--fleet",
         nargs=argparse.REMAINDER,
         metavar="ARGS",
-        help="instead: the horizon beside `proposed` on fleets of M = 3 .. 48 with compiled "
-        "problems, cold and warm builds (bench/horizon_fleet.py --sizes 3,6,12,24,48 --compiled "
-        "ARGS; e.g. --fleet --slots 60 --seeds 1,2,3 --compare-tree DIR)",
+        help="instead: the horizon beside `proposed` on fleets of M = 3 .. 48 "
+        "(bench/horizon_fleet.py --sizes 3,6,12,24,48 ARGS; e.g. --fleet --slots 60 --seeds "
+        "1,2,3 --compare-tree DIR, or --compiled for cold and warm builds of compiled problems)",
     )
     args = ap.parse_args()
     if args.fleet is not None:
         fleet = Path(__file__).with_name("horizon_fleet.py")
-        command = [sys.executable, str(fleet), "--sizes", "3,6,12,24,48", "--compiled"]
+        command = [sys.executable, str(fleet), "--sizes", "3,6,12,24,48"]
         sys.exit(subprocess.run([*command, *args.fleet], check=False).returncode)
     if args.profile:
         profile(args.profile, args.slots_24 if args.profile >= 24 else args.slots)
