@@ -284,17 +284,21 @@ def kit_pair_bands(kit: SolverKit) -> tuple[int, ...]:
     return pair_bands(s.M, s.planner.horizon.pair_band)
 
 
-def ordered_nlp(kit: SolverKit, data: HorizonSlotData) -> tuple[HorizonNLP | None, IntArray, int]:
-    """(the NLP of the narrowest band that the slot's pairs within reach fit, or None if none
-    does; the fleet's order for it: UAV order[a] in the NLP's UAV slot a; the order's
-    bandwidth). A fleet with the full problem alone keeps its own order."""
+def ordered_nlp(
+    kit: SolverKit, *, prev_xy_m: FloatArray, prev_velocity_mps: FloatArray
+) -> tuple[HorizonNLP | None, IntArray, int]:
+    """(the NLP of the narrowest band that the pairs within reach of the UAVs at prev_xy_m
+    [M, 2] flying prev_velocity_mps [M, 2] fit, or None if none does; the fleet's order for it:
+    UAV order[a] in the NLP's UAV slot a; the order's bandwidth). A fleet with the full problem
+    alone keeps its own order."""
     s = kit.scenario
     bands = kit_pair_bands(kit)
     if bands == (s.M - 1,):
         return horizon_nlp(kit), np.arange(s.M), s.M - 1
     narrowest = horizon_nlp(kit, bands[0])
-    reach = horizon_reach_m(data.prev_velocity, s.v_max, s.dt, narrowest.length)
-    within = pairs_within_reach(data.prev_xy, reach, narrowest.pair_clearance_m)
+    velocity = prev_velocity_mps if s.planner.vehicle_model else np.zeros((s.M, 2))
+    reach = horizon_reach_m(velocity, s.v_max, s.dt, narrowest.length)
+    within = pairs_within_reach(prev_xy_m, reach, narrowest.pair_clearance_m)
     order, width = banded_order(within)
     fits = [band for band in bands if band >= width]
     return (horizon_nlp(kit, fits[0]) if fits else None), order, width
@@ -340,62 +344,64 @@ def plan_horizon(
     def value(xy: FloatArray, eta: FloatArray) -> float:
         return float(weights @ horizon_bound_traces(s, J_pred, x_pred, xy, eta, sensing))
 
-    def meeting_rates(starts: list[Start], data: HorizonSlotData, link_m: float) -> list[Start]:
-        return [
-            (q, v, _shares_meeting_rates(s, q, e, data.serving_xy, link_m)) for q, v, e in starts
+    # The NLP and the fleet's order depend on the UAVs' start only (not on the association).
+    nlp, order, width = ordered_nlp(kit, prev_xy_m=inp.prev_xy_m, prev_velocity_mps=prev_v)
+
+    def velocities(v: FloatArray | None) -> FloatArray | None:
+        return v if nlp is not None and nlp.vehicle_model else None
+
+    def scored(
+        candidates: list[Start], data: HorizonSlotData
+    ) -> tuple[list[Start], list[Start], HorizonSlotData, list[tuple[bool, float, int]]]:
+        """(the starts with shares that meet 14a; the same and the data in the NLP's order of the
+        fleet; their (infeasible, value, index), feasible starts first, then the lower
+        objective)."""
+        assert nlp is not None
+        link_m = nlp.margins.link_m
+        starts = [
+            (q, v, _shares_meeting_rates(s, q, e, data.serving_xy, link_m))
+            for q, v, e in candidates
         ]
+        # A permutation of the UAV axis, which the value ignores.
+        in_order = [(q[:, order], v[:, order], e[:, order]) for q, v, e in starts]
+        ordered = data.in_order(order)
+        scores = sorted(
+            (not nlp.satisfies(q, velocities(v), e, ordered), value(q, e), i)
+            for i, (q, v, e) in enumerate(in_order)
+        )
+        return starts, in_order, ordered, scores
 
     shifted = None
     if prev_plan is not None and prev_plan.horizon is not None:
         shifted = _shifted(prev_plan.horizon, L, M, dt, s)
-    starts: list[Start] = []
-    if shifted is not None:
+    ranked = None
+    if shifted is not None and nlp is not None:
         # Last slot's horizon shifted, alone, where it meets the rows: the per-slot plan was the
         # lower start on few slots (docs/model.md, "Start points") and costs a third of a slot.
         assoc = slot_association(inp, kit)
         data = horizon_slot_data(s, inp, prev_v, target_cov_pred, assoc, shifted[0][0], L)
-        nlp, order, width = ordered_nlp(kit, data)
-        if nlp is not None:
-            starts = meeting_rates([shifted], data, nlp.margins.link_m)
-            q, v, e = (x[:, order] for x in starts[0])
-            velocity = v if nlp.vehicle_model else None
-            if not nlp.satisfies(q, velocity, e, data.in_order(order)):
-                starts = []
-    if not starts:
+        ranked = scored([shifted], data)
+        if ranked[3][0][0]:
+            ranked = None
+    if ranked is None:
         base = base_plan()
         if base.report.status != "ok":
             return fall_back("the per-slot plan is infeasible", "per-slot plan infeasible")
+        if nlp is None:
+            why = f"its pairs within reach need a band of {width} (pair_band {kit_pair_bands(kit)})"
+            return fall_back(why, "pairs beyond the band")
         assoc = base.bs_of_uav
         data = horizon_slot_data(s, inp, prev_v, target_cov_pred, assoc, base.uav_xy_m, L)
-        nlp, order, width = ordered_nlp(kit, data)
         v1 = (
             base.uav_velocity_mps
             if base.uav_velocity_mps is not None
             else (base.uav_xy_m - data.prev_xy) / dt
         )
-        starts = [_continue(base.uav_xy_m, v1, base.bandwidth_share, L, dt, s)]
-        if shifted is not None:
-            starts.append(shifted)
-        if nlp is not None:
-            starts = meeting_rates(starts, data, nlp.margins.link_m)
-    if nlp is None:
-        why = f"its pairs within reach need a band of {width} (pair_band {kit_pair_bands(kit)})"
-        return fall_back(why, "pairs beyond the band")
-    ordered = data.in_order(order)
-
-    def velocities(v: FloatArray | None) -> FloatArray | None:
-        return v if nlp.vehicle_model else None
-
-    # In the NLP's order of the fleet (a permutation of the UAV axis, which the value ignores).
-    starts_ordered = [(q[:, order], v[:, order], e[:, order]) for q, v, e in starts]
-    # Feasible starts first, then the lower objective.
-    scored = sorted(
-        (
-            (not nlp.satisfies(st[0], velocities(st[1]), st[2], ordered), value(st[0], st[2]), i)
-            for i, st in enumerate(starts_ordered)
-        )
-    )
-    start_infeasible, start_value, first = scored[0]
+        candidates = [_continue(base.uav_xy_m, v1, base.bandwidth_share, L, dt, s)]
+        ranked = scored(candidates + ([shifted] if shifted is not None else []), data)
+    assert nlp is not None
+    starts, starts_ordered, ordered, scores = ranked
+    start_infeasible, start_value, first = scores[0]
     start = starts_ordered[first]
     sol = nlp.solve(start[0], velocities(start[1]), start[2], ordered)
     note = f"IPOPT {sol.status} in {sol.iterations} it"
