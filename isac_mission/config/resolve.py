@@ -100,6 +100,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
         a_max=uav.max_accel_mps2,
         x0=np.asarray(targets[0].x0, dtype=float),
         kappa=tgt.process_noise_intensity,
+        a_target=tgt.max_accel_mps2,
         rcs_m2=targets[0].rcs_m2,
         sensing_model=sens.model,
         Ts=sens.cpi_s,

@@ -112,6 +112,8 @@ class Scenario:
     x0: FloatArray
     kappa: float
     rcs_m2: float
+    a_target: float
+    """target.max_accel_mps2 (m/s^2): the target's manoeuvre bound (docs/model.md, "Safety")."""
     sensing_model: str
     Ts: float
     alpha_d: float
@@ -189,6 +191,7 @@ class Scenario:
             "v_max": self.v_max,
             "d_safe": self.d_safe,
             "a_max": self.a_max,
+            "a_target": self.a_target,
             "gamma_th": self.gamma_th,
             "r_th": self.r_th,
             "n_a": self.n_a,

@@ -138,6 +138,14 @@ class TargetConfig(Section):
     )
     process_noise_intensity: float = Field(0.5, ge=0, description="kappa in W (eq. 4), m^2/s^3.")
     rcs_dbsm: float = Field(-10.0, description="sigma_RCS.")
+    max_accel_mps2: float = Field(
+        2.0,
+        ge=0,
+        description="a_T, how hard the target may manoeuvre off its constant-velocity prediction, "
+        "m/s^2: the safety rule keeps D_s against every such motion over each leg and the "
+        "evasion guard keeps each UAV able to dodge it (docs/model.md, 'Safety'). 0: the "
+        "constant-velocity model only.",
+    )
 
 
 class SensingConfig(Section):

@@ -134,6 +134,69 @@ def unviable_pairs(
     return np.asarray(short)
 
 
+ESCAPE_STEPS_PER_SLOT = 8
+"""Time steps per slot of the simulated dodges of `target_escape`."""
+
+
+def target_escape(
+    uav_xy_m: FloatArray,
+    uav_velocity_mps: FloatArray,
+    target_xy_m: FloatArray,
+    target_velocity_mps: FloatArray,
+    clearance_m: float,
+    escape_accel_mps2: float,
+    v_max_mps: float,
+    dt_s: float,
+) -> tuple[BoolArray, FloatArray]:
+    """(viable [M], direction [M, 2]): can each UAV at uav_xy_m [M, 2], moving at
+    uav_velocity_mps [M, 2], keep clearance_m from the target at target_xy_m [2] moving at
+    target_velocity_mps [2], by a dodge it could start now?
+
+    The target coasts; the UAV accelerates at escape_accel_mps2 (a_max - a_T: what the target's
+    own manoeuvre toward it leaves) along one of three fixed directions (away from the target
+    now, across its relative velocity on the side it already misses by, the bisector of the two),
+    its speed capped at V_max, simulated over ESCAPE_STEPS_PER_SLOT steps a slot. A UAV is viable
+    when its coasting motion stays clearance_m away or its best dodge does, within the
+    look-ahead dt + (|relative velocity| + sqrt(2 c A)) / A it needs to cancel the closing speed
+    and step the clearance aside (a farther encounter is next slot's to dodge). direction: the
+    best dodge's unit vector (the one whose nearest distance is largest)."""
+    xy = np.asarray(uav_xy_m, dtype=float)
+    v0 = np.asarray(uav_velocity_mps, dtype=float)
+    p_t = np.asarray(target_xy_m, dtype=float).reshape(2)
+    v_t = np.asarray(target_velocity_mps, dtype=float).reshape(2)
+    M = len(xy)
+    rel, rel_v = xy - p_t, v0 - v_t
+    a = max(escape_accel_mps2, 1e-6)
+    speed = np.linalg.norm(rel_v, axis=1)
+    look_ahead_s = dt_s + (speed + np.sqrt(2 * clearance_m * a)) / a
+    _, coast_miss = closest_approach(rel, rel_v, look_ahead_s)
+    away = rel / np.maximum(np.linalg.norm(rel, axis=1), 1e-12)[:, None]
+    across = np.stack([-rel_v[:, 1], rel_v[:, 0]], axis=1) / np.maximum(speed, 1e-12)[:, None]
+    across *= np.where(np.einsum("mi,mi->m", across, rel) < 0, -1.0, 1.0)[:, None]
+    across = np.where(speed[:, None] > 1e-9, across, away)
+    bisector = away + across
+    bisector /= np.maximum(np.linalg.norm(bisector, axis=1), 1e-12)[:, None]
+    directions = np.stack([away, across, bisector], axis=1)  # [M, 3, 2]
+    h = dt_s / ESCAPE_STEPS_PER_SLOT
+    steps = int(np.ceil(float(np.max(look_ahead_s, initial=0.0)) / h))
+    p, v = np.repeat(xy[:, None], 3, axis=1), np.repeat(v0[:, None], 3, axis=1)
+    nearest = np.linalg.norm(p - p_t, axis=-1)
+    for k in range(1, steps + 1):
+        v_next = v + a * h * directions
+        fast = np.linalg.norm(v_next, axis=-1, keepdims=True)
+        v_next *= np.minimum(1.0, v_max_mps / np.maximum(fast, 1e-12))
+        p = p + 0.5 * (v + v_next) * h
+        v = v_next
+        gap = np.linalg.norm(p - (p_t + v_t * k * h), axis=-1)
+        within = (k * h <= look_ahead_s)[:, None]
+        nearest = np.where(within, np.minimum(nearest, gap), nearest)
+    best = np.argmax(nearest, axis=1)
+    viable = (coast_miss >= clearance_m - VIABILITY_TOL_M) | (
+        nearest[np.arange(M), best] >= clearance_m - VIABILITY_TOL_M
+    )
+    return np.asarray(viable), np.asarray(directions[np.arange(M), best])
+
+
 def evasive_velocity(
     v0_mps: FloatArray, direction: FloatArray, a_max_mps2: float, v_max_mps: float, dt_s: float
 ) -> FloatArray:
@@ -172,16 +235,20 @@ def evasive_legs(
     a_max_mps2: float,
     v_max_mps: float,
     dt_s: float,
+    target_direction: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray, BoolArray]:
     """(end points [M, 2] m, end velocities [M, 2] m/s, evading [M]): every UAV with a threat
     (threat [M, P]) flies its evasive leg (module docstring), the others keep base_xy_m [M, 2]
-    and base_velocity_mps [M, 2]."""
+    and base_velocity_mps [M, 2]. target_direction [M, 2]: the unit vector each UAV dodges the
+    target along (`target_escape`), instead of straight away from it."""
     M = len(base_xy_m)
     p0, v0 = parties.xy_m[:M], parties.velocity_mps[:M]
     rel_xy, rel_v = parties.relative_to(p0, v0)
     t, _ = closest_approach(rel_xy, rel_v, np.full(threat.shape, np.inf))
     now = np.linalg.norm(rel_xy, axis=-1)
     away = rel_xy / np.maximum(now, 1e-12)[..., None]
+    if target_direction is not None:
+        away[:, M] = target_direction
     push = np.einsum("mp,mpi->mi", threat / np.maximum(t, dt_s), away)
     norm = np.linalg.norm(push, axis=-1)
     evading = threat.any(axis=1) & (norm > 1e-12)

@@ -25,12 +25,18 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.model.radar import SensingParams
 from isac_mission.planning.association import association_costs, optimal_assignment
-from isac_mission.planning.evasion import Parties, coasting_threats, evasive_legs, unviable_pairs
+from isac_mission.planning.evasion import (
+    Parties,
+    coasting_threats,
+    evasive_legs,
+    target_escape,
+    unviable_pairs,
+)
 from isac_mission.planning.feasibility import operating_area
 from isac_mission.planning.margins import SafetyMargins
 from isac_mission.planning.problem import SlotInput, SlotProblem, slot_clearance_m
 from isac_mission.tracking.pcrb import PlanningObjective
-from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
+from isac_mission.types import BoolArray, FloatArray, IntArray, SlotPlan, SolveReport
 
 NO_BS = -1
 """bs_of_uav of a vehicle outside the plan."""
@@ -65,8 +71,10 @@ def best_effort(problem: SlotProblem, reason: str) -> SlotPlan:
     if s.planner.vehicle_model and inp.prev_velocity_mps is not None:
         parties = slot_parties(inp, s)
         threat, _ = coasting_threats(parties, s.a_max, s.dt)
+        start_viable, dodge = _target_escape(parties, s, inp.prev_xy_m, inp.prev_velocity_mps)
+        threat[:, s.M] |= ~start_viable
         xy, velocity, _ = evasive_legs(
-            parties, threat, best, (best - inp.prev_xy_m) / s.dt, s.a_max, s.v_max, s.dt
+            parties, threat, best, (best - inp.prev_xy_m) / s.dt, s.a_max, s.v_max, s.dt, dodge
         )
         plan = problem.plan(np.clip(xy, *cons.area_bounds()), comm.eta, report)
         return replace(plan, uav_velocity_mps=velocity)
@@ -103,22 +111,26 @@ def kept_viable(plan: SlotPlan, inp: SlotInput, s: Scenario, sensing: SensingPar
     if plan.uav_velocity_mps is None:
         return plan
     parties = slot_parties(inp, s)
-    unviable = unviable_pairs(parties, plan.uav_xy_m, plan.uav_velocity_mps, s.a_max)
+    unviable = _unviable(parties, s, plan.uav_xy_m, plan.uav_velocity_mps)
     if not unviable.any():
         return plan
+    _, dodge = _target_escape(parties, s, inp.prev_xy_m, inp.prev_velocity_mps)
     threat = unviable
     for _ in range(s.M):  # an evading UAV can leave a neighbour unviable: it evades too
         xy, velocity, evading = evasive_legs(
-            parties, threat, plan.uav_xy_m, plan.uav_velocity_mps, s.a_max, s.v_max, s.dt
+            parties, threat, plan.uav_xy_m, plan.uav_velocity_mps, s.a_max, s.v_max, s.dt, dodge
         )
-        more = threat | unviable_pairs(parties, xy, velocity, s.a_max)
+        more = threat | _unviable(parties, s, xy, velocity)
         if (more == threat).all():
             break
         threat = more
     xy = np.clip(xy, *operating_area(s))
     objective = PlanningObjective(inp.prior_information, inp.target_state_pred, sensing)
     uavs = ", ".join(str(m) for m in np.flatnonzero(evading))
-    why = f"evasive legs for UAVs {uavs}: their planned end states could not brake apart before D_s"
+    dodging = threat[evading, s.M].any()
+    why = f"evasive legs for UAVs {uavs}: their planned end states could not " + (
+        "brake apart before D_s or dodge the target" if dodging else "brake apart before D_s"
+    )
     report = replace(
         plan.report,
         reason=why + (f"; {plan.report.reason}" * bool(plan.report.reason)),
@@ -131,6 +143,37 @@ def kept_viable(plan: SlotPlan, inp: SlotInput, s: Scenario, sensing: SensingPar
         pcrb_trace=float(objective.value(xy, plan.bandwidth_share)),
         report=report,
     )
+
+
+def _target_escape(
+    parties: Parties, s: Scenario, xy_m: FloatArray, velocity_mps: FloatArray, end: bool = False
+) -> tuple[BoolArray, FloatArray]:
+    """evasion.target_escape of UAVs at xy_m [M, 2] moving at velocity_mps [M, 2] from the
+    slot's target (its party: at the slot's start; end: at its predicted end state), with
+    a_max - a_T to dodge with."""
+    M = s.M
+    target_xy = parties.xy_m[M] + s.dt * parties.velocity_mps[M] * end
+    return target_escape(
+        xy_m,
+        velocity_mps,
+        target_xy,
+        parties.velocity_mps[M],
+        float(parties.clearance_m[M]),
+        max(s.a_max - s.a_target, 0.0),
+        s.v_max,
+        s.dt,
+    )
+
+
+def _unviable(
+    parties: Parties, s: Scenario, end_xy_m: FloatArray, end_velocity_mps: FloatArray
+) -> BoolArray:
+    """[M, P] evasion.unviable_pairs of the end state end_xy_m [M, 2], end_velocity_mps [M, 2],
+    with the target's column: the UAVs that could not dodge the target from there."""
+    unviable = unviable_pairs(parties, end_xy_m, end_velocity_mps, s.a_max)
+    viable, _ = _target_escape(parties, s, end_xy_m, end_velocity_mps, end=True)
+    unviable[:, s.M] = ~viable
+    return unviable
 
 
 def per_slot_instead(base: SlotPlan, method: str, why: str, kind: str, solve_s: float) -> SlotPlan:

@@ -10,7 +10,9 @@ keeps:
   of the predicted position covariance over the slot (at each sampled instant of the leg,
   planning/legs.py: the target's possible motion within the slot; the true target is within
   k sigma_max of its prediction along any direction with probability Phi(k) or more) and
-  e = planner.tracking_margin_m; kept along the legs, not only at their ends;
+  e = planner.tracking_margin_m, plus a_T dt^2 / 2 for a target that manoeuvres at up to
+  a_T = target.max_accel_mps2 off its prediction within the slot; kept along the legs, not only
+  at their ends;
 - 14i: D_s + 2 e between planned UAVs (and D_s + 2 e from keep-out points);
 - 14a and 14b: the rate and the control range at a distance e farther from the BS.
 
@@ -137,10 +139,22 @@ def _largest_eigenvalue(P: FloatArray) -> FloatArray:
 
 def target_clearance_m(s: Scenario, target_cov_pred: FloatArray | None) -> float:
     """The planned distance (m) from the predicted target that 14j keeps: D_s, plus (rule on)
-    k sigma_max + e for the predicted covariance target_cov_pred [4, 4] (or [2, 2]; None: no
-    covariance term), sigma_max over the slot's sampled instants (`slot_sigma_max_m`)."""
+    k sigma_max + e + a_T dt^2 / 2 for the predicted covariance target_cov_pred [4, 4] (or
+    [2, 2]; None: no covariance term), sigma_max over the slot's sampled instants
+    (`slot_sigma_max_m`), a_T the target's manoeuvre bound (`manoeuvre_margin_m`)."""
     cfg = s.planner
     if not rule_on(s):
         return s.d_safe
     sigma = 0.0 if target_cov_pred is None else slot_sigma_max_m(s, target_cov_pred)
-    return s.d_safe + cfg.safety_confidence_sigma * sigma + cfg.tracking_margin_m
+    return (
+        s.d_safe
+        + cfg.safety_confidence_sigma * sigma
+        + cfg.tracking_margin_m
+        + manoeuvre_margin_m(s.a_target, s.dt)
+    )
+
+
+def manoeuvre_margin_m(a_target_mps2: float, dt_s: float) -> float:
+    """How far (m) a target accelerating at most a_target_mps2 can be off its constant-velocity
+    prediction from the slot's start by the slot's end, a_T dt^2 / 2 (the most over the leg)."""
+    return 0.5 * a_target_mps2 * dt_s**2

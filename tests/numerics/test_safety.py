@@ -56,16 +56,21 @@ def _with(s: Scenario, **planner: object) -> Scenario:
     return s.with_changes(planner=s.planner.model_copy(update=planner))
 
 
-def test_clearance_is_d_safe_with_none_and_d_safe_plus_k_sigma_plus_e_with_the_rule(
+def test_clearance_is_d_safe_with_none_and_d_safe_plus_k_sigma_plus_e_plus_manoeuvre_with_the_rule(
     paper: Scenario,
 ) -> None:
     P = np.diag([4.0, 9.0, 0.01, 0.01])  # position sigma_max = 3 m
     assert target_clearance_m(_with(paper, safety_margin="none"), P) == paper.d_safe
-    s = _with(paper, safety_confidence_sigma=5.0, tracking_margin_m=1.5)
+    s = _with(paper, safety_confidence_sigma=5.0, tracking_margin_m=1.5).with_changes(
+        a_target=3.0, dt=2.0
+    )
+    assert target_clearance_m(_with(s, safety_margin="none"), P) == paper.d_safe
     sigma = slot_sigma_max_m(s, P)
     assert sigma >= 3.0
-    assert target_clearance_m(s, P) == pytest.approx(paper.d_safe + 5.0 * sigma + 1.5)
-    assert target_clearance_m(s, None) == paper.d_safe + 1.5
+    manoeuvre = 0.5 * 3.0 * 2.0**2  # a_T dt^2 / 2: 6 m off the prediction by the slot's end
+    assert target_clearance_m(s, P) == pytest.approx(paper.d_safe + 5.0 * sigma + 1.5 + manoeuvre)
+    assert target_clearance_m(s, None) == paper.d_safe + 1.5 + manoeuvre
+    assert paper.a_target == 2.0  # the shipped bound (docs/model.md, "Safety")
     m = SafetyMargins.of(s)
     assert (m.tracking_m, m.separation_m, m.link_m) == (1.5, paper.d_safe + 3.0, 1.5)
     off = SafetyMargins.of(_with(paper, safety_margin="none"))
@@ -166,7 +171,10 @@ def test_the_true_target_is_beyond_the_planned_clearance_with_probability_phi_k(
     rng = np.random.default_rng(3)
     n = 200_000
     for k in (1.0, 2.0):
-        s = _with(paper, safety_confidence_sigma=k, tracking_margin_m=1.0)
+        # The Gaussian part alone: no manoeuvre margin.
+        s = _with(paper, safety_confidence_sigma=k, tracking_margin_m=1.0).with_changes(
+            a_target=0.0
+        )
         P = np.array([[4.0, 1.5], [1.5, 1.0]])
         _, V = np.linalg.eigh(P)
         c = target_clearance_m(s, P)
@@ -207,7 +215,7 @@ def test_a_plan_that_crosses_the_targets_disk_between_instants_is_rejected(
 ) -> None:
     # The target flies (-15, 0) -> (15, 0) (about (1000, 1000)) in the slot; a UAV holding at
     # (0, 30.5) is 34 m from it at both instants but 30.5 m halfway, inside D_s + e = 31 m.
-    s = _with(paper, tracking_margin_m=1.0)
+    s = _with(paper, tracking_margin_m=1.0).with_changes(a_target=0.0)
     o = np.array([1000.0, 1000.0])
     prev = o + np.array([[0.0, 30.5], [500.0, 500.0], [-500.0, 500.0]])
     target, v = o + np.array([15.0, 0.0]), np.array([30.0, 0.0])
