@@ -22,9 +22,12 @@ parabola a cubic Hermite leg with these ends is (|a| <= a_max all along it, its 
 an end, <= V_max). Pushing along the miss vector instead, which grows the miss distance faster in
 theory, lost to V_max on the measured M = 12 trap (27.7 m of D_s = 30; docs/performance.md).
 
-The target is a threat for the best effort, but not in the viability test: an intruder faster than
-V_max cannot be outbraked, and a target that manoeuvres is a separate rule (docs/model.md,
-"Safety"). Pure: numpy only. Shapes: M UAVs, P parties (M UAVs, the target, K keep-out points).
+The target cannot be outbraked when it is faster than V_max, but it can be dodged:
+`target_escape` asks whether a UAV can still keep the clearance from every target motion within
+its manoeuvre bound a_T by coasting or by accelerating along one of three directions; a plan's end
+state that cannot is replaced by the evasive leg along the best of them (docs/model.md, "Evasion").
+
+Pure: numpy only. Shapes: M UAVs, P parties (M UAVs, the target, K keep-out points).
 """
 
 from __future__ import annotations
@@ -144,87 +147,104 @@ def target_escape(
     target_xy_m: FloatArray,
     target_velocity_mps: FloatArray,
     clearance_m: float,
-    escape_accel_mps2: float,
+    a_max_mps2: float,
+    a_target_mps2: float,
     v_max_mps: float,
     dt_s: float,
+    known_s: float = 0.0,
 ) -> tuple[BoolArray, FloatArray]:
     """(viable [M], direction [M, 2]): can each UAV at uav_xy_m [M, 2], moving at
     uav_velocity_mps [M, 2], keep clearance_m from the target at target_xy_m [2] moving at
-    target_velocity_mps [2], by a dodge it could start now?
+    target_velocity_mps [2] and accelerating at up to a_target_mps2 (a_T) off that motion, by a
+    dodge it could start now?
 
-    The target coasts; the UAV accelerates at escape_accel_mps2 (a_max - a_T: what the target's
-    own manoeuvre toward it leaves) along one of three fixed directions (away from the target
-    now, across its relative velocity on the side it already misses by, the bisector of the two),
-    its speed capped at V_max, simulated over ESCAPE_STEPS_PER_SLOT steps a slot. A UAV is viable
-    when its coasting motion stays clearance_m away or its best dodge does, within the
-    look-ahead dt + (|relative velocity| + sqrt(2 c A)) / A it needs to cancel the closing speed
-    and step the clearance aside (a farther encounter is next slot's to dodge). direction: the
-    best dodge's unit vector (the one whose nearest distance is largest)."""
+    The UAV coasts, or accelerates at a_max along one of three fixed directions (away from the
+    target now, across their relative velocity on the side it already misses by, the bisector of
+    the two), a slot at a time on the constant-acceleration legs `evasive_legs` flies
+    (`evasive_velocity`: speed within V_max), each sampled at ESCAPE_STEPS_PER_SLOT instants.
+    The target's state was known known_s ago (the slot's start, for a check of its end: its
+    position then was within a_T dt^2 / 2, its velocity within a_T dt, of the constant-velocity
+    motion given), so at time t its worst motion is anywhere within a_T (t + known_s)^2 / 2 of
+    that motion, and a UAV motion keeps the target away if its distance to it is at least
+    clearance_m + a_T (t + known_s)^2 / 2 at every sample. Viable: one of the four motions does, within the
+    look-ahead dt + (|relative velocity| + sqrt(2 c A)) / A, A = a_max - a_T, that the UAV needs
+    to cancel their closing speed and step the clearance aside (a farther encounter is next
+    slot's to dodge). direction: the dodge (of the three) whose worst margin is largest."""
     xy = np.asarray(uav_xy_m, dtype=float)
     v0 = np.asarray(uav_velocity_mps, dtype=float)
     p_t = np.asarray(target_xy_m, dtype=float).reshape(2)
     v_t = np.asarray(target_velocity_mps, dtype=float).reshape(2)
     M = len(xy)
     rel, rel_v = xy - p_t, v0 - v_t
-    a = max(escape_accel_mps2, 1e-6)
     speed = np.linalg.norm(rel_v, axis=1)
-    look_ahead_s = dt_s + (speed + np.sqrt(2 * clearance_m * a)) / a
-    _, coast_miss = closest_approach(rel, rel_v, look_ahead_s)
+    net = max(a_max_mps2 - a_target_mps2, 0.1 * a_max_mps2)
+    look_ahead_s = dt_s + (speed + np.sqrt(2 * clearance_m * net)) / net
     away = rel / np.maximum(np.linalg.norm(rel, axis=1), 1e-12)[:, None]
     across = np.stack([-rel_v[:, 1], rel_v[:, 0]], axis=1) / np.maximum(speed, 1e-12)[:, None]
     across *= np.where(np.einsum("mi,mi->m", across, rel) < 0, -1.0, 1.0)[:, None]
     across = np.where(speed[:, None] > 1e-9, across, away)
     bisector = away + across
     bisector /= np.maximum(np.linalg.norm(bisector, axis=1), 1e-12)[:, None]
-    directions = np.stack([away, across, bisector], axis=1)  # [M, 3, 2]
-    h = dt_s / ESCAPE_STEPS_PER_SLOT
-    steps = int(np.ceil(float(np.max(look_ahead_s, initial=0.0)) / h))
-    p, v = np.repeat(xy[:, None], 3, axis=1), np.repeat(v0[:, None], 3, axis=1)
-    nearest = np.linalg.norm(p - p_t, axis=-1)
-    for k in range(1, steps + 1):
-        v_next = v + a * h * directions
-        fast = np.linalg.norm(v_next, axis=-1, keepdims=True)
-        v_next *= np.minimum(1.0, v_max_mps / np.maximum(fast, 1e-12))
-        p = p + 0.5 * (v + v_next) * h
-        v = v_next
-        gap = np.linalg.norm(p - (p_t + v_t * k * h), axis=-1)
-        within = (k * h <= look_ahead_s)[:, None]
-        nearest = np.where(within, np.minimum(nearest, gap), nearest)
-    best = np.argmax(nearest, axis=1)
-    viable = (coast_miss >= clearance_m - VIABILITY_TOL_M) | (
-        nearest[np.arange(M), best] >= clearance_m - VIABILITY_TOL_M
-    )
+    coast = np.zeros_like(away)
+    directions = np.stack([coast, away, across, bisector], axis=1)  # [M, 4, 2]
+    accel = np.array([0.0, 1.0, 1.0, 1.0])[None, :, None] * a_max_mps2
+    slots = int(np.ceil(float(np.max(look_ahead_s, initial=0.0)) / dt_s))
+    tau = np.arange(1, ESCAPE_STEPS_PER_SLOT + 1) / ESCAPE_STEPS_PER_SLOT  # [S] in (0, 1]
+    p, v = np.repeat(xy[:, None], 4, axis=1), np.repeat(v0[:, None], 4, axis=1)
+    margin = np.repeat(np.linalg.norm(rel, axis=1)[:, None], 4, axis=1) - clearance_m
+    for k in range(slots):
+        v1 = np.where(accel > 0, evasive_velocity(v, directions, a_max_mps2, v_max_mps, dt_s), v)
+        t_s = (k + tau) * dt_s  # [S]
+        pts = (
+            p[:, :, None]
+            + v[:, :, None] * (tau * dt_s)[:, None]
+            + 0.5 * (v1 - v)[:, :, None] * (tau**2 * dt_s)[:, None]
+        )  # [M, 4, S, 2]
+        gap = np.linalg.norm(pts - (p_t + t_s[:, None] * v_t), axis=-1)
+        need = clearance_m + 0.5 * a_target_mps2 * (t_s + known_s) ** 2
+        slack = np.where(t_s <= look_ahead_s[:, None, None], gap - need, np.inf)
+        margin = np.minimum(margin, slack.min(axis=-1))
+        p, v = pts[:, :, -1], v1
+    viable = margin.max(axis=1) >= -VIABILITY_TOL_M
+    best = 1 + np.argmax(margin[:, 1:], axis=1)
     return np.asarray(viable), np.asarray(directions[np.arange(M), best])
 
 
 def evasive_velocity(
     v0_mps: FloatArray, direction: FloatArray, a_max_mps2: float, v_max_mps: float, dt_s: float
 ) -> FloatArray:
-    """The end velocity v1 [2] (m/s) of the constant-acceleration leg that accelerates furthest
-    along the unit vector `direction` [2] from v0_mps [2]: v1 maximises (v1 - v0) . direction over
-    the intersection of |v1 - v0| <= a_max dt and |v1| <= V_max. That set is convex, so the
-    optimum is v0 + a_max dt direction, V_max direction, or a point where the two circles cross,
-    whichever is feasible and best; a vehicle faster than V_max + a_max dt brakes at a_max."""
+    """The end velocity v1 [..., 2] (m/s) of the constant-acceleration leg that accelerates
+    furthest along the unit vector `direction` [..., 2] from v0_mps [..., 2]: v1 maximises
+    (v1 - v0) . direction over the intersection of |v1 - v0| <= a_max dt and |v1| <= V_max. That
+    set is convex, so the optimum is v0 + a_max dt direction, V_max direction, or a point where
+    the two circles cross, whichever is feasible and best; a vehicle faster than
+    V_max + a_max dt brakes at a_max."""
     v0 = np.asarray(v0_mps, dtype=float)
-    u = np.asarray(direction, dtype=float)
+    u = np.broadcast_to(np.asarray(direction, dtype=float), v0.shape)
     reach = a_max_mps2 * dt_s
     v_cap = v_max_mps * (1 - 1e-9)
-    candidates = [v0 + reach * u, v_cap * u]
-    speed = float(np.linalg.norm(v0))
-    if speed > 1e-12 and abs(reach - v_cap) <= speed <= reach + v_cap:
-        along = (v_cap**2 - reach**2 + speed**2) / (2 * speed)
-        across = np.sqrt(max(v_cap**2 - along**2, 0.0))
-        e = v0 / speed
-        n = np.array([-e[1], e[0]])
-        candidates += [along * e + across * n, along * e - across * n]
-    feasible = [
-        c
-        for c in candidates
-        if np.linalg.norm(c - v0) <= reach * (1 + 1e-9) and np.linalg.norm(c) <= v_max_mps
+    speed = np.linalg.norm(v0, axis=-1, keepdims=True)
+    e = v0 / np.maximum(speed, 1e-12)
+    n = np.stack([-e[..., 1], e[..., 0]], axis=-1)
+    along = (v_cap**2 - reach**2 + speed**2) / (2 * np.maximum(speed, 1e-12))
+    across = np.sqrt(np.maximum(v_cap**2 - along**2, 0.0))
+    crossing = (speed > 1e-12) & (abs(reach - v_cap) <= speed) & (speed <= reach + v_cap)
+    candidates = np.stack(
+        [v0 + reach * u, v_cap * u, along * e + across * n, along * e - across * n], axis=-2
+    )  # [..., 4, 2]
+    feasible = (
+        (np.linalg.norm(candidates - v0[..., None, :], axis=-1) <= reach * (1 + 1e-9))
+        & (np.linalg.norm(candidates, axis=-1) <= v_max_mps)
+        & np.concatenate([np.ones((*crossing.shape[:-1], 2), bool), crossing.repeat(2, -1)], -1)
+    )
+    gain = np.where(
+        feasible, np.einsum("...ki,...i->...k", candidates - v0[..., None, :], u), -np.inf
+    )
+    best = np.take_along_axis(candidates, np.argmax(gain, axis=-1)[..., None, None], axis=-2)[
+        ..., 0, :
     ]
-    if not feasible:
-        return np.asarray(v0 - reach * v0 / max(speed, 1e-12))
-    return np.asarray(max(feasible, key=lambda c: float((c - v0) @ u)))
+    brake = v0 - reach * e
+    return np.asarray(np.where(feasible.any(axis=-1, keepdims=True), best, brake))
 
 
 def evasive_legs(

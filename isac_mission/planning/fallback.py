@@ -149,8 +149,8 @@ def _target_escape(
     parties: Parties, s: Scenario, xy_m: FloatArray, velocity_mps: FloatArray, end: bool = False
 ) -> tuple[BoolArray, FloatArray]:
     """evasion.target_escape of UAVs at xy_m [M, 2] moving at velocity_mps [M, 2] from the
-    slot's target (its party: at the slot's start; end: at its predicted end state), with
-    a_max - a_T to dodge with."""
+    slot's target (its party: at the slot's start; end: at its predicted end state), which may
+    manoeuvre at a_T."""
     M = s.M
     target_xy = parties.xy_m[M] + s.dt * parties.velocity_mps[M] * end
     return target_escape(
@@ -159,9 +159,11 @@ def _target_escape(
         target_xy,
         parties.velocity_mps[M],
         float(parties.clearance_m[M]),
-        max(s.a_max - s.a_target, 0.0),
+        s.a_max,
+        s.a_target,
         s.v_max,
         s.dt,
+        known_s=s.dt * end,
     )
 
 

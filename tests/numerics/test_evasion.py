@@ -29,6 +29,7 @@ from isac_mission.planning.evasion import (
     coasting_threats,
     evasive_legs,
     evasive_velocity,
+    target_escape,
     unviable_pairs,
 )
 from isac_mission.planning.margins import SafetyMargins
@@ -165,3 +166,157 @@ def test_the_twelve_uav_trap_keeps_every_pair_apart() -> None:
     for o in evasive:
         assert "evasive legs for UAVs" in o.plan.report.reason
     assert SafetyMargins.of(s).separation_m >= s.d_safe
+
+
+A_TARGET, TARGET_SPEED = 2.0, 30.0
+"""The target of the guard's tests: faster than V_max, turning toward the UAV at a_T."""
+
+
+def fly_against_target(
+    xy: np.ndarray, v: np.ndarray, p: np.ndarray, vt: np.ndarray, guarded: bool, slots: int = 15
+) -> float:
+    """One UAV planned by the worst plan that keeps 14j along its leg (coasting on; a leg that
+    does not keep it is no plan: it evades, as the best effort does), guarded by
+    target_escape (end state, known a slot ago) when `guarded`; the target turns toward the UAV
+    at A_TARGET at constant speed. The smallest true distance along the legs (40 samples a
+    slot)."""
+    clearance = SEP + 0.5 * A_TARGET * DT**2
+    smallest = np.inf
+    frac = np.linspace(0, 1, 41)[:, None]
+    for _ in range(slots):
+        parties = Parties.of(xy[None], v[None], SEP, p, vt, clearance, None)
+        end_xy, end_v = xy + v * DT, v.copy()
+        coasting_gap = np.linalg.norm(xy + v * DT * frac - (p + vt * DT * frac), axis=1)
+        dodge_now = bool(np.min(coasting_gap) < clearance)
+        if guarded:
+            viable, _ = target_escape(
+                end_xy[None],
+                end_v[None],
+                p + vt * DT,
+                vt,
+                clearance,
+                A_MAX,
+                A_TARGET,
+                V_MAX,
+                DT,
+                known_s=DT,
+            )
+            dodge_now |= not viable[0]
+        if dodge_now:
+            _, direction = target_escape(
+                xy[None], v[None], p, vt, clearance, A_MAX, A_TARGET, V_MAX, DT
+            )
+            threat = np.array([[False, True]])
+            e_xy, e_v, _ = evasive_legs(
+                parties, threat, end_xy[None], end_v[None], A_MAX, V_MAX, DT, direction
+            )
+            end_xy, end_v = e_xy[0], e_v[0]
+        pp, vv, h = p.copy(), vt.copy(), DT / 40
+        for k in range(1, 41):
+            u = vv / np.linalg.norm(vv)
+            n = np.array([-u[1], u[0]]) * np.sign((xy - pp) @ np.array([-u[1], u[0]]) or 1.0)
+            vn = vv + A_TARGET * h * n
+            vn *= TARGET_SPEED / np.linalg.norm(vn)
+            pp, vv = pp + 0.5 * (vv + vn) * h, vn
+            uav = hermite_position(xy[None], v[None], end_xy[None], end_v[None], DT, k / 40)[0]
+            smallest = min(smallest, float(np.linalg.norm(uav - pp)))
+        xy, v, p, vt = end_xy, end_v, pp, vv
+    return smallest
+
+
+def random_viable_encounters(rng: np.random.Generator, count: int) -> list[tuple[np.ndarray, ...]]:
+    """UAV at the origin, the target 60-400 m away on any heading at TARGET_SPEED; kept where
+    target_escape says the start is viable."""
+    clearance = SEP + 0.5 * A_TARGET * DT**2
+    out: list[tuple[np.ndarray, ...]] = []
+    while len(out) < count:
+        xy, v = np.zeros(2), rng.uniform(-1, 1, 2) * V_MAX / np.sqrt(2)
+        bearing, heading = rng.uniform(0, 2 * np.pi, 2)
+        p = rng.uniform(60, 400) * np.array([np.cos(bearing), np.sin(bearing)])
+        vt = TARGET_SPEED * np.array([np.cos(heading), np.sin(heading)])
+        viable, _ = target_escape(xy[None], v[None], p, vt, clearance, A_MAX, A_TARGET, V_MAX, DT)
+        if viable[0]:
+            out.append((xy, v, p, vt))
+    return out
+
+
+def test_guarded_uavs_dodge_a_faster_target_manoeuvring_at_the_bound(
+    rng: np.random.Generator,
+) -> None:
+    """From 150 viable starts, a target faster than V_max that turns toward the UAV at a_T
+    never comes within D_s of a guarded UAV; without the guard (14j along the leg only) it
+    does."""
+    unguarded = []
+    for xy, v, p, vt in random_viable_encounters(rng, 150):
+        assert fly_against_target(xy, v, p, vt, guarded=True) >= SEP, (v, p, vt)
+        unguarded.append(fly_against_target(xy, v, p, vt, guarded=False))
+    assert sum(g < SEP for g in unguarded) >= 5, sorted(unguarded)[:10]
+
+
+def test_a_target_far_off_any_course_is_viable_and_one_head_on_and_close_is_not() -> None:
+    clearance = SEP + 1.0
+    xy, v = np.zeros((1, 2)), np.zeros((1, 2))
+    passing = target_escape(
+        xy,
+        v,
+        np.array([-300.0, 200.0]),
+        np.array([30.0, 0.0]),
+        clearance,
+        A_MAX,
+        A_TARGET,
+        V_MAX,
+        DT,
+    )
+    head_on_far = target_escape(
+        xy,
+        v,
+        np.array([-400.0, 0.0]),
+        np.array([30.0, 0.0]),
+        clearance,
+        A_MAX,
+        A_TARGET,
+        V_MAX,
+        DT,
+    )
+    head_on_close = target_escape(
+        xy,
+        v,
+        np.array([-60.0, 0.0]),
+        np.array([30.0, 0.0]),
+        clearance,
+        A_MAX,
+        A_TARGET,
+        V_MAX,
+        DT,
+    )
+    assert passing[0][0] and head_on_far[0][0] and not head_on_close[0][0]
+    # Head-on at 150 m (5 s away), the dodge goes across the target's path, not away from it.
+    _, direction = target_escape(
+        xy,
+        v,
+        np.array([-150.0, 0.0]),
+        np.array([30.0, 0.0]),
+        clearance,
+        A_MAX,
+        A_TARGET,
+        V_MAX,
+        DT,
+    )
+    assert abs(direction[0, 1]) >= abs(direction[0, 0])
+
+
+def test_the_six_uav_trap_dodges_the_target() -> None:
+    """The fleet bench's M = 6, seed 2, `horizon`: before the target was in the guard, capped
+    slots flew per-slot plans that left UAV 4 in the path of the 30 m/s target, the next slots
+    were infeasible and their best effort came within 10.9 m of it. With the constant-velocity
+    target alone (a_T = 0: the same missions up to the guard), the guard dodges it."""
+    bench = load_bench()
+    s = bench.fleet_scenario(6, 30).with_changes(a_target=0.0)
+    outcomes: list[SlotOutcome] = []
+    run_closed_loop(s, "horizon", draw_run_noise(s, 2), SolverKit(s), outcomes.append)
+    _, target_gaps = bench.flown_gaps_m(s, outcomes)
+    assert min(target_gaps) >= s.d_safe, [
+        (o.slot, round(g, 1)) for o, g in zip(outcomes, target_gaps, strict=True) if g < s.d_safe
+    ]
+    dodged = [o for o in outcomes if "dodge the target" in o.plan.report.reason]
+    assert dodged, "the guard never dodged: the trap is gone and this test no longer tests it"
