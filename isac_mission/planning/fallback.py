@@ -33,7 +33,7 @@ from isac_mission.planning.evasion import (
     unviable_pairs,
 )
 from isac_mission.planning.feasibility import operating_area
-from isac_mission.planning.margins import SafetyMargins
+from isac_mission.planning.margins import SafetyMargins, manoeuvre_margin_m
 from isac_mission.planning.problem import SlotInput, SlotProblem, slot_clearance_m
 from isac_mission.tracking.pcrb import PlanningObjective
 from isac_mission.types import BoolArray, FloatArray, IntArray, SlotPlan, SolveReport
@@ -150,7 +150,8 @@ def _target_escape(
 ) -> tuple[BoolArray, FloatArray]:
     """evasion.target_escape of UAVs at xy_m [M, 2] moving at velocity_mps [M, 2] from the
     slot's target (its party: at the slot's start; end: at its predicted end state), which may
-    manoeuvre at a_T."""
+    manoeuvre at a_T: the distance to keep is the slot's 14j clearance without its manoeuvre
+    margin, which target_escape's reach a_T (t + known)^2 / 2 replaces."""
     M = s.M
     target_xy = parties.xy_m[M] + s.dt * parties.velocity_mps[M] * end
     return target_escape(
@@ -158,7 +159,7 @@ def _target_escape(
         velocity_mps,
         target_xy,
         parties.velocity_mps[M],
-        float(parties.clearance_m[M]),
+        float(parties.clearance_m[M]) - manoeuvre_margin_m(s),
         s.a_max,
         s.a_target,
         s.v_max,

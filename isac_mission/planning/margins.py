@@ -139,9 +139,9 @@ def _largest_eigenvalue(P: FloatArray) -> FloatArray:
 
 def target_clearance_m(s: Scenario, target_cov_pred: FloatArray | None) -> float:
     """The planned distance (m) from the predicted target that 14j keeps: D_s, plus (rule on)
-    k sigma_max + e + a_T dt^2 / 2 for the predicted covariance target_cov_pred [4, 4] (or
+    k sigma_max + e + the manoeuvre margin for the predicted covariance target_cov_pred [4, 4] (or
     [2, 2]; None: no covariance term), sigma_max over the slot's sampled instants
-    (`slot_sigma_max_m`), a_T the target's manoeuvre bound (`manoeuvre_margin_m`)."""
+    (`slot_sigma_max_m`), plus the manoeuvre margin (`manoeuvre_margin_m`)."""
     cfg = s.planner
     if not rule_on(s):
         return s.d_safe
@@ -150,11 +150,22 @@ def target_clearance_m(s: Scenario, target_cov_pred: FloatArray | None) -> float
         s.d_safe
         + cfg.safety_confidence_sigma * sigma
         + cfg.tracking_margin_m
-        + manoeuvre_margin_m(s.a_target, s.dt)
+        + manoeuvre_margin_m(s)
     )
 
 
-def manoeuvre_margin_m(a_target_mps2: float, dt_s: float) -> float:
-    """How far (m) a target accelerating at most a_target_mps2 can be off its constant-velocity
-    prediction from the slot's start by the slot's end, a_T dt^2 / 2 (the most over the leg)."""
-    return 0.5 * a_target_mps2 * dt_s**2
+def manoeuvre_margin_m(s: Scenario) -> float:
+    """What 14j keeps (m, rule on; else 0) for a target that manoeuvres at up to a_T =
+    s.a_target off its constant-velocity prediction: a_T dt^2 / 2, how far it can be off by the
+    slot's end, plus, with the vehicle model (where the evasion guard checks the end state),
+    the reaction margin (a_T dt)^2 / (2 (a_max - a_T)): a UAV that ends its slot at rest
+    relative to the target, the target's velocity a_T dt off its prediction toward it, closes
+    by at most that much before its own a_max - a_T opens the distance again
+    (docs/model.md, "Safety")."""
+    if not rule_on(s):
+        return 0.0
+    margin = 0.5 * s.a_target * s.dt**2
+    if s.planner.vehicle_model and s.a_target > 0:
+        surplus = max(s.a_max - s.a_target, 1e-3 * s.a_max)
+        margin += (s.a_target * s.dt) ** 2 / (2 * surplus)
+    return margin

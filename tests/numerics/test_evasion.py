@@ -170,6 +170,9 @@ def test_the_twelve_uav_trap_keeps_every_pair_apart() -> None:
 
 A_TARGET, TARGET_SPEED = 2.0, 30.0
 """The target of the guard's tests: faster than V_max, turning toward the UAV at a_T."""
+CLEARANCE_14J = SEP + 0.5 * A_TARGET * DT**2 + (A_TARGET * DT) ** 2 / (2 * (A_MAX - A_TARGET))
+"""What 14j keeps with the vehicle model (docs/model.md, "Safety"): D_s, the manoeuvre within the
+slot, the reaction margin; target_escape keeps D_s plus its own reach."""
 
 
 def fly_against_target(
@@ -180,21 +183,20 @@ def fly_against_target(
     target_escape (end state, known a slot ago) when `guarded`; the target turns toward the UAV
     at A_TARGET at constant speed. The smallest true distance along the legs (40 samples a
     slot)."""
-    clearance = SEP + 0.5 * A_TARGET * DT**2
     smallest = np.inf
     frac = np.linspace(0, 1, 41)[:, None]
     for _ in range(slots):
-        parties = Parties.of(xy[None], v[None], SEP, p, vt, clearance, None)
+        parties = Parties.of(xy[None], v[None], SEP, p, vt, CLEARANCE_14J, None)
         end_xy, end_v = xy + v * DT, v.copy()
         coasting_gap = np.linalg.norm(xy + v * DT * frac - (p + vt * DT * frac), axis=1)
-        dodge_now = bool(np.min(coasting_gap) < clearance)
+        dodge_now = bool(np.min(coasting_gap) < CLEARANCE_14J)
         if guarded:
             viable, _ = target_escape(
                 end_xy[None],
                 end_v[None],
                 p + vt * DT,
                 vt,
-                clearance,
+                SEP,
                 A_MAX,
                 A_TARGET,
                 V_MAX,
@@ -203,9 +205,7 @@ def fly_against_target(
             )
             dodge_now |= not viable[0]
         if dodge_now:
-            _, direction = target_escape(
-                xy[None], v[None], p, vt, clearance, A_MAX, A_TARGET, V_MAX, DT
-            )
+            _, direction = target_escape(xy[None], v[None], p, vt, SEP, A_MAX, A_TARGET, V_MAX, DT)
             threat = np.array([[False, True]])
             e_xy, e_v, _ = evasive_legs(
                 parties, threat, end_xy[None], end_v[None], A_MAX, V_MAX, DT, direction
@@ -227,14 +227,13 @@ def fly_against_target(
 def random_viable_encounters(rng: np.random.Generator, count: int) -> list[tuple[np.ndarray, ...]]:
     """UAV at the origin, the target 60-400 m away on any heading at TARGET_SPEED; kept where
     target_escape says the start is viable."""
-    clearance = SEP + 0.5 * A_TARGET * DT**2
     out: list[tuple[np.ndarray, ...]] = []
     while len(out) < count:
         xy, v = np.zeros(2), rng.uniform(-1, 1, 2) * V_MAX / np.sqrt(2)
         bearing, heading = rng.uniform(0, 2 * np.pi, 2)
         p = rng.uniform(60, 400) * np.array([np.cos(bearing), np.sin(bearing)])
         vt = TARGET_SPEED * np.array([np.cos(heading), np.sin(heading)])
-        viable, _ = target_escape(xy[None], v[None], p, vt, clearance, A_MAX, A_TARGET, V_MAX, DT)
+        viable, _ = target_escape(xy[None], v[None], p, vt, SEP, A_MAX, A_TARGET, V_MAX, DT)
         if viable[0]:
             out.append((xy, v, p, vt))
     return out
@@ -320,3 +319,31 @@ def test_the_six_uav_trap_dodges_the_target() -> None:
     ]
     dodged = [o for o in outcomes if "dodge the target" in o.plan.report.reason]
     assert dodged, "the guard never dodged: the trap is gone and this test no longer tests it"
+
+
+@pytest.mark.parametrize("target_speed_mps", [15.0, 22.0])
+def test_a_uav_at_the_14j_clearance_beside_the_target_is_viable_thanks_to_the_reaction_margin(
+    target_speed_mps: float,
+) -> None:
+    """A UAV that ends its slot beside the target at 14j's clearance, moving with it, can keep
+    away from every target motion within a_T: the reaction margin is what makes it so (0.2 m
+    less and the target, its velocity a_T dt off toward the UAV, gets within D_s first)."""
+    vt = np.array([target_speed_mps, 0.0])
+
+    def viable(gap_m: float) -> bool:
+        ok, _ = target_escape(
+            np.array([[0.0, gap_m]]),
+            vt[None],
+            np.zeros(2),
+            vt,
+            SEP,
+            A_MAX,
+            A_TARGET,
+            V_MAX,
+            DT,
+            known_s=DT,
+        )
+        return bool(ok[0])
+
+    assert viable(CLEARANCE_14J)
+    assert not viable(CLEARANCE_14J - 0.2)
