@@ -8,7 +8,7 @@ summaries count them), from most to least planned:
 | "" | the method planned | its plan | the method |
 | `horizon: <why>` | the horizon's answer is not kept (IPOPT failed, or stopped at its cap on an iterate infeasible or no better than its start; the answer breaks the exact check or the leg limits, the per-slot plan is infeasible) | the per-slot plan (`per_slot_instead`) | planning/horizon.py |
 | `infeasible` | no plan meets 14a-14j (the link cannot reach R_th, or the search ends infeasible) | `best_effort`: the link-optimal waypoints (or the coasting point), away from the target first; with the vehicle model, threatened UAVs on evasive legs | planning/per_slot.py, planning/benchmarks.py |
-| `evasive` | with the vehicle model, the plan's end state leaves UAVs that cannot brake apart before D_s | `kept_viable`: those UAVs on evasive legs (planning/evasion.py), the others the plan | planning/slot.py |
+| `evasive` | with the vehicle model, the plan's end state leaves UAVs that cannot brake apart before D_s or dodge the target | `kept_viable`: those UAVs on evasive legs (planning/evasion.py), the others the plan | planning/slot.py |
 | `solver error` | the planner raised | the communication-optimal plan, else `hold_plan` | planning/fleet.py |
 | `timeout`, `no vehicles` | the live budget passed; nothing can follow a plan | `hold_plan`: every vehicle holds where it is | service/ground/loop.py, planning/fleet.py |
 | `late` | a plan is published after its slot's end | that plan, marked | service/ground/loop.py |
@@ -60,8 +60,9 @@ def best_effort(problem: SlotProblem, reason: str) -> SlotPlan:
     """The plan of a slot no method can solve (status and fallback "infeasible"): the
     link-optimal waypoints, or where the vehicles coast to when the planner respects their
     dynamics; either way away from the target first, inside the operating area. With the
-    vehicle model a UAV that coasts toward another UAV, the target or a keep-out point flies its
-    evasive leg instead (planning/evasion.py), its end velocity in the plan."""
+    vehicle model a UAV that coasts toward another UAV, the target or a keep-out point, or that
+    could no longer dodge the target, flies its evasive leg instead (planning/evasion.py), its
+    end velocity in the plan."""
     cons = problem.constraints
     comm = problem.communication
     best = comm.uav_xy if problem.ballistic_xy_m is None else problem.ballistic_xy_m
@@ -104,8 +105,9 @@ def slot_parties(inp: SlotInput, s: Scenario) -> Parties:
 
 def kept_viable(plan: SlotPlan, inp: SlotInput, s: Scenario, sensing: SensingParams) -> SlotPlan:
     """`plan`, or under the vehicle model, where its end state leaves UAVs that cannot brake
-    apart before D_s (evasion.unviable_pairs), the plan with those UAVs on their evasive legs
-    (fallback "evasive"; the bound re-evaluated, the association and shares kept)."""
+    apart before D_s (evasion.unviable_pairs) or dodge the target (evasion.target_escape), the
+    plan with those UAVs on their evasive legs (fallback "evasive"; the bound re-evaluated, the
+    association and shares kept)."""
     if not s.planner.vehicle_model or inp.prev_velocity_mps is None:
         return plan
     if plan.uav_velocity_mps is None:

@@ -252,56 +252,39 @@ def test_guarded_uavs_dodge_a_faster_target_manoeuvring_at_the_bound(
     assert sum(g < SEP for g in unguarded) >= 5, sorted(unguarded)[:10]
 
 
+def escape_from_rest(target_x_m: float) -> tuple[bool, np.ndarray]:
+    """target_escape of a UAV at rest at the origin from a 30 m/s target at (target_x_m, 0)
+    flying +x, clearance D_s + 1 m: (viable, dodge direction [2])."""
+    viable, direction = target_escape(
+        np.zeros((1, 2)),
+        np.zeros((1, 2)),
+        np.array([target_x_m, 0.0]),
+        np.array([TARGET_SPEED, 0.0]),
+        SEP + 1.0,
+        A_MAX,
+        A_TARGET,
+        V_MAX,
+        DT,
+    )
+    return bool(viable[0]), direction[0]
+
+
 def test_a_target_far_off_any_course_is_viable_and_one_head_on_and_close_is_not() -> None:
-    clearance = SEP + 1.0
-    xy, v = np.zeros((1, 2)), np.zeros((1, 2))
-    passing = target_escape(
-        xy,
-        v,
+    passing, _ = target_escape(
+        np.zeros((1, 2)),
+        np.zeros((1, 2)),
         np.array([-300.0, 200.0]),
-        np.array([30.0, 0.0]),
-        clearance,
+        np.array([TARGET_SPEED, 0.0]),
+        SEP + 1.0,
         A_MAX,
         A_TARGET,
         V_MAX,
         DT,
     )
-    head_on_far = target_escape(
-        xy,
-        v,
-        np.array([-400.0, 0.0]),
-        np.array([30.0, 0.0]),
-        clearance,
-        A_MAX,
-        A_TARGET,
-        V_MAX,
-        DT,
-    )
-    head_on_close = target_escape(
-        xy,
-        v,
-        np.array([-60.0, 0.0]),
-        np.array([30.0, 0.0]),
-        clearance,
-        A_MAX,
-        A_TARGET,
-        V_MAX,
-        DT,
-    )
-    assert passing[0][0] and head_on_far[0][0] and not head_on_close[0][0]
+    assert passing[0] and escape_from_rest(-400.0)[0] and not escape_from_rest(-60.0)[0]
     # Head-on at 150 m (5 s away), the dodge goes across the target's path, not away from it.
-    _, direction = target_escape(
-        xy,
-        v,
-        np.array([-150.0, 0.0]),
-        np.array([30.0, 0.0]),
-        clearance,
-        A_MAX,
-        A_TARGET,
-        V_MAX,
-        DT,
-    )
-    assert abs(direction[0, 1]) >= abs(direction[0, 0])
+    direction = escape_from_rest(-150.0)[1]
+    assert abs(direction[1]) >= abs(direction[0])
 
 
 def test_the_six_uav_trap_dodges_the_target() -> None:
