@@ -43,6 +43,7 @@ from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.planning.slot import Method
 from isac_mission.service.ground.report import SlotEvent
+from isac_mission.types import FloatArray
 from isac_mission.wire import Keys, decode_telemetry, decode_truth
 from sim.world import run_world
 from sim.world_options import WorldOptions
@@ -163,13 +164,15 @@ async def run_soak(
     method: Method = "proposed",
     trace_malloc: bool = False,
     on_sample: Callable[[SoakSample], None] | None = None,
+    path: tuple[tuple[tuple[float, float], ...], float] | None = None,
 ) -> SoakResult:
     """Fly `s` (use `soak_scenario`) live for s.N slots with `method` and sample every slot
     (module docstring); an observer session counts the telemetry samples closer than D_s to
     the true target or another UAV (soak_safety.py).
 
     Free loopback ports for Zenoh and MAVLink; `lockstep_timeout` of the world 60 wall s.
-    Give `soak_scenario` and `run_soak` the same `loop_radius_m`.
+    Give `soak_scenario` and `run_soak` the same `loop_radius_m`. path: (waypoints [P, 2] m,
+    speed m/s), a scripted target path instead of `target` (its start is s.x0's).
     """
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
     # The observer listens too, and the world connects to it: Zenoh peers do not forward each
@@ -193,10 +196,16 @@ async def run_soak(
         bus=BusSettings(connect=(endpoint, observer_endpoint)),
         **ports.world_kwargs(),
         start="offboard",
-        target_waypoints_xy_m=loop_waypoints(s.N, s.dt, loop_radius_m)
+        target_waypoints_xy_m=path[0]
+        if path is not None
+        else loop_waypoints(s.N, s.dt, loop_radius_m)
         if target == "loop"
         else None,
-        target_speed_mps=LOOP_SPEED_MPS if target == "loop" else None,
+        target_speed_mps=path[1]
+        if path is not None
+        else LOOP_SPEED_MPS
+        if target == "loop"
+        else None,
     )
     samples: list[SoakSample] = []
     quarter = max(1, s.N // 4)
@@ -357,3 +366,26 @@ def quarter_table(samples: Sequence[SoakSample], warmup: int = 0) -> QuarterTabl
         solve_ratio=last.solve_ms / first.solve_ms,
         rss_ratio=last.rss_mib / first.rss_mib,
     )
+
+
+def pursuit_path(
+    x0: FloatArray, aims_xy_m: FloatArray, a_target_mps2: float, dt_s: float, steps: int = 20
+) -> FloatArray:
+    """[len(aims), 2]: the positions at the slot instants of a target starting at x0 [4] at
+    constant speed, turning toward aims_xy_m[n] [N + 1, 2] during slot n at up to a_target_mps2
+    (integrated in `steps` steps a slot): a manoeuvre at the bound."""
+    p, v = np.array(x0[:2], dtype=float), np.array(x0[2:4], dtype=float)
+    speed = float(np.linalg.norm(v))
+    out = [p.copy()]
+    h = dt_s / steps
+    for aim in aims_xy_m[1:]:
+        for _ in range(steps):
+            heading = math.atan2(v[1], v[0])
+            want = math.atan2(aim[1] - p[1], aim[0] - p[0])
+            turn = (want - heading + math.pi) % (2 * math.pi) - math.pi
+            heading += float(np.clip(turn, -a_target_mps2 / speed * h, a_target_mps2 / speed * h))
+            v_next = speed * np.array([math.cos(heading), math.sin(heading)])
+            p = p + 0.5 * (v + v_next) * h
+            v = v_next
+        out.append(p.copy())
+    return np.asarray(out)
