@@ -166,10 +166,11 @@ def target_escape(
     position then was within a_T dt^2 / 2, its velocity within a_T dt, of the constant-velocity
     motion given), so at time t its worst motion is anywhere within a_T (t + known_s)^2 / 2 of
     that motion, and a UAV motion keeps the target away if its distance to it is at least
-    clearance_m + a_T (t + known_s)^2 / 2 at every sample. Viable: one of the four motions does, within the
-    look-ahead dt + (|relative velocity| + sqrt(2 c A)) / A, A = a_max - a_T, that the UAV needs
-    to cancel their closing speed and step the clearance aside (a farther encounter is next
-    slot's to dodge). direction: the dodge (of the three) whose worst margin is largest."""
+    clearance_m + a_T (t + known_s)^2 / 2 at every sample. Viable: one of the four motions does,
+    within the look-ahead dt + (|relative velocity| + sqrt(2 c A)) / A, A = a_max - a_T, that
+    the UAV needs to cancel their closing speed and step the clearance aside (a farther
+    encounter is next slot's to dodge). direction: the dodge (of the three) whose worst margin
+    is largest."""
     xy = np.asarray(uav_xy_m, dtype=float)
     v0 = np.asarray(uav_velocity_mps, dtype=float)
     p_t = np.asarray(target_xy_m, dtype=float).reshape(2)
@@ -187,13 +188,13 @@ def target_escape(
     bisector /= np.maximum(np.linalg.norm(bisector, axis=1), 1e-12)[:, None]
     coast = np.zeros_like(away)
     directions = np.stack([coast, away, across, bisector], axis=1)  # [M, 4, 2]
-    accel = np.array([0.0, 1.0, 1.0, 1.0])[None, :, None] * a_max_mps2
+    dodging = np.array([False, True, True, True])[None, :, None]
     slots = int(np.ceil(float(np.max(look_ahead_s, initial=0.0)) / dt_s))
     tau = np.arange(1, ESCAPE_STEPS_PER_SLOT + 1) / ESCAPE_STEPS_PER_SLOT  # [S] in (0, 1]
     p, v = np.repeat(xy[:, None], 4, axis=1), np.repeat(v0[:, None], 4, axis=1)
     margin = np.repeat(np.linalg.norm(rel, axis=1)[:, None], 4, axis=1) - clearance_m
     for k in range(slots):
-        v1 = np.where(accel > 0, evasive_velocity(v, directions, a_max_mps2, v_max_mps, dt_s), v)
+        v1 = np.where(dodging, evasive_velocity(v, directions, a_max_mps2, v_max_mps, dt_s), v)
         t_s = (k + tau) * dt_s  # [S]
         pts = (
             p[:, :, None]
