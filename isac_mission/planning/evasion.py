@@ -188,13 +188,13 @@ def target_escape(
     bisector /= np.maximum(np.linalg.norm(bisector, axis=1), 1e-12)[:, None]
     coast = np.zeros_like(away)
     directions = np.stack([coast, away, across, bisector], axis=1)  # [M, 4, 2]
-    dodging = np.array([False, True, True, True])[None, :, None]
     slots = int(np.ceil(float(np.max(look_ahead_s, initial=0.0)) / dt_s))
     tau = np.arange(1, ESCAPE_STEPS_PER_SLOT + 1) / ESCAPE_STEPS_PER_SLOT  # [S] in (0, 1]
     p, v = np.repeat(xy[:, None], 4, axis=1), np.repeat(v0[:, None], 4, axis=1)
     margin = np.repeat(np.linalg.norm(rel, axis=1)[:, None], 4, axis=1) - clearance_m
     for k in range(slots):
-        v1 = np.where(dodging, evasive_velocity(v, directions, a_max_mps2, v_max_mps, dt_s), v)
+        v1 = v.copy()  # the coasting motion keeps its velocity; the dodges accelerate
+        v1[:, 1:] = evasive_velocity(v[:, 1:], directions[:, 1:], a_max_mps2, v_max_mps, dt_s)
         t_s = (k + tau) * dt_s  # [S]
         pts = (
             p[:, :, None]

@@ -175,6 +175,13 @@ CLEARANCE_14J = SEP + 0.5 * A_TARGET * DT**2 + (A_TARGET * DT) ** 2 / (2 * (A_MA
 slot, the reaction margin; target_escape keeps D_s plus its own reach."""
 
 
+def end_state_viable(xy: np.ndarray, v: np.ndarray, p: np.ndarray, vt: np.ndarray) -> bool:
+    """target_escape's verdict on one UAV's end state (xy [2], v [2]) against the target's
+    predicted end state (p [2], vt [2]), known a slot before, as the guard asks it."""
+    viable, _ = target_escape(xy[None], v[None], p, vt, SEP, A_MAX, A_TARGET, V_MAX, DT, known_s=DT)
+    return bool(viable[0])
+
+
 def fly_against_target(
     xy: np.ndarray, v: np.ndarray, p: np.ndarray, vt: np.ndarray, guarded: bool, slots: int = 15
 ) -> float:
@@ -191,19 +198,7 @@ def fly_against_target(
         coasting_gap = np.linalg.norm(xy + v * DT * frac - (p + vt * DT * frac), axis=1)
         dodge_now = bool(np.min(coasting_gap) < CLEARANCE_14J)
         if guarded:
-            viable, _ = target_escape(
-                end_xy[None],
-                end_v[None],
-                p + vt * DT,
-                vt,
-                SEP,
-                A_MAX,
-                A_TARGET,
-                V_MAX,
-                DT,
-                known_s=DT,
-            )
-            dodge_now |= not viable[0]
+            dodge_now |= not end_state_viable(end_xy, end_v, p + vt * DT, vt)
         if dodge_now:
             _, direction = target_escape(xy[None], v[None], p, vt, SEP, A_MAX, A_TARGET, V_MAX, DT)
             threat = np.array([[False, True]])
@@ -252,13 +247,13 @@ def test_guarded_uavs_dodge_a_faster_target_manoeuvring_at_the_bound(
     assert sum(g < SEP for g in unguarded) >= 5, sorted(unguarded)[:10]
 
 
-def escape_from_rest(target_x_m: float) -> tuple[bool, np.ndarray]:
-    """target_escape of a UAV at rest at the origin from a 30 m/s target at (target_x_m, 0)
-    flying +x, clearance D_s + 1 m: (viable, dodge direction [2])."""
+def escape_from_rest(target_x_m: float, target_y_m: float = 0.0) -> tuple[bool, np.ndarray]:
+    """target_escape of a UAV at rest at the origin from a 30 m/s target at (target_x_m,
+    target_y_m) flying +x, clearance D_s + 1 m: (viable, dodge direction [2])."""
     viable, direction = target_escape(
         np.zeros((1, 2)),
         np.zeros((1, 2)),
-        np.array([target_x_m, 0.0]),
+        np.array([target_x_m, target_y_m]),
         np.array([TARGET_SPEED, 0.0]),
         SEP + 1.0,
         A_MAX,
@@ -270,18 +265,8 @@ def escape_from_rest(target_x_m: float) -> tuple[bool, np.ndarray]:
 
 
 def test_a_target_far_off_any_course_is_viable_and_one_head_on_and_close_is_not() -> None:
-    passing, _ = target_escape(
-        np.zeros((1, 2)),
-        np.zeros((1, 2)),
-        np.array([-300.0, 200.0]),
-        np.array([TARGET_SPEED, 0.0]),
-        SEP + 1.0,
-        A_MAX,
-        A_TARGET,
-        V_MAX,
-        DT,
-    )
-    assert passing[0] and escape_from_rest(-400.0)[0] and not escape_from_rest(-60.0)[0]
+    assert escape_from_rest(-300.0, 200.0)[0]
+    assert escape_from_rest(-400.0)[0] and not escape_from_rest(-60.0)[0]
     # Head-on at 150 m (5 s away), the dodge goes across the target's path, not away from it.
     direction = escape_from_rest(-150.0)[1]
     assert abs(direction[1]) >= abs(direction[0])
@@ -314,19 +299,7 @@ def test_a_uav_at_the_14j_clearance_beside_the_target_is_viable_thanks_to_the_re
     vt = np.array([target_speed_mps, 0.0])
 
     def viable(gap_m: float) -> bool:
-        ok, _ = target_escape(
-            np.array([[0.0, gap_m]]),
-            vt[None],
-            np.zeros(2),
-            vt,
-            SEP,
-            A_MAX,
-            A_TARGET,
-            V_MAX,
-            DT,
-            known_s=DT,
-        )
-        return bool(ok[0])
+        return end_state_viable(np.array([0.0, gap_m]), vt, np.zeros(2), vt)
 
     assert viable(CLEARANCE_14J)
     assert not viable(CLEARANCE_14J - 0.2)
