@@ -232,7 +232,10 @@ grep -Eq 'vehicles landed[^0-9]*3' "$ground_log" || {
 # The trace, copied out of the named volume as the README says.
 out="$(mktemp -d)"
 docker cp "$("${compose[@]}" -p "$project" ps -a -q ground)":/data/serve "$out/" > /dev/null
-ok_slots="$(grep -c '"status": *"ok"' "$out/serve/trace_proposed.jsonl" || true)"
+# One trace, of the default method (trace_horizon.jsonl; the name follows `serve`'s default).
+traces=("$out"/serve/trace_*.jsonl)
+[ "${#traces[@]}" = 1 ] && [ -f "${traces[0]}" ] || fail "expected one trace in /data/serve, found: ${traces[*]}"
+ok_slots="$(grep -c '"status": *"ok"' "${traces[0]}" || true)"
 [ "$ok_slots" -ge "$min_ok_slots" ] || fail "the trace has $ok_slots ok slots"
 # `stop` came mid-mission (the landing is the shutdown's, not the mission's end).
 grep -Eq 'slots completed[^0-9]*([0-9]|[1-5][0-9])/60' "$ground_log" || {

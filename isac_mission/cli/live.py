@@ -38,13 +38,34 @@ if TYPE_CHECKING:
     from isac_mission.records.multi_target import MultiTargetSlot
 
 
+def resolved_method(method: str | None, s: Scenario, out_dir: Path, resume: bool) -> str:
+    """--method if given; else, resuming, the method of the one trace in out_dir
+    (trace_<method>.jsonl: `serve --resume` continues what was flown), else the live default
+    (`live_default_method`). ValueError when out_dir holds the traces of several methods."""
+    from isac_mission.planning.registry import live_default_method
+
+    if method is not None:
+        return method
+    if resume:
+        found = sorted(
+            p.name[len("trace_") : -len(".jsonl")] for p in out_dir.glob("trace_*.jsonl")
+        )
+        if len(found) > 1:
+            raise ValueError(
+                f"{out_dir} holds the traces of {', '.join(found)}; say which to resume"
+            )
+        if found:
+            return found[0]
+    return live_default_method(s.multi_target)
+
+
 def _live(
     config: Path,
     *,
     serve_only: bool,
     speed: float,
     lockstep: bool,
-    method: str,
+    method: str | None,
     seed: int | None,
     out: Path | None,
     zenoh_listen: str | None,
@@ -69,6 +90,16 @@ def _live(
     from isac_mission.planning.registry import METHODS
 
     s = load_or_exit(config)
+    out_dir = (
+        out
+        if out is not None
+        else Path("out") / f"{'serve' if serve_only else 'run'}-{s.mission_id}"
+    )
+    try:
+        method = resolved_method(method, s, out_dir, resume)
+    except ValueError as err:
+        err_console.print(f"--method: {err}", highlight=False)
+        raise typer.Exit(2) from None
     if method not in METHODS:
         err_console.print(f"--method: unknown {method!r}; choose from {', '.join(METHODS)}")
         raise typer.Exit(2)
@@ -83,11 +114,6 @@ def _live(
             raise typer.Exit(2) from None
     quiet_highs_banner()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    out_dir = (
-        out
-        if out is not None
-        else Path("out") / f"{'serve' if serve_only else 'run'}-{s.mission_id}"
-    )
     if link_outages:
         from isac_mission.cli.embedded import check_link_outages
 
@@ -336,7 +362,13 @@ def _multi_target_summary(
     console.print(f"trace: {result.trace_path}")
 
 
-MethodOpt = Annotated[str, typer.Option(help=f"Planning method: {methods_help()}.")]
+MethodOpt = Annotated[
+    str | None,
+    typer.Option(
+        help=f"Planning method: {methods_help()}. Default: horizon; on a multi-target scenario "
+        "proposed (horizon plans one target)."
+    ),
+]
 SpeedOpt = Annotated[float, typer.Option(help="Simulation seconds per wall second.")]
 
 
@@ -347,7 +379,7 @@ def run(
     lockstep: Annotated[
         bool, typer.Option(help="The world waits at each slot for its plan.")
     ] = False,
-    method: MethodOpt = "proposed",
+    method: MethodOpt = None,
     seed: Annotated[
         int | None, typer.Option(help="World noise seed (default: the config's).")
     ] = None,
@@ -398,7 +430,7 @@ def run(
 @app.command()
 def serve(
     config: ConfigArg,
-    method: MethodOpt = "proposed",
+    method: MethodOpt = None,
     out: Annotated[Path | None, typer.Option(help="Output folder (trace, plots).")] = None,
     zenoh_listen: Annotated[
         str | None,

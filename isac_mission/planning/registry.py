@@ -104,6 +104,18 @@ def methods_help() -> str:
     return ", ".join(METHODS)
 
 
+LIVE_DEFAULT_METHOD = "horizon"
+"""What `run` and `serve` fly without --method (docs/service.md, "The default method")."""
+LIVE_DEFAULT_MULTI_TARGET_METHOD = "proposed"
+"""Their default on a multi-target scenario (the horizon plans one target's bound)."""
+
+
+def live_default_method(multi_target: bool) -> str:
+    """The method `run` and `serve` fly when none is given: the receding horizon, or on a
+    multi-target scenario the paper's per-slot method."""
+    return LIVE_DEFAULT_MULTI_TARGET_METHOD if multi_target else LIVE_DEFAULT_METHOD
+
+
 def check_method(name: str) -> str:
     """name if it is registered; ValueError naming the choices otherwise."""
     if name not in METHODS:

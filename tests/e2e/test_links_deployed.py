@@ -25,7 +25,7 @@ import yaml
 from isac_mission.bus import tcp_loopback
 from isac_mission.records import read_trace
 from tests.support.independent.constraints import check_constraints
-from tests.support.live_cli import ROOT, serve_argv, sim_argv, start
+from tests.support.live_cli import DEFAULT_TRACE, ROOT, serve_argv, sim_argv, start
 from tests.support.mavproxy import MavProxy
 from tests.support.ports import free_port_block, sitl_ports, sitl_ports_and_blocks
 from tests.support.pty_pair import PtyCable
@@ -63,7 +63,7 @@ def _fly(serve: subprocess.Popen[str], sim: subprocess.Popen[str]) -> str:
 def _check_mission(serve_out: str, out: Path) -> None:
     assert f"{SLOTS}/{SLOTS}" in serve_out, serve_out[-2000:]
     assert re.search(r"vehicles landed\s*│\s*3\s*│", serve_out), serve_out[-2000:]
-    trace = read_trace(out / "trace_proposed.jsonl")
+    trace = read_trace(out / DEFAULT_TRACE)
     assert [r.slot for r in trace.slots] == list(range(1, SLOTS + 1))
     assert check_constraints(trace, tol_m=LIVE_TOL_M) == []
 

@@ -29,6 +29,7 @@ from isac_mission.records import Trace, read_trace
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import compare_pcrb
 from tests.support.live_cli import (
+    DEFAULT_TRACE,
     cli,
     serve_argv,
     short_mission,
@@ -218,7 +219,7 @@ def test_serve_and_sim_as_two_processes_complete_a_mission(tmp_path: Path) -> No
                 p.kill()
     assert "15/15" in serve_out
     assert re.search(r"vehicles landed\s*│\s*3\s*│", serve_out), serve_out[-2000:]
-    trace = read_trace(out / "trace_proposed.jsonl")
+    trace = read_trace(out / DEFAULT_TRACE)
     assert [r.slot for r in trace.slots] == list(range(1, 16))
     assert check_constraints(trace, tol_m=LIVE_TOL_M) == []
 
@@ -281,7 +282,7 @@ async def test_ground_station_observer_sees_offboard_flight_along_the_plan(tmp_p
     # Each planned waypoint of vehicle 0 was passed close by, as the ground station saw it
     # (scenario x = east, y = north; the simulated vehicles' local origin is the scenario's).
     seen = np.array(positions)
-    trace = read_trace(out / "trace_proposed.jsonl")
+    trace = read_trace(out / DEFAULT_TRACE)
     assert len(trace.slots) == 12
     for record in trace.slots:
         wp = np.asarray(record.plan_xy)[0]
@@ -323,7 +324,7 @@ def test_signal_mid_mission_lands_flushes_and_exits_zero(
 ) -> None:
     out = tmp_path / "run"
     proc = _start_run(out)
-    trace_path = out / "trace_proposed.jsonl"
+    trace_path = out / DEFAULT_TRACE
     try:
         wait_for_slots(trace_path, 3, proc, timeout_s=180)
         proc.send_signal(sig)
@@ -342,7 +343,7 @@ def test_signal_mid_mission_lands_flushes_and_exits_zero(
 def test_killed_run_leaves_every_completed_slot_readable(tmp_path: Path) -> None:
     out = tmp_path / "run"
     proc = _start_run(out)
-    trace_path = out / "trace_proposed.jsonl"
+    trace_path = out / DEFAULT_TRACE
     try:
         wait_for_slots(trace_path, 4, proc, timeout_s=180)
         proc.kill()
@@ -378,7 +379,7 @@ def test_a_solve_in_flight_when_the_mission_ends_leaves_a_clean_exit(
     proc = start(
         [sys.executable, "-m", "tests.support.slow_solve", str(SLOW_SLOT), str(SLOW_SOLVE_S), *argv]
     )
-    trace_path = out / "trace_proposed.jsonl"
+    trace_path = out / DEFAULT_TRACE
     try:
         if ending != "completed":
             # Record 5 is written once plan 6 is out: held after its budget, its solve running.

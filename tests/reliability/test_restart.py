@@ -25,7 +25,14 @@ from isac_mission.bus import tcp_loopback
 from isac_mission.records import Trace, read_trace
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import compare_pcrb
-from tests.support.live_cli import serve_argv, short_mission, sim_argv, start, wait_for_slots
+from tests.support.live_cli import (
+    DEFAULT_TRACE,
+    serve_argv,
+    short_mission,
+    sim_argv,
+    start,
+    wait_for_slots,
+)
 from tests.support.ports import free_port_block, sitl_ports
 
 TOL_M = 1.0
@@ -69,7 +76,7 @@ def _launch(
     serve = start(serve_argv(config, out, endpoint, ports.offboard_base))
     sim_cmd = sim_argv(config, endpoint, ports, "--speed", "3", *sim_extra)
     sim = start(sim_cmd, stdout=subprocess.DEVNULL)
-    return serve, sim, out / "trace_proposed.jsonl"
+    return serve, sim, out / DEFAULT_TRACE
 
 
 def test_two_process_start_traces_slot_1_as_planned(tmp_path: Path) -> None:

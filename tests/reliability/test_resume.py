@@ -39,7 +39,7 @@ from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import bound_update, compare_pcrb, cv_model, jacobian
-from tests.support.live_cli import serve_argv, sim_argv, start, wait_for_slots
+from tests.support.live_cli import DEFAULT_TRACE, serve_argv, sim_argv, start, wait_for_slots
 from tests.support.ports import free_port_block, sitl_ports
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -285,7 +285,7 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(
     endpoint = tcp_loopback(free_port_block(1, socket.SOCK_STREAM))
     ports = sitl_ports(3)
     out = tmp_path / "serve"
-    path = out / "trace_proposed.jsonl"
+    path = out / DEFAULT_TRACE
     serve_cmd = serve_argv(config, out, endpoint, ports.offboard_base)
 
     def start_serve(*extra: str) -> subprocess.Popen[str]:

@@ -11,10 +11,13 @@ from pathlib import Path
 import yaml
 
 from isac_mission.errors import MessageError
+from isac_mission.planning.registry import live_default_method
 from isac_mission.records import Trace, read_trace
 from tests.support.ports import SitlPorts
 
 ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_TRACE = f"trace_{live_default_method(multi_target=False)}.jsonl"
+"""The trace file of a single-target `run` or `serve` without --method."""
 
 
 def cli(*args: str) -> list[str]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 import isac_mission
@@ -66,3 +67,30 @@ def test_simulate_takes_a_shipped_scenario_by_name(tmp_path: Path) -> None:
     assert "paper: 1 runs" in result.output
     assert (out / "summary.json").is_file()
     assert len(list((out / "traces").glob("sd_run*.jsonl"))) == 1
+
+
+def test_run_and_serve_fly_the_horizon_by_default_and_resume_what_was_flown(
+    tmp_path: Path,
+) -> None:
+    from isac_mission.cli.live import resolved_method
+    from isac_mission.config import load_scenario
+    from isac_mission.errors import ConfigError
+    from isac_mission.planning.multi_target import check_multi_target_method
+
+    paper, multi = load_scenario("paper"), load_scenario("multi-target")
+    assert not paper.multi_target and multi.multi_target
+    assert resolved_method(None, paper, tmp_path, resume=False) == "horizon"
+    # The horizon plans one target's bound: a multi-target scenario defaults to a method that
+    # its path accepts, and the single-target default is one it refuses.
+    default_multi = resolved_method(None, multi, tmp_path, resume=False)
+    check_multi_target_method(default_multi)
+    with pytest.raises(ConfigError):
+        check_multi_target_method(resolved_method(None, paper, tmp_path, resume=False))
+    assert resolved_method("sd", paper, tmp_path, resume=True) == "sd"
+    # `--resume` continues the method of the trace it finds, whatever today's default.
+    (tmp_path / "trace_proposed.jsonl").write_text("{}\n")
+    assert resolved_method(None, paper, tmp_path, resume=True) == "proposed"
+    assert resolved_method(None, paper, tmp_path, resume=False) == "horizon"
+    (tmp_path / "trace_sd.jsonl").write_text("{}\n")
+    with pytest.raises(ValueError, match="proposed, sd; say which to resume"):
+        resolved_method(None, paper, tmp_path, resume=True)
