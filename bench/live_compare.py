@@ -35,6 +35,7 @@ import argparse
 import json
 import math
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -130,12 +131,28 @@ def fly_live(
         argv, cwd=ROOT, capture_output=True, text=True, env=_env(), check=False, timeout=1800
     )
     exits.append(proc.returncode)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / SUMMARY).write_text(proc.stdout)
     if proc.returncode != 0 or not trace.is_file():
         print(
             f"  live {method} seed {seed}: FAILED (exit {proc.returncode})\n{proc.stderr[-2000:]}"
         )
         return None
     return trace
+
+
+SUMMARY = "summary.txt"
+"""Where each live mission's printed summary is kept (beside its trace)."""
+
+
+def plans_late(trace: Path) -> int | None:
+    """The `plans late` counter of the summary kept beside a live trace (plans the bridges
+    dropped: they arrived more than a slot after their slot ended), None if none was kept."""
+    summary = trace.parent / SUMMARY
+    if not summary.is_file():
+        return None
+    found = re.search(r"plans late\s*│\s*(\d+)", summary.read_text())
+    return int(found.group(1)) if found else 0
 
 
 def run_simulate(config: str, method: str, seed: int, out: Path) -> Path | None:
@@ -310,6 +327,15 @@ def report(
         )
         if fallbacks or sim_fallbacks:
             print(f"{'':9s} fallbacks live {dict(fallbacks)}; simulate {dict(sim_fallbacks)}")
+        late = [plans_late(traces["live"][m][s]) for s in common]
+        n_slots = sum(len(tr.slots) for tr in read["live"][m])
+        if all(n is not None for n in late):
+            late_total = sum(n for n in late if n is not None)
+            timeouts = statuses.get("timeout", 0)
+            print(
+                f"{'':9s} live: {timeouts} slots over the plan budget (timeout), {late_total} "
+                f"plans late (dropped by the bridges) of {n_slots} slots"
+            )
         rows[m] = {
             "live": pl,
             "simulate": ps,
