@@ -14,7 +14,7 @@ live settings, the loop target as the truth; about 2 min for 3600 slots): the sl
 best effort (infeasible), by the evasion guard (evasive) and fallen back otherwise, and the slots
 where a UAV came closer than D_s to the true target or to another UAV along the flown legs
 (bench/horizon_fleet.py's `flown_gaps_m`), with the nearest distances.
-Run: python bench/soak.py [--slots 3600] [--speed 20] [--method proposed] [--target loop|cv]
+Run: python bench/soak.py [--slots 3600] [--speed 20] [--method horizon] [--target loop|cv]
      [--tracemalloc] [--offline]
 """
 
@@ -41,6 +41,7 @@ from isac_mission.experiment.closed_loop import (  # noqa: E402
     draw_run_noise,
     run_closed_loop,
 )
+from isac_mission.planning.registry import live_default_method  # noqa: E402
 from isac_mission.planning.slot import METHODS, SolverKit  # noqa: E402
 from isac_mission.quiet import quiet_highs_banner  # noqa: E402
 from sim.target import ScriptedTarget  # noqa: E402
@@ -60,7 +61,12 @@ def main() -> None:
     ap.add_argument("--speed", type=float, default=20.0)
     ap.add_argument("--no-lockstep", action="store_true")
     ap.add_argument("--target", choices=("loop", "cv"), default="loop")
-    ap.add_argument("--method", choices=METHODS, default="proposed", help="Planning method.")
+    ap.add_argument(
+        "--method",
+        choices=METHODS,
+        default=live_default_method(multi_target=False),
+        help="Planning method (default: the live default, horizon).",
+    )
     ap.add_argument("--config", default=str(ROOT / "config" / "paper.yaml"))
     ap.add_argument("--tracemalloc", action="store_true")
     ap.add_argument("--samples", type=Path, help="Write the per-slot samples here (JSON Lines).")

@@ -13,13 +13,14 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.config.live_settings import LiveSettings
 from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run_closed_loop
 from isac_mission.model.vehicle import hermite_position
-from isac_mission.planning.slot import SolverKit
+from isac_mission.planning.slot import Method, SolverKit
 from tests.support.soak import pursuit_path, run_soak
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,9 +59,11 @@ def nearest_along_legs(s: Scenario, outcomes: list[SlotOutcome], path: np.ndarra
     return nearest
 
 
+@pytest.mark.parametrize("method", ["horizon", "proposed"])
 async def test_a_target_manoeuvring_at_the_bound_toward_a_uav_stays_d_safe_away(
-    tmp_path: Path,
+    tmp_path: Path, method: Method
 ) -> None:
+    """Offline and live, with the live default (`horizon`) and the paper's method."""
     s, path = pursuit_scenario(tmp_path)
     assert s.a_target > 0
     truth = np.hstack([path, np.zeros_like(path)])
@@ -70,7 +73,7 @@ async def test_a_target_manoeuvring_at_the_bound_toward_a_uav_stays_d_safe_away(
     outcomes: list[SlotOutcome] = []
     run_closed_loop(
         planned,
-        "proposed",
+        method,
         draw_run_noise(planned, 1),
         SolverKit(planned),
         outcomes.append,
@@ -82,7 +85,12 @@ async def test_a_target_manoeuvring_at_the_bound_toward_a_uav_stays_d_safe_away(
 
     waypoints = tuple((float(x), float(y)) for x, y in path)
     result = await run_soak(
-        s, tmp_path / "out", speed=10.0, lockstep=True, path=(waypoints, TARGET_SPEED_MPS)
+        s,
+        tmp_path / "out",
+        speed=10.0,
+        lockstep=True,
+        path=(waypoints, TARGET_SPEED_MPS),
+        method=method,
     )
     counts = result.proximity
     assert counts.samples >= s.M * s.N

@@ -41,6 +41,7 @@ from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
+from isac_mission.planning.registry import live_default_method
 from isac_mission.planning.slot import Method
 from isac_mission.service.ground.report import SlotEvent
 from isac_mission.types import FloatArray
@@ -161,12 +162,13 @@ async def run_soak(
     target: TargetKind = "loop",
     loop_radius_m: float = LOOP_RADIUS_M,
     seed: int = 1,
-    method: Method = "proposed",
+    method: Method | None = None,
     trace_malloc: bool = False,
     on_sample: Callable[[SoakSample], None] | None = None,
     path: tuple[tuple[tuple[float, float], ...], float] | None = None,
 ) -> SoakResult:
-    """Fly `s` (use `soak_scenario`) live for s.N slots with `method` and sample every slot
+    """Fly `s` (use `soak_scenario`) live for s.N slots with `method` (None: what `run` flies
+    by default, `live_default_method`) and sample every slot
     (module docstring); an observer session counts the telemetry samples closer than D_s to
     the true target or another UAV (soak_safety.py).
 
@@ -182,7 +184,7 @@ async def run_soak(
     opts = LiveOptions(
         speed=speed,
         lockstep=lockstep,
-        method=method,
+        method=method or live_default_method(multi_target=False),
         seed=seed,
         out_dir=out_dir,
         zenoh_endpoint=endpoint,
