@@ -492,7 +492,7 @@ def serve(
 @app.command("compile")
 def compile_problems(
     config: ConfigArg,
-    method: MethodOpt = "horizon",
+    method: MethodOpt = None,
     live_settings: Annotated[
         bool,
         typer.Option(
@@ -510,10 +510,11 @@ def compile_problems(
     from isac_mission.nlp_cache import CompiledNlpCache
     from isac_mission.planning.fleet import prepare_fleet
     from isac_mission.planning.multi_target import KEEP_OUT_CAPACITY
-    from isac_mission.planning.registry import METHODS
+    from isac_mission.planning.registry import METHODS, live_default_method
     from isac_mission.planning.slot import SolverKit
 
     s = load_or_exit(config)
+    method = method or live_default_method(s.multi_target)
     if method not in METHODS:
         err_console.print(f"--method: unknown {method!r}; choose from {', '.join(METHODS)}")
         raise typer.Exit(2)

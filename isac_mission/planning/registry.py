@@ -105,7 +105,7 @@ def methods_help() -> str:
 
 
 LIVE_DEFAULT_METHOD = "horizon"
-"""What `run` and `serve` fly without --method (docs/service.md, "The default method")."""
+"""What `run` and `serve` fly without --method (docs/service.md, "The method flown")."""
 LIVE_DEFAULT_MULTI_TARGET_METHOD = "proposed"
 """Their default on a multi-target scenario (the horizon plans one target's bound)."""
 
