@@ -15,7 +15,7 @@ best effort (infeasible), by the evasion guard (evasive) and fallen back otherwi
 where a UAV came closer than D_s to the true target or to another UAV along the flown legs
 (bench/horizon_fleet.py's `flown_gaps_m`), with the nearest distances.
 Run: python bench/soak.py [--slots 3600] [--speed 20] [--method horizon] [--target loop|cv]
-     [--tracemalloc] [--offline]
+     [--tracemalloc] [--offline] [--out DIR (keep the live trace)]
 """
 
 from __future__ import annotations
@@ -53,6 +53,7 @@ from tests.support.soak import (  # noqa: E402
     run_soak,
     soak_scenario,
 )
+from tests.support.soak_safety import ProximityEvent  # noqa: E402
 
 
 def main() -> None:
@@ -70,6 +71,7 @@ def main() -> None:
     ap.add_argument("--config", default=str(ROOT / "config" / "paper.yaml"))
     ap.add_argument("--tracemalloc", action="store_true")
     ap.add_argument("--samples", type=Path, help="Write the per-slot samples here (JSON Lines).")
+    ap.add_argument("--out", type=Path, help="Keep the mission's trace in this directory.")
     ap.add_argument("--progress", type=int, default=100, help="Print a line every N slots.")
     ap.add_argument("--offline", action="store_true", help="The same scenario, offline.")
     args = ap.parse_args()
@@ -96,10 +98,12 @@ def main() -> None:
 
     try:
         with tempfile.TemporaryDirectory() as tmp:
+            out_dir = args.out or Path(tmp)
+            out_dir.mkdir(parents=True, exist_ok=True)
             result = asyncio.run(
                 run_soak(
                     s,
-                    Path(tmp),
+                    out_dir,
                     speed=args.speed,
                     lockstep=not args.no_lockstep,
                     target=args.target,
@@ -131,6 +135,7 @@ def main() -> None:
         f"safety: {result.proximity.render(s.d_safe)}; infeasible slots "
         f"{result.infeasible_slots} ({100 * result.infeasible_slots / n_slots:.2f} %)"
     )
+    print_events(result.proximity.events)
     print(quarter_table(result.samples).render())
     near = [p for p in result.samples if p.target_distance_m == p.target_distance_m]
     if near:
@@ -146,6 +151,23 @@ def main() -> None:
         print("\nPython heap growth from the end of Q1 to the end (tracemalloc, by line):")
         for site, size, count in result.heap_growth:
             print(f"{size / 1024:10.1f} KiB {count:8d} blocks  {site}")
+
+
+def print_events(events: list[ProximityEvent]) -> None:
+    """The samples under D_s, one line per slot, UAV and party: count, nearest distance (m),
+    and for a UAV pair the oldest age of the other's sample (s)."""
+    if not events:
+        return
+    print("\nsamples under D_s (slot, UAV, party: count, nearest m, other sample's age s):")
+    by_key: dict[tuple[int, int, int], list[ProximityEvent]] = {}
+    for e in events:
+        by_key.setdefault((e.slot, e.uav, e.other), []).append(e)
+    for (slot, uav, other), group in sorted(by_key.items()):
+        party = "target" if other < 0 else f"UAV {other}"
+        print(
+            f"  slot {slot:5d}  UAV {uav} - {party:7s}: {len(group):3d}  "
+            f"{min(e.distance_m for e in group):5.1f} m  age {max(e.age_s for e in group):.2f} s"
+        )
 
 
 def offline_soak(s: Scenario, method: str, target: str) -> None:

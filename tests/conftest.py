@@ -31,7 +31,10 @@ from tests.support import ports
 # the suite (a compile takes a core for seconds to minutes), and no developer's cache read;
 # inherited by every process a test starts. tests/integration/test_nlp_cache.py sets its own.
 os.environ.setdefault("ISAC_MISSION_COMPILE", "off")
-os.environ.setdefault("ISAC_MISSION_NLP_CACHE", tempfile.mkdtemp(prefix="isac-mission-nlp-"))
+if "ISAC_MISSION_NLP_CACHE" not in os.environ:
+    # Made (and removed at exit) by the process that set it; the workers it starts inherit it.
+    _nlp_cache = tempfile.TemporaryDirectory(prefix="isac-mission-nlp-")
+    os.environ["ISAC_MISSION_NLP_CACHE"] = _nlp_cache.name
 
 ROOT = Path(__file__).resolve().parent.parent
 TESTS = ROOT / "tests"

@@ -17,10 +17,12 @@ a_max dt / 4 a slot (model/vehicle.py), and it looks one slot ahead. Two tests f
 
 `evasive_legs` gives each threatened UAV the constant-acceleration leg that accelerates as far as
 a_max and V_max allow (`evasive_velocity`) along the sum of the directions away from its threats
-now, each weighted by 1 / max(time to the closest approach, dt): p1 = p0 + (v0 + v1) dt / 2, the
-parabola a cubic Hermite leg with these ends is (|a| <= a_max all along it, its speed largest at
-an end, <= V_max). Pushing along the miss vector instead, which grows the miss distance faster in
-theory, lost to V_max on the measured M = 12 trap (27.7 m of D_s = 30; docs/performance.md).
+now, each weighted by 1 / max(time to the closest approach, dt), or, where that sum points toward
+one of them, along the direction that moves it away from all of them the most (`away_from_all`):
+p1 = p0 + (v0 + v1) dt / 2, the parabola a cubic Hermite leg with these ends is (|a| <= a_max all
+along it, its speed largest at an end, <= V_max). Pushing along the miss vector instead, which
+grows the miss distance faster in theory, lost to V_max on the measured M = 12 trap (27.7 m of
+D_s = 30; docs/performance.md).
 
 The target cannot be outbraked when it is faster than V_max, but it can be dodged:
 `target_escape` asks whether a UAV can still keep the clearance from every target motion within
@@ -276,6 +278,29 @@ def evasive_legs(
     xy = np.array(base_xy_m, dtype=float)
     velocity = np.array(base_velocity_mps, dtype=float)
     for m in np.flatnonzero(evading):
-        velocity[m] = evasive_velocity(v0[m], push[m] / norm[m], a_max_mps2, v_max_mps, dt_s)
+        u = push[m] / norm[m]
+        aways = away[m, threat[m]]
+        if np.min(aways @ u) < 0:
+            u = away_from_all(aways, u)
+        velocity[m] = evasive_velocity(v0[m], u, a_max_mps2, v_max_mps, dt_s)
         xy[m] = p0[m] + 0.5 * (v0[m] + velocity[m]) * dt_s
     return xy, velocity, np.asarray(evading)
+
+
+def away_from_all(aways: FloatArray, push: FloatArray) -> FloatArray:
+    """The unit vector u that maximises min_p u . aways[p] (aways [T, 2], unit vectors away
+    from T threats), the one nearest the push (unit [2]) among near-equals: for a UAV between
+    two threats, the weighted push away from the nearer one drives it into the other (the
+    M = 3 soak's arrival: away from a UAV 33 m behind, into the target 42 m ahead), where the
+    sideways dodge moves away from both. Exact: on the circle a min of the u . aways[p] is
+    largest where one of them is (an away) or where two are equal (u = +-(a_p + a_q) / |.|, or
+    a perpendicular to a_p where a_q = -a_p), and these are the candidates."""
+    perp = np.stack([-aways[:, 1], aways[:, 0]], axis=1)
+    i, j = np.triu_indices(len(aways), 1)
+    sums = aways[i] + aways[j]
+    candidates = np.concatenate([aways, perp, -perp, sums, -sums, push[None]])
+    norm = np.linalg.norm(candidates, axis=1)
+    candidates = candidates[norm > 1e-9] / norm[norm > 1e-9, None]  # opposite aways sum to 0
+    worst = np.min(candidates @ aways.T, axis=1)
+    near = worst >= worst.max() - 1e-9
+    return np.asarray(candidates[near][np.argmax(candidates[near] @ push)])

@@ -6,7 +6,7 @@ summaries count them), from most to least planned:
 | fallback | when | what flies | where |
 |---|---|---|---|
 | "" | the method planned | its plan | the method |
-| `horizon: <why>` | the horizon's answer is not kept (IPOPT failed, or stopped at its cap on an iterate infeasible or no better than its start; the answer breaks the exact check or the leg limits, the per-slot plan is infeasible) | the per-slot plan (`per_slot_instead`) | planning/horizon.py |
+| `horizon: <why>` | the horizon's answer is not kept (IPOPT failed, or stopped at its cap on an iterate infeasible or no better than its start; the answer breaks the exact check or the leg limits) | the per-slot plan (`per_slot_instead`; its best effort where it is infeasible: the horizon still starts from it) | planning/horizon.py |
 | `infeasible` | no plan meets 14a-14j (the link cannot reach R_th, or the search ends infeasible) | `best_effort`: the link-optimal waypoints (or the coasting point), away from the target first; with the vehicle model, threatened UAVs on evasive legs | planning/per_slot.py, planning/benchmarks.py |
 | `evasive` | with the vehicle model, the plan's end state leaves UAVs that cannot brake apart before D_s or dodge the target | `kept_viable`: those UAVs on evasive legs (planning/evasion.py), the others the plan | planning/slot.py |
 | `solver error` | the planner raised | the communication-optimal plan, else `hold_plan` | planning/fleet.py |

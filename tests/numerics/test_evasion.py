@@ -9,7 +9,9 @@
   evasive leg keeps a_max and V_max;
 - the trap that found it: a 12-UAV fleet of the horizon bench, `proposed` with the vehicle
   model, whose pair came to 16.6 m of D_s = 30 m before the guard, keeps every pair >= D_s
-  along the flown legs.
+  along the flown legs;
+- a UAV between two threats moves away from both (the soak's arrival), on the direction that is
+  the best on a fine grid of the circle.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run
 from isac_mission.model.vehicle import VehicleModel, hermite_position
 from isac_mission.planning.evasion import (
     Parties,
+    away_from_all,
     coasting_threats,
     evasive_legs,
     evasive_velocity,
@@ -303,3 +306,45 @@ def test_a_uav_at_the_14j_clearance_beside_the_target_is_viable_thanks_to_the_re
 
     assert viable(CLEARANCE_14J)
     assert not viable(CLEARANCE_14J - 0.2)
+
+
+def test_a_uav_between_a_uav_and_the_target_dodges_sideways_not_into_the_target() -> None:
+    """The M = 3 soak's arrival (slot 72 of `bench/soak.py --offline --slots 1200`): UAV 0 has
+    UAV 1 31 m behind it (closest now: the heavier weight of the push) and the target 45 m ahead,
+    closing at 5 m/s. The push away from UAV 1 alone would fly it at a_max into the target; its
+    evasive leg instead moves it away from both, at a_max."""
+    xy = np.array([[0.0, 0.0], [0.0, -31.0]])
+    v = np.zeros((2, 2))
+    target_xy, target_v = np.array([5.0, 45.0]), np.array([0.0, -5.0])
+    parties = Parties.of(xy, v, SEP, target_xy, target_v, SEP + 4.0, None)
+    threat = np.array([[False, True, True], [True, False, False]])
+    end_xy, end_v, evading = evasive_legs(parties, threat, xy, v, A_MAX, V_MAX, DT)
+    assert evading.all()
+    dv = end_v[0] - v[0]
+    assert np.linalg.norm(dv) == pytest.approx(A_MAX * DT)
+    to_uav_1 = xy[1] - xy[0]
+    to_target = target_xy - xy[0]
+    assert dv @ to_uav_1 < 0 and dv @ to_target < 0, dv
+    # Farther from both than coasting leaves it (UAV 1 evades too; the target coasts on).
+    coasting_uav_1 = xy[1] + v[1] * DT
+    assert np.linalg.norm(end_xy[0] - end_xy[1]) > np.linalg.norm(xy[0] - coasting_uav_1)
+    target_end = target_xy + target_v * DT
+    assert np.linalg.norm(end_xy[0] - target_end) > np.linalg.norm(xy[0] - target_end)
+
+
+def test_the_direction_away_from_all_threats_is_the_best_on_a_grid(
+    rng: np.random.Generator,
+) -> None:
+    """away_from_all maximises min_p u . aways[p] over unit u: against 7200 directions on the
+    circle, for 300 random sets of 2-5 threats (and exactly opposite pairs)."""
+    angle = np.linspace(0, 2 * np.pi, 7200, endpoint=False)
+    grid = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    sets = [rng.normal(size=(int(rng.integers(2, 6)), 2)) for _ in range(300)]
+    sets += [np.array([[0.0, 1.0], [0.0, -1.0]]), np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]])]
+    for aways in sets:
+        aways = aways / np.linalg.norm(aways, axis=1)[:, None]
+        push = rng.normal(size=2)
+        u = away_from_all(aways, push / np.linalg.norm(push))
+        assert np.linalg.norm(u) == pytest.approx(1.0)
+        best_on_grid = float(np.max(np.min(grid @ aways.T, axis=1)))
+        assert float(np.min(aways @ u)) >= best_on_grid - 1e-9, aways

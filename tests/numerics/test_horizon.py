@@ -35,7 +35,7 @@ from isac_mission.planning.horizon_nlp import (
 )
 from isac_mission.planning.per_slot import Proposed, polish_nlp
 from isac_mission.planning.polish import PolishNLP
-from isac_mission.planning.problem import with_end_velocity
+from isac_mission.planning.problem import slot_clearance_m, with_end_velocity
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.records import read_trace
 from isac_mission.tracking.pcrb import SensingParams
@@ -505,3 +505,34 @@ def test_the_per_slot_plan_is_computed_only_when_the_shifted_horizon_does_not_do
     calls.clear()
     plan = plan_horizon(later[0], per_slot_counted(later[0]), capped, time.perf_counter())
     assert plan.report.fallback.startswith("horizon: IPOPT") and len(calls) == 1
+
+
+def test_an_infeasible_per_slot_plan_is_still_a_start_for_the_horizon() -> None:
+    """Where the per-slot plan comes back infeasible (its best effort), the horizon still solves
+    from it (its legs change a velocity by up to a_max dt, the per-slot method's by a_max dt / 4)
+    and its answer flies when its first slot passes the exact check; where no plan can, the best
+    effort flies, saying why the horizon's answer was not kept."""
+    s = _vehicle(_scenario())
+    kit = SolverKit(s)
+    inp = replace(_inputs(s, "proposed")[12], prev_plan=None)
+    real = with_end_velocity(Proposed().plan(inp, kit), inp, s)
+    assert real.report.status == "ok"
+    # The per-slot plan as a best effort would come back: the same waypoints, marked infeasible.
+    best_effort = replace(
+        real, report=replace(real.report, status="infeasible", fallback="infeasible")
+    )
+    plan = plan_horizon(inp, lambda: best_effort, kit, time.perf_counter())
+    assert plan.report.status == "ok" and plan.report.fallback == "", plan.report.reason
+    assert plan.horizon is not None
+    gaps = np.linalg.norm(plan.uav_xy_m - inp.target_state_pred[None, :2], axis=1)
+    assert gaps.min() >= slot_clearance_m(inp, s)
+    # The target predicted on top of UAV 0: no plan keeps 14j within a slot's reach.
+    x_pred = np.array(inp.target_state_pred, dtype=float)
+    x_pred[:2] = inp.prev_xy_m[0]
+    trapped = replace(inp, target_state_pred=x_pred)
+    base = with_end_velocity(Proposed().plan(trapped, kit), trapped, s)
+    assert base.report.status == "infeasible"
+    plan = plan_horizon(trapped, lambda: base, kit, time.perf_counter())
+    assert plan.report.status == "infeasible" and plan.report.fallback == "infeasible"
+    assert plan.report.reason.startswith("horizon: ") and plan.horizon is None
+    np.testing.assert_array_equal(plan.uav_xy_m, base.uav_xy_m)

@@ -7,10 +7,15 @@ chosen), and records after every slot: wall time, this process's CPU time (all t
 resident set size (VmRSS) and the slot's planning time. `quarter_table` reduces the samples to
 per-quarter medians and the first-vs-last-quarter ratios the soak test asserts on.
 
-Target: by default a scripted loop (a 24-gon inscribed in a circle of radius 900 m around
-(1500, 1600) m, from the scenario's x0 position (600, 1600) m heading north at 15 m/s, lap about
-377 s), so that the four quarters of a long run are statistically the same mission, and slower
-than the UAVs, which must keep D_s from it. The scenario's own CV target
+Target: by default a scripted loop, a circle of radius 450 m around (1500, 1600) m flown at
+15 m/s (a lap of about 188 s), clockwise from its west point (1050, 1600) m heading north: it
+turns at 15² / 450 = 0.5 m/s² all the time, within the scenario's manoeuvre bound
+(`target.max_accel_mps2`, 2 m/s²), so that the four quarters of a long run are statistically the
+same mission, and slower than the UAVs, which must keep D_s from it. The circle is flown as a
+360-gon (sides 7.9 m, 0.02 m inside the circle), whose corners step the velocity by 0.26 m/s
+twice a slot. An earlier loop, a 24-gon of radius 900 m, stepped it by 3.9 m/s at each corner,
+an acceleration beyond any bound, and most of its infeasible slots came right after a corner
+(docs/performance.md, Table 14). The scenario's own CV target
 (`target="cv"`) reflects off the area's walls, but its velocity is a random walk (kappa = 0.5
 m^2/s^3: an rms speed of about 67 m/s after 3600 s), so its later quarters are a harder problem
 and their planning time says nothing about leaks.
@@ -54,29 +59,29 @@ from tests.support.soak_safety import ProximityCounter, ProximityCounts
 TargetKind = Literal["loop", "cv"]
 
 LOOP_CENTRE_XY_M = (1500.0, 1600.0)
-LOOP_RADIUS_M = 900.0
+LOOP_RADIUS_M = 450.0
 LOOP_SPEED_MPS = 15.0
+LOOP_SIDES = 360
+"""The polygon that flies the circle (module docstring)."""
 
 
 def loop_corners(radius_m: float = LOOP_RADIUS_M) -> tuple[tuple[float, float], ...]:
-    """The scripted target's loop: a 24-gon of circumradius `radius_m` around LOOP_CENTRE_XY_M,
-    clockwise from its west point (for the default radius (600, 1600) m), heading north."""
+    """The scripted target's loop: a LOOP_SIDES-gon of circumradius `radius_m` around
+    LOOP_CENTRE_XY_M, clockwise from its west point (for the default radius (1050, 1600) m),
+    heading north."""
     cx, cy = LOOP_CENTRE_XY_M
     return tuple(
         (
-            cx + radius_m * math.cos(math.pi - 2 * math.pi * k / 24),
-            cy + radius_m * math.sin(math.pi - 2 * math.pi * k / 24),
+            cx + radius_m * math.cos(math.pi - 2 * math.pi * k / LOOP_SIDES),
+            cy + radius_m * math.sin(math.pi - 2 * math.pi * k / LOOP_SIDES),
         )
-        for k in range(24)
+        for k in range(LOOP_SIDES)
     )
 
 
 def loop_radius_for_lap(lap_s: float) -> float:
-    """The circumradius whose 24-gon takes `lap_s` seconds at LOOP_SPEED_MPS."""
-    return LOOP_SPEED_MPS * lap_s / (48.0 * math.sin(math.pi / 24))
-
-
-LOOP_CORNERS_XY_M = loop_corners()
+    """The circumradius whose loop takes `lap_s` seconds at LOOP_SPEED_MPS."""
+    return LOOP_SPEED_MPS * lap_s / (2 * LOOP_SIDES * math.sin(math.pi / LOOP_SIDES))
 
 
 @dataclass(frozen=True)

@@ -22,16 +22,40 @@ from isac_mission.types import FloatArray
 from isac_mission.wire import TelemetryMsg, TruthMsg
 
 
+@dataclass(frozen=True)
+class ProximityEvent:
+    """One telemetry sample closer than D_s: UAV `uav` at simulation time t_s (s, stamped with
+    `slot`) was distance_m (m) from the true target (`other` -1) or from UAV `other`, whose
+    latest sample, moved on with its velocity, was age_s (s) old (0 for the target)."""
+
+    slot: int
+    t_s: float
+    uav: int
+    other: int
+    distance_m: float
+    age_s: float
+
+
+EVENTS_KEPT = 500
+"""Samples under D_s kept with their details (the counts go on past it)."""
+
+
 @dataclass
 class ProximityCounts:
-    """Samples checked, those closer than D_s (m) to the true target and to another UAV, and
-    the nearest distances seen (m; inf before any sample)."""
+    """Samples checked, those closer than D_s (m) to the true target and to another UAV, the
+    nearest distances seen (m; inf before any sample) and the first EVENTS_KEPT samples under
+    D_s."""
 
     samples: int = 0
     target_under_d_safe: int = 0
     uav_under_d_safe: int = 0
     nearest_target_m: float = math.inf
     nearest_uav_m: float = math.inf
+    events: list[ProximityEvent] = field(default_factory=list)
+
+    def record(self, event: ProximityEvent) -> None:
+        if len(self.events) < EVENTS_KEPT:
+            self.events.append(event)
 
     def render(self, d_safe_m: float) -> str:
         return (
@@ -54,7 +78,7 @@ class ProximityCounter:
     counts: ProximityCounts = field(default_factory=ProximityCounts)
     _first: tuple[float, FloatArray] | None = None
     _truths: list[tuple[float, FloatArray]] = field(default_factory=list)
-    _waiting: list[tuple[float, FloatArray]] = field(default_factory=list)
+    _waiting: list[tuple[float, int, int, FloatArray]] = field(default_factory=list)
     _latest: dict[int, tuple[float, FloatArray, FloatArray]] = field(default_factory=dict)
 
     def on_telemetry(self, msg: TelemetryMsg) -> None:
@@ -77,16 +101,20 @@ class ProximityCounter:
             return
         xy = np.asarray(msg.position_xy_m, dtype=float)
         others = [
-            float(np.linalg.norm(xy - (xy_o + v_o * (msg.t_s - t_o))))
+            (float(np.linalg.norm(xy - (xy_o + v_o * (msg.t_s - t_o)))), other, msg.t_s - t_o)
             for other, (t_o, xy_o, v_o) in self._latest.items()
             if other != msg.uav
         ]
         if others:
-            self.counts.nearest_uav_m = min(self.counts.nearest_uav_m, *others)
-            if min(others) < self.d_safe_m:
+            nearest, other, age_s = min(others)
+            self.counts.nearest_uav_m = min(self.counts.nearest_uav_m, nearest)
+            if nearest < self.d_safe_m:
                 self.counts.uav_under_d_safe += 1  # a sample counts once
+                self.counts.record(
+                    ProximityEvent(msg.slot, msg.t_s, msg.uav, other, nearest, age_s)
+                )
         self._latest[msg.uav] = (msg.t_s, xy, np.asarray(msg.velocity_xy_mps, dtype=float))
-        self._waiting.append((msg.t_s, xy))
+        self._waiting.append((msg.t_s, msg.slot, msg.uav, xy))
         self._judge()
 
     def on_truth(self, msg: TruthMsg) -> None:
@@ -104,16 +132,18 @@ class ProximityCounter:
         if not self._truths:
             return
         t_last = self._truths[-1][0]
-        keep: list[tuple[float, FloatArray]] = []
-        for t, xy in self._waiting:
+        keep: list[tuple[float, int, int, FloatArray]] = []
+        for waiting in self._waiting:
+            t, slot, uav, xy = waiting
             if t > t_last:
-                keep.append((t, xy))  # waits for the next truth
+                keep.append(waiting)  # waits for the next truth
                 continue
             d = float(np.linalg.norm(xy - self._target_at(t)))
             self.counts.samples += 1
             self.counts.nearest_target_m = min(self.counts.nearest_target_m, d)
             if d < self.d_safe_m:
                 self.counts.target_under_d_safe += 1
+                self.counts.record(ProximityEvent(slot, t, uav, -1, d, 0.0))
         self._waiting = keep
 
     def _target_at(self, t: float) -> FloatArray:
