@@ -152,22 +152,21 @@ def test_the_loop_target_manoeuvres_within_the_scenarios_bound() -> None:
     most dv tau - a_T tau^2 / 2 <= dv^2 / (2 a_T): 1.7 cm for the 360-gon, under 2 % of the
     tracking margin; the earlier 24-gon's 3.9 m/s steps, 3.8 m), and it turns all the time
     (0.5 m/s^2: more than a tenth of the bound's reach at the slot's end)."""
-    a_t = load_scenario(ROOT / "config" / "paper.yaml").a_target
     s = soak_scenario(load_scenario(ROOT / "config" / "paper.yaml"), 400)
+    a_t = s.a_target
     loop = ScriptedTarget(loop_waypoints(s.N, s.dt), LOOP_SPEED_MPS, s.dt)
     lap_s = 2 * np.pi * LOOP_RADIUS_M / LOOP_SPEED_MPS
     step_mps = 2 * LOOP_SPEED_MPS * np.sin(np.pi / LOOP_SIDES)
+    corner_m = step_mps**2 / (2 * a_t)
     # What the corners add is small against the vehicles' tracking margin that 14j also keeps.
-    assert step_mps**2 / (2 * a_t) < 0.02 * s.planner.tracking_margin_m
+    assert corner_m < 0.02 * s.planner.tracking_margin_m
+    taus = np.linspace(0.05, 1.0, 20) * s.dt
     for t0 in np.arange(0.0, lap_s, s.dt):
         x0 = loop.state_at(t0)
-        taus = np.linspace(0.05, 1.0, 20) * s.dt
         off_m = [
             np.linalg.norm(loop.state_at(t0 + tau)[:2] - x0[:2] - tau * x0[2:]) for tau in taus
         ]
-        assert max(
-            o - a_t * tau**2 / 2 for o, tau in zip(off_m, taus, strict=True)
-        ) <= step_mps**2 / (2 * a_t)
+        assert max(o - a_t * tau**2 / 2 for o, tau in zip(off_m, taus, strict=True)) <= corner_m
         assert off_m[-1] > 0.1 * a_t * s.dt**2 / 2
 
 
