@@ -174,7 +174,7 @@ def offline_soak(s: Scenario, method: str, target: str) -> None:
     """Fly the soak's scenario `s` offline with `method` and the live settings, the loop target
     (or the constant-velocity one) as the truth, and print its safety counts (module docstring)."""
     sys.path.insert(0, str(ROOT / "bench"))
-    from horizon_fleet import flown_gaps_m
+    from horizon_fleet import flown_gaps_m, horizon_counts
 
     planned = LiveSettings().apply(s)
     truth = None
@@ -183,7 +183,7 @@ def offline_soak(s: Scenario, method: str, target: str) -> None:
         truth = np.array([path.state_at(n * s.dt) for n in range(s.N + 1)])
     outcomes: list[SlotOutcome] = []
     t0 = time.monotonic()
-    run_closed_loop(
+    result = run_closed_loop(
         planned,
         method,
         draw_run_noise(planned, 1),
@@ -202,8 +202,19 @@ def offline_soak(s: Scenario, method: str, target: str) -> None:
         f"evasive {kinds.count('evasive')}, other fallbacks {other}\n"
         f"slots closer than D_s = {d_s:g} m to the true target "
         f"{sum(g < d_s for g in target_gaps)} (nearest {min(target_gaps):.1f} m), to another "
-        f"UAV {sum(g < d_s for g in uav_gaps)} (nearest {min(uav_gaps):.1f} m)"
+        f"UAV {sum(g < d_s for g in uav_gaps)} (nearest {min(uav_gaps):.1f} m)\n"
+        f"mean tr(PCRB) {np.mean(np.trace(result.pcrb, axis1=1, axis2=2)):.6g}; plan time median / p95 / max "
+        f"{' / '.join(f'{1e3 * q:.1f}' for q in np.percentile(result.solve_s, [50, 95, 100]))} ms"
     )
+    if method == "horizon":
+        reports = [o.plan.report for o in outcomes]
+        notes = [f"fallback {r.fallback}: {r.reason}" if r.fallback else r.polish for r in reports]
+        its, conv, kept, capped, other_hz = horizon_counts(notes)
+        p50, p90, top = np.percentile(its, [50, 90, 100])
+        print(
+            f"horizon: converged {conv}, kept at the cap {kept}, fallen back at the cap {capped}, "
+            f"other {other_hz}; IPOPT iterations median {p50:.0f}, p90 {p90:.0f}, max {top:.0f}"
+        )
 
 
 if __name__ == "__main__":

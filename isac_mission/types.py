@@ -84,6 +84,23 @@ class SlotPlan:
 
 
 @dataclass(frozen=True)
+class HorizonDuals:
+    """IPOPT's multipliers at a horizon solution, the next slot's dual warm start (docs/model.md,
+    "Receding horizon", "Start points").
+
+    lam_x [n_x]: of the variables' bounds; lam_g [n_g]: of the rows, both of the NLP solved (its
+    scaled units); f_scale: the objective's divisor they go with; pair_band: that NLP's band;
+    order [M]: the fleet's order in it.
+    """
+
+    lam_x: FloatArray
+    lam_g: FloatArray
+    f_scale: float
+    pair_band: int
+    order: IntArray
+
+
+@dataclass(frozen=True)
 class HorizonPlan:
     """A receding-horizon plan of slots n..n+L-1.
 
@@ -96,3 +113,5 @@ class HorizonPlan:
     uav_velocity_mps: FloatArray | None
     bandwidth_share: FloatArray
     pcrb_trace: FloatArray
+    duals: HorizonDuals | None = None
+    """The multipliers of the solve that gave this plan (None: not a kept IPOPT answer)."""

@@ -207,6 +207,13 @@ class HorizonConfig(Section):
         description="Weight of the last horizon slot's tr(PCRB), a stand-in for the slots "
         "beyond the horizon (1 = none; docs/model.md).",
     )
+    terminal_braking: bool = Field(
+        True,
+        description="Vehicle model: the horizon ends where each UAV could match the predicted "
+        "target's velocity braking at a_max and still keep the last slot's clearance, so that "
+        "the plan shifted by a slot can be continued (docs/model.md, 'Receding horizon: the "
+        "terminal row').",
+    )
     max_iterations: int = Field(
         60,
         ge=1,

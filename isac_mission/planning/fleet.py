@@ -229,7 +229,7 @@ def widen_plan(sub: SlotPlan, uav_xy: FloatArray, excluded: tuple[int, ...]) -> 
         if h.uav_velocity_mps is not None:
             h_v = np.zeros((L, M, 2))
             h_v[:, idx] = h.uav_velocity_mps
-        horizon = HorizonPlan(h_xy, h_v, h_eta, h.pcrb_trace)
+        horizon = HorizonPlan(h_xy, h_v, h_eta, h.pcrb_trace, h.duals)
     return SlotPlan(
         xy, assoc, eta, sub.pcrb_trace, replace(sub.report, reason=reason), velocity, horizon
     )
@@ -251,6 +251,7 @@ def active_part(plan: SlotPlan, active: tuple[int, ...]) -> SlotPlan:
             None if h.uav_velocity_mps is None else h.uav_velocity_mps[:, idx],
             h.bandwidth_share[:, idx],
             h.pcrb_trace,
+            h.duals,
         )
     )
     v = plan.uav_velocity_mps

@@ -63,7 +63,14 @@ from isac_mission.tracking.pcrb import (
     predict_information,
     scaled_inverse,
 )
-from isac_mission.types import FloatArray, HorizonPlan, IntArray, SlotPlan, SolveReport
+from isac_mission.types import (
+    FloatArray,
+    HorizonDuals,
+    HorizonPlan,
+    IntArray,
+    SlotPlan,
+    SolveReport,
+)
 
 if TYPE_CHECKING:
     from isac_mission.planning.slot import SolverKit
@@ -240,6 +247,9 @@ def legs_ok(
 AT_CAP_NOTE = "its last iterate kept (feasible, lower)"
 """In a slot's note: IPOPT stopped at its cap on an iterate that is a better horizon plan."""
 
+START_FEASIBILITY_TOL = 1e-9
+"""Slack (the NLP's scaled units) within which a start meets the horizon's rows."""
+
 CAP_FEASIBILITY_TOL = 1e-7
 """Slack (the NLP's scaled units) of a capped iterate's horizon constraints: IPOPT's converged
 answers meet them to its constr_viol_tol, 1e-8; the flown slot meets the exact check."""
@@ -352,10 +362,11 @@ def plan_horizon(
 
     def scored(
         candidates: list[Start], data: HorizonSlotData
-    ) -> tuple[list[Start], list[Start], HorizonSlotData, list[tuple[bool, float, int]]]:
+    ) -> tuple[list[Start], list[Start], HorizonSlotData, list[tuple[float, float, int]]]:
         """(the starts with shares that meet 14a; the same and the data in the NLP's order of the
-        fleet; their (infeasible, value, index), feasible starts first, then the lower
-        objective)."""
+        fleet; their (rank, value, index), feasible starts first (rank 0); then, under the
+        vehicle model, the nearer to feasible (rank: the largest row missed), else the lower
+        objective (docs/model.md, "Start points")."""
         assert nlp is not None
         link_m = nlp.margins.link_m
         starts = [
@@ -365,11 +376,12 @@ def plan_horizon(
         # A permutation of the UAV axis, which the value ignores.
         in_order = [(q[:, order], v[:, order], e[:, order]) for q, v, e in starts]
         ordered = data.in_order(order)
-        scores = sorted(
-            (not nlp.satisfies(q, velocities(v), e, ordered), value(q, e), i)
-            for i, (q, v, e) in enumerate(in_order)
-        )
-        return starts, in_order, ordered, scores
+        scores = []
+        for i, (q, v, e) in enumerate(in_order):
+            miss = nlp.violation(q, velocities(v), e, ordered)
+            rank = 0.0 if miss <= START_FEASIBILITY_TOL else miss if nlp.vehicle_model else 1.0
+            scores.append((rank, value(q, e), i))
+        return starts, in_order, ordered, sorted(scores)
 
     shifted = None
     if prev_plan is not None and prev_plan.horizon is not None:
@@ -381,7 +393,7 @@ def plan_horizon(
         assoc = slot_association(inp, kit)
         data = horizon_slot_data(s, inp, prev_v, target_cov_pred, assoc, shifted[0][0], L)
         ranked = scored([shifted], data)
-        if ranked[3][0][0]:
+        if ranked[3][0][0] > 0:
             ranked = None
     if ranked is None:
         # An infeasible per-slot plan (its best effort) is a start too: the horizon's legs
@@ -402,15 +414,23 @@ def plan_horizon(
         ranked = scored(candidates + ([shifted] if shifted is not None else []), data)
     assert nlp is not None
     starts, starts_ordered, ordered, scores = ranked
-    start_infeasible, start_value, first = scores[0]
+    start_miss, start_value, first = scores[0]
+    start_infeasible = start_miss > 0
     start = starts_ordered[first]
-    sol = nlp.solve(start[0], velocities(start[1]), start[2], ordered)
+    from_shifted = shifted is not None and first == len(starts) - 1
+    duals = prev_plan.horizon.duals if from_shifted and prev_plan and prev_plan.horizon else None
+    if duals is not None and not np.array_equal(duals.order, order):
+        duals = None
+    sol = nlp.solve(start[0], velocities(start[1]), start[2], ordered, duals)
     note = f"IPOPT {sol.status} in {sol.iterations} it"
     if not sol.success:
         if not kept_at_cap(nlp, sol, ordered, start_infeasible, start_value, value):
             why = f"IPOPT {sol.status} after {sol.iterations} it"
             return fall_back(why, f"IPOPT {sol.status}")
         note += f", {AT_CAP_NOTE}"
+    solved_duals: HorizonDuals | None = HorizonDuals(
+        sol.lam_x, sol.lam_g, sol.f_scale, nlp.pair_band, order
+    )
     sol = sol.in_order(np.argsort(order))
     start = starts[first]
     if not start_infeasible and value(sol.uav_xy_m, sol.bandwidth_share) > start_value:
@@ -421,6 +441,7 @@ def plan_horizon(
             uav_velocity_mps=velocities(start[1]),
             bandwidth_share=start[2],
         )
+        solved_duals = None
         note += ", its start kept (lower)"
     xy1, eta1 = sol.uav_xy_m[0], sol.bandwidth_share[0]
     cons = SlotConstraints(
@@ -465,6 +486,7 @@ def plan_horizon(
             uav_velocity_mps=sol.uav_velocity_mps,
             bandwidth_share=sol.bandwidth_share,
             pcrb_trace=traces,
+            duals=solved_duals,
         ),
     )
 

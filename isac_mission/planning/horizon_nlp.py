@@ -62,7 +62,7 @@ from isac_mission.planning.nlp_model import (
     straight_leg_point,
 )
 from isac_mission.tracking.pcrb import SensingParams, measurement_information, scaled_inverse
-from isac_mission.types import FloatArray, IntArray
+from isac_mission.types import FloatArray, HorizonDuals, IntArray
 
 IPOPT_OPTIONS: dict[str, Any] = {
     "print_level": 0,
@@ -85,6 +85,20 @@ IPOPT_OPTIONS: dict[str, Any] = {
     "hessian_approximation": "exact",
 }
 """IPOPT's options of the horizon (max_iter from planner.horizon.max_iterations)."""
+
+WARM_START_OPTIONS: dict[str, Any] = {
+    "warm_start_init_point": "yes",
+    "warm_start_bound_push": 1e-3,
+    "warm_start_bound_frac": 1e-3,
+    "warm_start_slack_bound_push": 1e-3,
+    "warm_start_slack_bound_frac": 1e-3,
+    "warm_start_mult_bound_push": 1e-3,
+}
+"""IPOPT's options on top of IPOPT_OPTIONS for a start from last slot's multipliers, shifted with
+its plan (`warm_duals`): from the shifted plan alone IPOPT took a median 77 iterations in the
+soak's tracking phase (docs/model.md, "Start points"). A cold start (no multipliers, or another
+problem's) keeps IPOPT's own initialisation: with zero multipliers pushed to these bounds the
+starts from rest stalled."""
 
 
 def horizon_weights(length: int, discount: float, terminal_weight: float) -> FloatArray:
@@ -127,7 +141,9 @@ class HorizonSlotData:
 @dataclass(frozen=True)
 class HorizonSolution:
     """uav_xy_m [L, M, 2], uav_velocity_mps [L, M, 2] or None, bandwidth_share [L, M] (each row
-    renormalised to sum 1); status: IPOPT's return_status; success; iterations."""
+    renormalised to sum 1); status: IPOPT's return_status; success; iterations; lam_x, lam_g:
+    IPOPT's multipliers (the NLP's order of the fleet, its scaled units); f_scale: the
+    objective's divisor of this solve."""
 
     uav_xy_m: FloatArray
     uav_velocity_mps: FloatArray | None
@@ -135,6 +151,9 @@ class HorizonSolution:
     status: str
     success: bool
     iterations: int
+    lam_x: FloatArray
+    lam_g: FloatArray
+    f_scale: float
 
     def in_order(self, order: IntArray) -> HorizonSolution:
         """The same plan with the UAVs in `order` (UAV slot a holds UAV order[a])."""
@@ -298,6 +317,22 @@ class HorizonNLP:
                 Pt_inv = scaled_inverse_sx(0.5 * (Pt + Pt.T), ones4)
                 J_prior_lifted = ca.mtimes(ca.mtimes(E, Pt_inv), E)
 
+        # The terminal row (docs/model.md, "Receding horizon: the terminal row"): at the end of
+        # the horizon, |r| - |w|^2 / (2 a_max) >= c_L for the offset r from the predicted target
+        # and the velocity w relative to it. Braking w to 0 at a_max keeps it (the distance
+        # lost, at most |w|^2 / (2 a_max) less what is already braked, shrinks with |w|^2), so
+        # the plan shifted by one slot continues feasibly; without it the horizon ended where
+        # no next slot could keep the clearance, and every shifted start missed the rows.
+        self.n_terminal = 0
+        if self.vehicle_model and cfg.terminal_braking:
+            target_end = predicted_target_point(x_pred, (L - 1) * dt)
+            brake = s.a_max * dt**2 / S  # in units of S per slot squared
+            for m in range(M):
+                offset = (q(L - 1, m) - target_end) / S
+                relative = (v(L - 1, m) - x_pred[2:4]) * dt / S
+                stopping = ca.sumsqr(relative) / (2 * brake)
+                add(ca.norm_2(offset) - stopping - clearance[L - 1] / S, 0.0, float("inf"))
+                self.n_terminal += 1
         x = ca.vertcat(z, u, eta)
         p = ca.vertcat(*params)
         self.n_x = int(x.numel())
@@ -321,6 +356,8 @@ class HorizonNLP:
         with lock:
             name = "horizon" if band == M - 1 else f"horizon_band{band}"
             self.solver: NlpSolver = ipopt(name, nlp, opts)
+            warm_opts = {**opts, "ipopt": {**opts["ipopt"], **WARM_START_OPTIONS}}
+            self.warm_solver: NlpSolver = ipopt(f"{name}_warm", nlp, warm_opts)
         self.lock: SolveLock = lock
         # For tests and the start point's scale: the weighted objective itself and its gradient.
         self.objective = ca.Function("f", [x, p], [objective])
@@ -456,6 +493,21 @@ class HorizonNLP:
         ubx = np.concatenate([ubz, np.full(n_u, 1.0), np.ones(L * M)])
         return lbx, ubx
 
+    def violation(
+        self,
+        xy: FloatArray,
+        velocity: FloatArray | None,
+        eta: FloatArray,
+        data: HorizonSlotData,
+    ) -> float:
+        """The largest amount by which the horizon plan (xy [L, M, 2], velocity, eta [L, M])
+        misses a constraint or bound of the NLP (scaled units; 0 if it meets them all)."""
+        x, p = self.pack(xy, velocity, eta, data)
+        g = np.asarray(self.constraints(x, p), dtype=float).ravel()
+        lbx, ubx = self.bounds(data)
+        misses = np.concatenate([self._lbg - g, g - self._ubg, lbx - x, x - ubx])
+        return float(np.max(misses, initial=0.0))
+
     def satisfies(
         self,
         xy: FloatArray,
@@ -466,15 +518,49 @@ class HorizonNLP:
     ) -> bool:
         """True if the horizon plan (xy [L, M, 2], velocity, eta [L, M]) meets every constraint
         and bound of the NLP (scaled units, slack tol)."""
-        x, p = self.pack(xy, velocity, eta, data)
-        g = np.asarray(self.constraints(x, p), dtype=float).ravel()
-        lbx, ubx = self.bounds(data)
-        return bool(
-            np.all(g >= self._lbg - tol)
-            and np.all(g <= self._ubg + tol)
-            and np.all(x >= lbx - tol)
-            and np.all(x <= ubx + tol)
+        return self.violation(xy, velocity, eta, data) <= tol
+
+    def warm_duals(
+        self, duals: HorizonDuals, f_scale: float
+    ) -> tuple[FloatArray, FloatArray] | None:
+        """(lam_x0, lam_g0): last slot's multipliers `duals` shifted by one slot, as its plan is
+        (each horizon slot's block takes the next one's, the last repeats), in the units of an
+        objective divided by f_scale; None if they are of another problem (another band or
+        size)."""
+        L = self.length
+        n_rows = len(self._lbg)
+        if (
+            duals.pair_band != self.pair_band
+            or len(duals.lam_x) != self.n_x + self.n_lift
+            or len(duals.lam_g) != n_rows + self.n_lift
+        ):
+            return None
+        # x is z, u (vehicle model) and eta, each L blocks of one horizon slot, then the L - 1
+        # lifted covariances; the rows are L blocks of one slot, the terminal rows, then the
+        # lifted equalities.
+        lam_x = np.concatenate(
+            [
+                *(_shift_slots(duals.lam_x[i : i + L * w], L) for i, w in self._slot_blocks()),
+                _shift_slots(duals.lam_x[self.n_x :], L - 1),
+            ]
         )
+        n_slot_rows = n_rows - self.n_terminal
+        lam_g = np.concatenate(
+            [
+                _shift_slots(duals.lam_g[:n_slot_rows], L),
+                duals.lam_g[n_slot_rows:n_rows],
+                _shift_slots(duals.lam_g[n_rows:], L - 1),
+            ]
+        )
+        ratio = duals.f_scale / f_scale
+        return ratio * lam_x, ratio * lam_g
+
+    def _slot_blocks(self) -> list[tuple[int, int]]:
+        """(offset, width per horizon slot) of z, u (vehicle model) and eta in x."""
+        M, L = self.scenario.M, self.length
+        widths = [2 * M] + ([2 * M] if self.vehicle_model else []) + [M]
+        offsets = np.cumsum([0, *(L * w for w in widths)])[:-1]
+        return [(int(o), w) for o, w in zip(offsets, widths, strict=True)]
 
     def solve(
         self,
@@ -482,26 +568,34 @@ class HorizonNLP:
         velocity0: FloatArray | None,
         eta0: FloatArray,
         data: HorizonSlotData,
+        duals: HorizonDuals | None = None,
     ) -> HorizonSolution:
-        """Solve from the start (xy0 [L, M, 2], velocity0, eta0 [L, M])."""
+        """Solve from the start (xy0 [L, M, 2], velocity0, eta0 [L, M]); duals: last slot's
+        multipliers when the start is its plan shifted (`warm_duals`), else a cold start."""
         x0, p = self.pack(xy0, velocity0, eta0, data)
         f0 = float(self.objective(x0, p))
-        x0, p = self.pack(xy0, velocity0, eta0, data, f0 if np.isfinite(f0) and f0 > 0 else 1.0)
+        f_scale = f0 if np.isfinite(f0) and f0 > 0 else 1.0
+        x0, p = self.pack(xy0, velocity0, eta0, data, f_scale)
         lbx, ubx = self.bounds(data)
         x0 = np.clip(x0, lbx, ubx)
         xy0, _, eta0 = self.unpack(x0, data)
         lift0 = self.lifted(xy0, eta0, data, p)
         free = np.full(self.n_lift, np.inf)
+        warm = None if duals is None else self.warm_duals(duals, f_scale)
+        solver, multipliers = self.solver, {}
+        if warm is not None:
+            solver, multipliers = self.warm_solver, {"lam_x0": warm[0], "lam_g0": warm[1]}
         with self.lock:
-            sol = self.solver(
+            sol = solver(
                 x0=np.concatenate([x0, lift0]),
                 p=p,
                 lbx=np.concatenate([lbx, -free]),
                 ubx=np.concatenate([ubx, free]),
                 lbg=self._solver_lbg,
                 ubg=self._solver_ubg,
+                **multipliers,
             )
-            stats = self.solver.stats()
+            stats = solver.stats()
         x_opt = np.asarray(sol["x"], dtype=float).ravel()[: self.n_x]
         xy, velocity, eta = self.unpack(x_opt, data)
         eta = np.maximum(eta, 0.0)
@@ -513,4 +607,14 @@ class HorizonNLP:
             status=str(stats.get("return_status", "unknown")),
             success=bool(stats.get("success", False)),
             iterations=int(stats.get("iter_count", 0)),
+            lam_x=np.asarray(sol["lam_x"], dtype=float).ravel(),
+            lam_g=np.asarray(sol["lam_g"], dtype=float).ravel(),
+            f_scale=f_scale,
         )
+
+
+def _shift_slots(values: FloatArray, n_slots: int) -> FloatArray:
+    """values [n_slots * k], k per horizon slot, shifted by one slot: slot l takes slot l + 1's,
+    the last keeps its own."""
+    blocks = np.asarray(values, dtype=float).reshape(n_slots, -1)
+    return np.concatenate([blocks[1:], blocks[-1:]]).reshape(-1)

@@ -214,8 +214,11 @@ def test_horizon_plans_carry_their_horizon_and_beat_the_per_slot_start() -> None
         assert plan.horizon.uav_xy_m.shape == (L, s.M, 2)
         np.testing.assert_array_equal(plan.uav_xy_m, plan.horizon.uav_xy_m[0])
         assert plan.pcrb_trace == pytest.approx(plan.horizon.pcrb_trace[0])
-        # The per-slot plan continued at constant velocity is one start: where it is feasible
-        # the horizon's answer is no worse on the horizon objective.
+        # The per-slot plan continued at constant velocity is one start where the shifted
+        # horizon does not meet the rows (else it is not computed): where it is feasible the
+        # horizon's answer is no worse on the horizon objective.
+        if plan.report.polish.endswith("from the shifted horizon alone"):
+            continue
         cont, eta = _continued(s, inp, base, L)
         cfg = s.planner.horizon
         w = horizon_weights(L, cfg.discount, cfg.terminal_weight)
