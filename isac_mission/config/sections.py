@@ -211,8 +211,7 @@ class HorizonConfig(Section):
         True,
         description="Vehicle model: the horizon ends where each UAV could match the predicted "
         "target's velocity braking at a_max and still keep the last slot's clearance, so that "
-        "the plan shifted by a slot can be continued (docs/model.md, 'Receding horizon: the "
-        "terminal row').",
+        "the plan shifted by a slot can be continued (docs/model.md, 'The terminal row').",
     )
     max_iterations: int = Field(
         60,

@@ -317,12 +317,11 @@ class HorizonNLP:
                 Pt_inv = scaled_inverse_sx(0.5 * (Pt + Pt.T), ones4)
                 J_prior_lifted = ca.mtimes(ca.mtimes(E, Pt_inv), E)
 
-        # The terminal row (docs/model.md, "Receding horizon: the terminal row"): at the end of
-        # the horizon, |r| - |w|^2 / (2 a_max) >= c_L for the offset r from the predicted target
-        # and the velocity w relative to it. Braking w to 0 at a_max keeps it (the distance
-        # lost, at most |w|^2 / (2 a_max) less what is already braked, shrinks with |w|^2), so
-        # the plan shifted by one slot continues feasibly; without it the horizon ended where
-        # no next slot could keep the clearance, and every shifted start missed the rows.
+        # The terminal row (docs/model.md, "The terminal row"): at the end of the horizon,
+        # |r| - |w|^2 / (2 a_max) >= c_L for the offset r from the predicted target and the
+        # velocity w relative to it. Braking w at a_max keeps it, so the plan shifted by one
+        # slot can be continued; without it the horizon ended where no next slot could keep the
+        # clearance, and the shifted starts of the soak's tracking phase missed their rows.
         self.n_terminal = 0
         if self.vehicle_model and cfg.terminal_braking:
             target_end = predicted_target_point(x_pred, (L - 1) * dt)
@@ -616,5 +615,8 @@ class HorizonNLP:
 def _shift_slots(values: FloatArray, n_slots: int) -> FloatArray:
     """values [n_slots * k], k per horizon slot, shifted by one slot: slot l takes slot l + 1's,
     the last keeps its own."""
-    blocks = np.asarray(values, dtype=float).reshape(n_slots, -1)
+    values = np.asarray(values, dtype=float)
+    if n_slots <= 1:  # one slot (or none: the lifted blocks of a horizon of one) keeps its own
+        return values
+    blocks = values.reshape(n_slots, -1)
     return np.concatenate([blocks[1:], blocks[-1:]]).reshape(-1)

@@ -178,3 +178,17 @@ def test_an_nlp_without_the_vehicle_model_has_no_terminal_row() -> None:
     assert nlp.n_terminal == 0
     off = horizon_nlp(SolverKit(_vehicle_scenario(terminal_braking=False)))
     assert off.n_terminal == 0
+
+
+def test_a_horizon_of_one_slot_keeps_its_multipliers() -> None:
+    """With L = 1 there is no later slot to shift in (and no lifted covariance): the multipliers
+    come back as they were, rescaled."""
+    s = _vehicle_scenario(length=1)
+    nlp = horizon_nlp(SolverKit(s))
+    assert nlp.n_lift == 0
+    rng = np.random.default_rng(1)
+    lam_x, lam_g = rng.normal(size=nlp.n_x), rng.normal(size=len(nlp.lbg))
+    warm = nlp.warm_duals(HorizonDuals(lam_x, lam_g, 3.0, nlp.pair_band, np.arange(s.M)), 1.0)
+    assert warm is not None
+    np.testing.assert_array_equal(warm[0], 3.0 * lam_x)
+    np.testing.assert_array_equal(warm[1], 3.0 * lam_g)
