@@ -188,8 +188,11 @@ def test_the_compile_command_fills_the_cache_for_run(tmp_path: Path) -> None:
 
     done = compile_command(env)
     assert done.returncode == 0, done.stderr
-    # The fleet and the fleet with one vehicle out, horizon and polish each.
-    assert done.stdout.count("compiled in") == 4, done.stdout
-    assert len(list((tmp_path / "cache").glob("*.casadi"))) == 4
+    # The fleet and the fleet with one vehicle out: the polish and the horizon's cold and warm
+    # solvers (docs/model.md, "Last slot's multipliers") each.
+    assert done.stdout.count("compiled in") == 6, done.stdout
+    for name in ("polish", "horizon", "horizon_warm"):
+        assert done.stdout.count(f"{name}: compiled in") == 2, done.stdout
+    assert len(list((tmp_path / "cache").glob("*.casadi"))) == 6
     refused = compile_command({**env, COMPILE_ENV: "off"})
     assert refused.returncode == 2 and "no C compiler" in refused.stderr
