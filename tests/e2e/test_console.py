@@ -143,6 +143,28 @@ async def test_live_console_draws_the_telemetry_commands_and_survives_connection
                 assert gap <= tolerance_m, (m, d, xy)
                 assert history[-1][0] - d["published_wall_s"] < 10.0  # a recent one
 
+            # 20 WebSocket connections opened and dropped, three times over: each is served
+            # its snapshot, the service goes on planning, its memory stays (the plan rate
+            # during the churn, a wall-clock figure, is bench/console_churn.py's). Before the
+            # commands: a new R_th renews the planner's problems, whose build (seconds under
+            # load) would be counted as the churn's memory.
+            rss0 = rss_kib(proc.pid)
+            plans_before = len(obs.plans)
+            await churn_websockets(url, rounds=3, connections=20)
+            await async_wait_until(
+                lambda: len(obs.plans) > plans_before, 120.0, "a plan after the churn"
+            )
+            rss1 = rss_kib(proc.pid)
+            assert rss1 <= 1.1 * rss0, (rss0, rss1)
+            # The dropped connections are gone: only the browser's page is left.
+            deadline = time.monotonic() + 60
+            while True:
+                snap = await asyncio.to_thread(wait_http, url, proc)
+                if snap["console"]["pages"] == 1 or time.monotonic() > deadline:
+                    break
+                await asyncio.sleep(0.5)
+            assert snap["console"]["pages"] == 1
+
             # R_th from the page reaches the ground loop, and its reply is shown.
             await page.fill("#rth", "12")
             await page.click("#set-rth")
@@ -189,25 +211,6 @@ async def test_live_console_draws_the_telemetry_commands_and_survives_connection
             if (target := _screenshot_target()) is not None:
                 shutil.copy(shot, target)
 
-            # 20 WebSocket connections opened and dropped, three times over: each is served
-            # its snapshot, the service goes on planning, its memory stays (the plan rate
-            # during the churn, a wall-clock figure, is bench/console_churn.py's).
-            rss0 = rss_kib(proc.pid)
-            plans_before = len(obs.plans)
-            await churn_websockets(url, rounds=3, connections=20)
-            await async_wait_until(
-                lambda: len(obs.plans) > plans_before, 120.0, "a plan after the churn"
-            )
-            rss1 = rss_kib(proc.pid)
-            assert rss1 <= 1.1 * rss0, (rss0, rss1)
-            # The dropped connections are gone: only the browser's page is left.
-            deadline = time.monotonic() + 60
-            while True:
-                snap = await asyncio.to_thread(wait_http, url, proc)
-                if snap["console"]["pages"] == 1 or time.monotonic() > deadline:
-                    break
-                await asyncio.sleep(0.5)
-            assert snap["console"]["pages"] == 1
             assert errors == []
     finally:
         out = stop(proc)
