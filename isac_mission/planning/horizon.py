@@ -186,6 +186,7 @@ def horizon_slot_data(
     nearest = np.argmin(np.linalg.norm(waypoints_xy_m[:, None, :] - s.bs_xy[None], axis=-1), axis=1)
     keep_out, x_pred = inp.keep_out_xy_m, inp.target_state_pred
     return HorizonSlotData(
+        rate_min_bps=s.r_th,
         prev_xy=np.asarray(inp.prev_xy_m, dtype=float),
         prev_velocity=np.asarray(start_velocity_mps, dtype=float)
         if s.planner.vehicle_model

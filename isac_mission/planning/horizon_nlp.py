@@ -56,6 +56,7 @@ from isac_mission.planning.nlp_model import (
     add_clearance_row,
     add_uav_rows,
     information_terms,
+    lower_at_rate,
     plain_ipopt,
     predicted_target_point,
     scaled_inverse_sx,
@@ -115,9 +116,11 @@ class HorizonSlotData:
     prev_xy [M, 2] (m), prev_velocity [M, 2] (m/s; zeros for the paper's kinematics);
     serving_xy, control_xy [M, 2]: the serving BS (14a) and the control BS (14b) per UAV;
     keep_out_xy [n_keep_out, 2]; x_pred [4]: slot n's predicted target state; J_pred [4, 4];
-    clearance_m [L]: the 14j distance per horizon slot.
+    clearance_m [L]: the 14j distance per horizon slot; rate_min_bps: R_th (bit/s), the planning
+    scenario's (an operator may change it; the NLP takes it as a bound: `_lower`).
     """
 
+    rate_min_bps: float
     prev_xy: FloatArray
     prev_velocity: FloatArray
     serving_xy: FloatArray
@@ -337,6 +340,7 @@ class HorizonNLP:
         self.n_x = int(x.numel())
         self.n_lift = n_lift
         self._lbg, self._ubg = rows.bounds()
+        self._rate_rows = np.array(rows.rate_rows, dtype=int)
         g = ca.vertcat(*rows.rows)
         g_lifted = ca.vertcat(*lifted_rows)
         n_eq = int(g_lifted.numel())
@@ -374,6 +378,10 @@ class HorizonNLP:
     @property
     def ubg(self) -> FloatArray:
         return self._ubg
+
+    def _lower(self, data: HorizonSlotData) -> FloatArray:
+        """The rows' lower bounds for the slot's R_th (nlp_model.lower_at_rate)."""
+        return lower_at_rate(self._lbg, self._rate_rows, self.scenario.r_th, data.rate_min_bps)
 
     def pack(
         self,
@@ -504,7 +512,7 @@ class HorizonNLP:
         x, p = self.pack(xy, velocity, eta, data)
         g = np.asarray(self.constraints(x, p), dtype=float).ravel()
         lbx, ubx = self.bounds(data)
-        misses = np.concatenate([self._lbg - g, g - self._ubg, lbx - x, x - ubx])
+        misses = np.concatenate([self._lower(data) - g, g - self._ubg, lbx - x, x - ubx])
         return float(np.max(misses, initial=0.0))
 
     def satisfies(
@@ -590,7 +598,7 @@ class HorizonNLP:
                 p=p,
                 lbx=np.concatenate([lbx, -free]),
                 ubx=np.concatenate([ubx, free]),
-                lbg=self._solver_lbg,
+                lbg=np.concatenate([self._lower(data), self._solver_lbg[len(self._lbg) :]]),
                 ubg=self._solver_ubg,
                 **multipliers,
             )

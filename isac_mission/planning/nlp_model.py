@@ -50,12 +50,14 @@ def plain_ipopt(name: str, nlp: dict[str, Any], options: dict[str, Any]) -> NlpS
 
 
 class NlpRows:
-    """The constraint rows g of an NLP with their bounds lbg <= g <= ubg."""
+    """The constraint rows g of an NLP with their bounds lbg <= g <= ubg; rate_rows: the indices
+    of its 14a rows (`relative_rate`, whose bound `lower_at_rate` moves with R_th)."""
 
     def __init__(self) -> None:
         self.rows: list[ca.SX] = []
         self.lower: list[float] = []
         self.upper: list[float] = []
+        self.rate_rows: list[int] = []
 
     def add(self, expr: ca.SX, lo: float, hi: float) -> None:
         """Append the row lo <= expr <= hi (scalar SX)."""
@@ -70,11 +72,27 @@ class NlpRows:
 
 def relative_rate(q: ca.SX, serving: ca.SX, eta: ca.SX, s: Scenario, link_margin_m: float) -> ca.SX:
     """eta R~(|q - w| + e) / R_th - 1 (14a, >= 0 when met): UAV at q [2] on the BS at serving [2]
-    with share eta, as if e = link_margin_m (m) farther from the BS."""
+    with share eta, as if e = link_margin_m (m) farther from the BS. R_th is s's, the NLP's
+    build value; another R_th is a bound of the row (`lower_at_rate`)."""
     d2 = ca.sumsqr(q - serving)
     dist2 = d2 if link_margin_m == 0 else (ca.sqrt(d2 + 1e-12) + link_margin_m) ** 2
     rate: ca.SX = eta * s.B * ca.log1p(s.rho0 / (dist2 + s.dH**2)) / (np.log(2.0) * s.r_th)
     return rate - 1.0
+
+
+def lower_at_rate(
+    lbg: FloatArray, rate_rows: FloatArray, built_bps: float, r_th_bps: float
+) -> FloatArray:
+    """The lower bounds lbg [n_rows] of an NLP built for R_th = built_bps, for R_th = r_th_bps:
+    its 14a rows (indices rate_rows) are eta R / built_bps - 1 >= RATE_MARGIN, so for r_th_bps
+    they take the bound (1 + RATE_MARGIN) r_th_bps / built_bps - 1. lbg itself (the same
+    numbers, bit for bit) when the two are equal. An operator's new R_th (the service's `set`)
+    thus keeps the NLP: rebuilt, its build made the next plans of a live mission time out."""
+    if r_th_bps == built_bps:
+        return lbg
+    out = np.array(lbg, dtype=float)
+    out[np.asarray(rate_rows, dtype=int)] = (1.0 + RATE_MARGIN) * (r_th_bps / built_bps) - 1.0
+    return out
 
 
 def scaled_inverse_sx(A: ca.SX, scale: ca.SX) -> ca.SX:
@@ -152,6 +170,7 @@ def add_uav_rows(
     units of scale_m^2; `reach` (rows <= 0: the dynamics disk). Every distance is tightened by
     SOLVER_MARGIN_M, the rate by RATE_MARGIN (planning/margins.py)."""
     inf = float("inf")
+    rows.rate_rows.append(len(rows.rows))
     rows.add(relative_rate(q, serving, eta, s, link_m), RATE_MARGIN, inf)
     control2 = (max(s.d_th - link_m - SOLVER_MARGIN_M, 0.0) / scale_m) ** 2
     rows.add(ca.sumsqr(q - control) / scale_m**2, -inf, control2)

@@ -56,6 +56,7 @@ from isac_mission.planning.nlp_model import (
     add_clearance_row,
     add_uav_rows,
     information_terms,
+    lower_at_rate,
     plain_ipopt,
     predicted_target_point,
     straight_leg_point,
@@ -174,6 +175,7 @@ class PolishNLP:
         p = ca.vertcat(*[ca.reshape(v, -1, 1) for v in params])
         self._lbg = np.array(lbg, dtype=float)
         self._ubg = np.array(ubg, dtype=float)
+        self._rate_rows = np.array(rows.rate_rows, dtype=int)
         nlp = {"x": x, "p": p, "f": objective, "g": ca.vertcat(*g)}
         opts: dict[str, Any] = {
             "print_time": False,
@@ -309,7 +311,8 @@ class PolishNLP:
         ubx = np.concatenate([ubz.reshape(-1, order="F"), np.ones(M)])
         x0 = np.clip(x0, lbx, ubx)
         with self.lock:
-            sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg)
+            lbg = lower_at_rate(self._lbg, self._rate_rows, s.r_th, cons.scenario.r_th)
+            sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=self._ubg)
             stats = self.solver.stats()
         status = str(stats.get("return_status", "unknown"))
         iterations = int(stats.get("iter_count", 0))

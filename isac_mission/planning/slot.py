@@ -11,8 +11,11 @@ planning/fallback.py.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from collections.abc import Callable
 from typing import TypeVar, cast
+
+import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.planning.association import AssociationLP
@@ -88,13 +91,21 @@ class SolverKit:
         fleet size and keep-out count: KitCache)."""
         self._built = problems
 
-    def renewed(self) -> SolverKit:
+    def renewed(self, scenario: Scenario | None = None) -> SolverKit:
         """A kit with fresh convex problems (their cvxpy Parameters are per-kit state, which a
         timed-out plan's thread may still be writing) sharing this kit's IPOPT problems (built
         once: their solves are serialised by solve_lock). A horizon kit rebuilt after every
-        timeout spent its next plan's budget on the build, and the timeouts cascaded."""
+        timeout spent its next plan's budget on the build, and the timeouts cascaded.
+
+        scenario: plan with it from now on (default: this kit's). It may differ from this
+        kit's in R_th only (an operator's `set`), which the IPOPT problems take as a parameter;
+        ValueError otherwise. Rebuilt instead, they made the next plans of a live mission time
+        out (seconds of build, a compile in the background)."""
+        s = self.scenario if scenario is None else scenario
+        if s is not self.scenario and (changed := _changed_fields(self.scenario, s) - {"r_th"}):
+            raise ValueError(f"a renewed kit may change R_th only, not {', '.join(changed)}")
         kit = SolverKit(
-            self.scenario,
+            s,
             fast=self.fast,
             n_keep_out=self.n_keep_out,
             solve_lock=self.solve_lock,
@@ -107,6 +118,17 @@ class SolverKit:
         """Build and solve once what `method` plans with (its SlotPlanner.prepare), so that the
         first real slot does not pay for compilation."""
         planner(method).prepare(self)
+
+
+def _changed_fields(a: Scenario, b: Scenario) -> set[str]:
+    """The names of the fields in which scenarios a and b differ (arrays by value)."""
+    out = set()
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        same = np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y
+        if not same:
+            out.add(f.name)
+    return out
 
 
 def plan_slot(inp: SlotInput, kit: SolverKit, method: Method = "proposed") -> SlotPlan:

@@ -61,6 +61,7 @@ def _inputs(s: Scenario, method: str = "horizon", seed: int = 5) -> list[SlotInp
 def _data(s: Scenario, inp: SlotInput, L: int) -> HorizonSlotData:
     nearest = np.argmin(np.linalg.norm(inp.prev_xy_m[:, None] - s.bs_xy[None], axis=-1), axis=1)
     return HorizonSlotData(
+        rate_min_bps=s.r_th,
         prev_xy=inp.prev_xy_m,
         prev_velocity=np.zeros((s.M, 2))
         if inp.prev_velocity_mps is None
@@ -402,6 +403,35 @@ def test_a_renewed_kit_shares_the_ipopt_problems_and_plans_the_same() -> None:
     assert renewed.positions is not kit.positions  # the convex problems are fresh
     again = plan_slot(inp, renewed, "horizon")
     np.testing.assert_allclose(again.uav_xy_m, first.uav_xy_m, atol=1e-6)
+
+
+def test_a_kit_renewed_for_a_new_r_th_keeps_its_ipopt_problems_and_meets_the_new_rate() -> None:
+    """An operator's new R_th (the service's `set`) renews the kit without building its IPOPT
+    problems again: the 14a rows take R_th as their bound (nlp_model.lower_at_rate). The plans
+    meet the new rate (recomputed here from eq. 3), as a kit built for it does."""
+    s = load_scenario("paper")
+    kit = SolverKit(s)
+    inp = _inputs(s, "proposed")[6]
+    s2 = s.with_changes(r_th=3.0 * s.r_th)
+    renewed = kit.renewed(s2)
+    assert renewed.scenario is s2
+    assert horizon_nlp(renewed) is horizon_nlp(kit) and polish_nlp(renewed) is polish_nlp(kit)
+
+    def rates_bps(plan: SlotPlan) -> np.ndarray:
+        d_m = np.linalg.norm(plan.uav_xy_m - s.bs_xy[plan.bs_of_uav], axis=1)
+        return np.asarray(rate(plan.bandwidth_share, d_m, s.dH, s.rho0, s.B))
+
+    for method in ("horizon", "proposed"):
+        before = plan_slot(inp, kit, method)
+        assert (rates_bps(before) < s2.r_th).any(), "the new R_th must bind"
+        after = plan_slot(inp, renewed, method)
+        fresh = plan_slot(inp, SolverKit(s2), method)
+        assert after.report.status == "ok" and not after.report.fallback
+        assert np.all(rates_bps(after) >= s2.r_th * (1 - 1e-9)), rates_bps(after) / s2.r_th
+        np.testing.assert_allclose(after.uav_xy_m, fresh.uav_xy_m, atol=1e-2)
+        np.testing.assert_allclose(after.pcrb_trace, fresh.pcrb_trace, rtol=1e-6)
+    with pytest.raises(ValueError, match="d_safe"):
+        kit.renewed(s.with_changes(d_safe=2 * s.d_safe))
 
 
 def test_a_start_whose_uavs_miss_the_rate_gets_shares_that_meet_it() -> None:

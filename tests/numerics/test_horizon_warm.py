@@ -32,6 +32,7 @@ def _vehicle_scenario(**horizon: object) -> Scenario:
 def _slot_data(s: Scenario, x_pred: np.ndarray, clearance_m: float) -> HorizonSlotData:
     L = s.planner.horizon.length
     return HorizonSlotData(
+        rate_min_bps=s.r_th,
         prev_xy=s.uav_start_xy,
         prev_velocity=np.zeros((s.M, 2)),
         serving_xy=s.bs_xy[: s.M],

@@ -179,17 +179,9 @@ class MissionState:
         return self.commit(job, job.run())
 
     def renew_kits(self) -> None:
-        """Plan on fresh solver kits from now on (a timed-out planner thread keeps the old);
-        the IPOPT problems are kept while the scenario is the same (SolverKit.renewed)."""
-        if self.kit.scenario is self.scenario:
-            self.kit = self.kit.renewed()
-        else:
-            self.kit = SolverKit(
-                self.scenario,
-                fast=self.kit.fast,
-                solve_lock=self.kit.solve_lock,
-                ipopt=self.kit.ipopt,
-            )
+        """Plan on fresh solver kits, for the current scenario, from now on (a timed-out
+        planner thread keeps the old); the IPOPT problems are kept (SolverKit.renewed)."""
+        self.kit = self.kit.renewed(self.scenario)
         self.kits = KitCache(self.kit, self.method)
 
     def set_scenario(self, s: Scenario) -> None:

@@ -131,11 +131,13 @@ class MultiTargetMission:
         if s.M != self._scenario.M:
             raise ValueError(f"the new scenario has M = {s.M}, the mission {self._scenario.M}")
         self._scenario = s
-        self.renew_kits(multi_target_kit(s))
+        self.renew_kits()
 
-    def renew_kits(self, kit: SolverKit | None = None) -> None:
-        """Plan on fresh kits from now on (a timed-out planner thread keeps the old)."""
-        self.kit = kit if kit is not None else self.kit.renewed()
+    def renew_kits(self) -> None:
+        """Plan on fresh kits, for the current scenario, from now on (a timed-out planner
+        thread keeps the old); the IPOPT problems, the solve lock and the compiled cache are
+        kept (SolverKit.renewed)."""
+        self.kit = self.kit.renewed(self._scenario)
         self.kits = KitCache(self.kit, self.method, KEEP_OUT_CAPACITY)
 
     def start_known_tracks(self) -> None:
