@@ -146,8 +146,7 @@ async def test_live_console_draws_the_telemetry_commands_and_survives_connection
             # 20 WebSocket connections opened and dropped, three times over: each is served
             # its snapshot, the service goes on planning, its memory stays (the plan rate
             # during the churn, a wall-clock figure, is bench/console_churn.py's). Before the
-            # commands: a new R_th renews the planner's problems, whose build (seconds under
-            # load) would be counted as the churn's memory.
+            # commands, so that the memory measured is the churn's alone.
             rss0 = rss_kib(proc.pid)
             plans_before = len(obs.plans)
             await churn_websockets(url, rounds=3, connections=20)
