@@ -161,6 +161,11 @@ class UpgradingSolver:
         """True once the compiled solver is the one that solves."""
         return self._loaded
 
+    @property
+    def current(self) -> NlpSolver:
+        """The solver that solves now (the interpreted one until the upgrade)."""
+        return self._current
+
     def _upgrade(self) -> None:
         job = self._job
         if job is None or not job.done.is_set():
@@ -218,24 +223,35 @@ class CompiledNlpCache:
     def path(self, name: str, key: str) -> Path:
         return self.directory / f"{name}-{key[:32]}.casadi"
 
-    def __call__(self, name: str, nlp: dict[str, Any], options: dict[str, Any]) -> NlpSolver:
+    def __call__(
+        self,
+        name: str,
+        nlp: dict[str, Any],
+        options: dict[str, Any],
+        like: NlpSolver | None = None,
+    ) -> NlpSolver:
+        """The compiled solver of `nlp` from the cache, else an interpreted one (module doc);
+        like: an interpreted one takes its derivatives (nlp_model.shared_derivatives). The
+        file's key is the problem's alone: a compile never shares."""
         function = nlp_function(name, nlp)
         path = self.path(name, problem_key(name, function, options))
         loaded = self.load(path)
         if loaded is not None:
             return loaded
+        if isinstance(like, UpgradingSolver):
+            like = like.current
         if self.compiler is None or self.compile == "never":
             why = "no C compiler" if self.compiler is None else "compiling is off"
             self._say(f"{name}: interpreted ({why}; {path.name} not in the cache)")
-            return plain_ipopt(name, nlp, options)
+            return plain_ipopt(name, nlp, options, like)
         job = CompileJob(name, function, options, path)
         self._submit(job)
         if self.compile == "now":
             job.done.wait()
             compiled = self.load(path)
-            return compiled if compiled is not None else plain_ipopt(name, nlp, options)
+            return compiled if compiled is not None else plain_ipopt(name, nlp, options, like)
         self._say(f"{name}: interpreted until {path.name} is compiled (in the background)")
-        return UpgradingSolver(plain_ipopt(name, nlp, options), job, self)
+        return UpgradingSolver(plain_ipopt(name, nlp, options, like), job, self)
 
     def load(self, path: Path) -> NlpSolver | None:
         """The compiled solver in `path`, or None (absent; a file that does not load is removed,

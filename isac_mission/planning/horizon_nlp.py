@@ -360,7 +360,8 @@ class HorizonNLP:
             name = "horizon" if band == M - 1 else f"horizon_band{band}"
             self.solver: NlpSolver = ipopt(name, nlp, opts)
             warm_opts = {**opts, "ipopt": {**opts["ipopt"], **WARM_START_OPTIONS}}
-            self.warm_solver: NlpSolver = ipopt(f"{name}_warm", nlp, warm_opts)
+            # The same NLP: the warm instance takes the cold one's derivative functions.
+            self.warm_solver: NlpSolver = ipopt(f"{name}_warm", nlp, warm_opts, like=self.solver)
         self.lock: SolveLock = lock
         # For tests and the start point's scale: the weighted objective itself and its gradient.
         self.objective = ca.Function("f", [x, p], [objective])

@@ -8,6 +8,7 @@ from __future__ import annotations
 import re
 import time
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -15,6 +16,7 @@ from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
 from isac_mission.planning.horizon import horizon_nlp, plan_horizon
 from isac_mission.planning.horizon_nlp import HorizonNLP, HorizonSlotData
+from isac_mission.planning.nlp_model import NlpSolver, plain_ipopt, shared_derivatives
 from isac_mission.planning.per_slot import Proposed
 from isac_mission.planning.problem import with_end_velocity
 from isac_mission.planning.slot import SlotInput, SolverKit
@@ -170,6 +172,49 @@ def test_the_multipliers_warm_start_reaches_the_same_plans_in_fewer_iterations()
             objectives[kind].append(float(plan.horizon.pcrb_trace.sum()))
     assert iterations["warm"] < iterations["cold"], iterations
     np.testing.assert_allclose(objectives["warm"], objectives["cold"], rtol=0.05)
+
+
+def test_the_warm_instance_takes_the_cold_ones_derivatives_and_plans_the_same() -> None:
+    """The warm-start IPOPT instance is built with the cold one's derivative functions
+    (nlp_model.shared_derivatives; they are most of its build); over warm-started tracking slots
+    its plans equal, bit for bit, those of a warm instance that generated its own."""
+    s = _vehicle_scenario()
+    likes: dict[str, object] = {}
+
+    def sharing(
+        name: str, nlp: dict[str, Any], options: dict[str, Any], like: NlpSolver | None = None
+    ) -> NlpSolver:
+        likes[name] = like
+        return plain_ipopt(name, nlp, options, like)
+
+    def own(
+        name: str, nlp: dict[str, Any], options: dict[str, Any], like: NlpSolver | None = None
+    ) -> NlpSolver:
+        return plain_ipopt(name, nlp, options)
+
+    kits = {"shared": SolverKit(s, ipopt=sharing), "own": SolverKit(s, ipopt=own)}
+    nlp = horizon_nlp(kits["shared"])
+    assert likes["horizon_warm"] is nlp.solver and likes["horizon"] is None
+    assert shared_derivatives(nlp.solver).keys() == {"grad_f", "jac_g", "hess_lag"}
+    inputs = [
+        inp
+        for inp in _soak_like_inputs(s)[12:24]
+        if inp.prev_plan is not None
+        and inp.prev_plan.horizon is not None
+        and inp.prev_plan.horizon.duals is not None
+    ]
+    assert len(inputs) >= 5
+    for inp in inputs:
+        plans = {}
+        for which, kit in kits.items():
+
+            def per_slot(case: SlotInput = inp, kit: SolverKit = kit) -> object:
+                return with_end_velocity(Proposed().plan(case, kit), case, s)
+
+            plans[which] = plan_horizon(inp, per_slot, kit, time.perf_counter())  # type: ignore[arg-type]
+        assert "IPOPT" in plans["shared"].report.polish
+        np.testing.assert_array_equal(plans["shared"].uav_xy_m, plans["own"].uav_xy_m)
+        np.testing.assert_array_equal(plans["shared"].bandwidth_share, plans["own"].bandwidth_share)
 
 
 def test_an_nlp_without_the_vehicle_model_has_no_terminal_row() -> None:

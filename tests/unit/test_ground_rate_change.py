@@ -35,8 +35,10 @@ def test_a_new_r_th_on_a_multi_target_mission_keeps_the_solve_lock_and_the_probl
     s = load_scenario("multi-target")
     lock = threading.RLock()
 
-    def factory(name: str, nlp: dict[str, Any], options: dict[str, Any]) -> NlpSolver:
-        return plain_ipopt(name, nlp, options)
+    def factory(
+        name: str, nlp: dict[str, Any], options: dict[str, Any], like: NlpSolver | None = None
+    ) -> NlpSolver:
+        return plain_ipopt(name, nlp, options, like)
 
     base = multi_target_kit(s)
     kit = SolverKit(s, n_keep_out=base.n_keep_out, solve_lock=lock, ipopt=factory)
