@@ -29,8 +29,8 @@ Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
 
 BUILD_AHEAD_BUDGET_S = 10.0
 """Start-up seconds `prepare_fleet` may spend on the fleets with two or more vehicles out (the
-one-out fleet is always built): every size at M = 3 and 6 (well under a second each), the first
-one or two beyond the one-out fleet at M = 12 (about 5 s each, interpreted)."""
+one-out fleet is always built). With the horizon, interpreted: every size at M = 6 (4 s for
+the five), at M = 12 the one-out fleet only (8 s)."""
 
 
 class KitCache:
