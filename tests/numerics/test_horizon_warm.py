@@ -46,6 +46,17 @@ def _slot_data(s: Scenario, x_pred: np.ndarray, clearance_m: float) -> HorizonSl
     )
 
 
+def _warm_started(inputs: list[SlotInput]) -> list[SlotInput]:
+    """The slots whose last plan carries a horizon with its multipliers."""
+    return [
+        inp
+        for inp in inputs
+        if inp.prev_plan is not None
+        and inp.prev_plan.horizon is not None
+        and inp.prev_plan.horizon.duals is not None
+    ]
+
+
 def test_last_slots_multipliers_shift_with_its_plan() -> None:
     """Each horizon slot's block of multipliers takes the next slot's, the last keeps its own, the
     terminal rows keep theirs, all rescaled to the new objective's divisor; multipliers of
@@ -146,13 +157,7 @@ def test_the_multipliers_warm_start_reaches_the_same_plans_in_fewer_iterations()
     agree, and the warm solves take fewer IPOPT iterations in all."""
     s = _vehicle_scenario()
     kit = SolverKit(s)
-    inputs = [
-        inp
-        for inp in _soak_like_inputs(s)[12:40]
-        if inp.prev_plan is not None
-        and inp.prev_plan.horizon is not None
-        and inp.prev_plan.horizon.duals is not None
-    ]
+    inputs = _warm_started(_soak_like_inputs(s)[12:40])
     assert len(inputs) >= 10
     iterations = {"warm": 0, "cold": 0}
     objectives: dict[str, list[float]] = {"warm": [], "cold": []}
@@ -196,13 +201,7 @@ def test_the_warm_instance_takes_the_cold_ones_derivatives_and_plans_the_same() 
     nlp = horizon_nlp(kits["shared"])
     assert likes["horizon_warm"] is nlp.solver and likes["horizon"] is None
     assert shared_derivatives(nlp.solver).keys() == {"grad_f", "jac_g", "hess_lag"}
-    inputs = [
-        inp
-        for inp in _soak_like_inputs(s)[12:24]
-        if inp.prev_plan is not None
-        and inp.prev_plan.horizon is not None
-        and inp.prev_plan.horizon.duals is not None
-    ]
+    inputs = _warm_started(_soak_like_inputs(s)[12:24])
     assert len(inputs) >= 5
     for inp in inputs:
         plans = {}
