@@ -18,7 +18,7 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.model.radar import SensingParams
 from isac_mission.planning.margins import RATE_MARGIN, SOLVER_MARGIN_M
-from isac_mission.types import FloatArray
+from isac_mission.types import FloatArray, IntArray
 
 SolveLock = AbstractContextManager[Any]
 """What SolverKit.solve_lock is: held around every IPOPT construction and solve. The live service
@@ -64,7 +64,7 @@ def shared_derivatives(like: NlpSolver | None) -> dict[str, ca.Function]:
     """The options that give a new nlpsol the derivative functions (the objective's gradient, the
     rows' Jacobian, the Lagrangian's Hessian) of `like`, a built solver of the same NLP; {} when
     like is None or not a CasADi Function. Generating them is most of an nlpsol's build (the
-    horizon at M = 12: 3.0 of 3.1 s): the horizon's warm-start instance builds in a fraction,
+    horizon at M = 12: about 3.0 of 3.2 s): the horizon's warm-start instance builds in a fraction,
     and evaluates the same functions."""
     if not isinstance(like, ca.Function):
         return {}
@@ -112,7 +112,7 @@ def relative_rate(q: ca.SX, serving: ca.SX, eta: ca.SX, s: Scenario, link_margin
 
 
 def lower_at_rate(
-    lbg: FloatArray, rate_rows: FloatArray, built_bps: float, r_th_bps: float
+    lbg: FloatArray, rate_rows: IntArray, built_bps: float, r_th_bps: float
 ) -> FloatArray:
     """The lower bounds lbg [n_rows] of an NLP built for R_th = built_bps, for R_th = r_th_bps:
     its 14a rows (indices rate_rows) are eta R / built_bps - 1 >= RATE_MARGIN, so for r_th_bps

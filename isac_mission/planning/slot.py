@@ -98,8 +98,8 @@ class SolverKit:
         timeout spent its next plan's budget on the build, and the timeouts cascaded.
 
         scenario: plan with it from now on (default: this kit's). It may differ from this
-        kit's in R_th only (an operator's `set`), which the IPOPT problems take as a parameter;
-        ValueError otherwise. Rebuilt instead, they made the next plans of a live mission time
+        kit's in R_th only (an operator's `set`), which the IPOPT problems take as the bound of
+        their 14a rows (nlp_model.lower_at_rate); ValueError otherwise. Rebuilt instead, they made the next plans of a live mission time
         out (seconds of build, a compile in the background)."""
         s = self.scenario if scenario is None else scenario
         if s is not self.scenario and (changed := _changed_fields(self.scenario, s) - {"r_th"}):
@@ -125,7 +125,7 @@ def _changed_fields(a: Scenario, b: Scenario) -> set[str]:
     out = set()
     for f in dataclasses.fields(a):
         x, y = getattr(a, f.name), getattr(b, f.name)
-        same = np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y
+        same = x is y or (np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y)
         if not same:
             out.add(f.name)
     return out
