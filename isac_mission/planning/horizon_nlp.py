@@ -494,8 +494,11 @@ class HorizonNLP:
         L, M = self.length, s.M
         lo, hi = operating_area(s)
         reach = np.arange(1, L + 1, dtype=float)[:, None, None]  # [L, 1, 1], in V_max dt
-        lbz = np.maximum((lo[None] - data.prev_xy) / self.step_m, -reach).reshape(-1)
-        ubz = np.minimum((hi[None] - data.prev_xy) / self.step_m, reach).reshape(-1)
+        # Clipped to the reach box on both sides: a UAV more than a slot's reach outside the
+        # area gets the point of the box nearest to the area (an empty box is an error to IPOPT;
+        # the exact checks then refuse the answer's area miss, as any method's).
+        lbz = np.clip((lo[None] - data.prev_xy) / self.step_m, -reach, reach).reshape(-1)
+        ubz = np.clip((hi[None] - data.prev_xy) / self.step_m, -reach, reach).reshape(-1)
         n_u = L * M * 2 if self.vehicle_model else 0
         lbx = np.concatenate([lbz, np.full(n_u, -1.0), np.full(L * M, MIN_SHARE)])
         ubx = np.concatenate([ubz, np.full(n_u, 1.0), np.ones(L * M)])

@@ -281,6 +281,29 @@ def test_a_horizon_solve_at_its_iteration_cap_flies_a_better_feasible_iterate_or
     assert set(kinds) == {"kept", "fallback"}, kinds
 
 
+def test_a_uav_more_than_a_slot_outside_the_area_gets_a_plan_or_a_reason_not_an_error() -> None:
+    """A UAV 1.5 steps beyond the area's edge cannot return in one slot: the position bounds
+    keep to its reach (lbx <= ubx, the box's point nearest to the area) and the plan comes back
+    infeasible with the area named, as every method's (it raised from IPOPT's bound check)."""
+    s = load_scenario("paper")
+    inp = _inputs(s, "proposed")[12]
+    prev = inp.prev_xy_m.copy()
+    prev[1, 0] = s.area[0] + 1.5 * s.v_max * s.dt
+    outside = replace(inp, prev_xy_m=prev)
+    kit = SolverKit(s)
+    nlp = horizon_nlp(kit)
+    lbx, ubx = nlp.bounds(_data(s, outside, nlp.length))
+    assert np.all(lbx <= ubx)
+    reach = np.arange(1, nlp.length + 1, dtype=float)  # in steps of V_max dt
+    in_steps = lbx[: 2 * s.M * nlp.length].reshape(nlp.length, s.M, 2)[:, 1, 0]
+    np.testing.assert_array_equal(in_steps, -reach)
+    in_steps = ubx[: 2 * s.M * nlp.length].reshape(nlp.length, s.M, 2)[:, 1, 0]
+    np.testing.assert_allclose(in_steps, -np.minimum(reach, 1.5), rtol=1e-12)
+    plan = plan_slot(outside, kit, "horizon")
+    assert plan.report.status != "ok"
+    assert "operating area" in plan.report.reason
+
+
 def test_capped_iterates_flown_in_a_mission_pass_the_independent_check(tmp_path: Path) -> None:
     s = _scenario(max_iterations=3).with_changes(N=30)
     run_monte_carlo(s, ["horizon"], runs=1, seed=21, trace_dir=tmp_path)
