@@ -91,7 +91,9 @@ def record(m: int, slots: int, seed: int) -> Recorded:
     return recorded
 
 
-def replay(recorded: Recorded, variant: dict[str, Any]) -> dict[str, Any]:
+def replay(
+    recorded: Recorded, variant: dict[str, Any]
+) -> list[tuple[float, int, str, float, np.ndarray]]:
     """Every recorded call solved again by the problems built with `variant` on top of their
     options: per call (seconds, iterations, status, evaluation seconds, x)."""
     import isac_mission.planning.nlp_model as nlp_model
@@ -112,7 +114,7 @@ def replay(recorded: Recorded, variant: dict[str, Any]) -> dict[str, Any]:
         evals = sum(v for k, v in stats.items() if k.startswith("t_wall_nlp"))
         x = np.asarray(sol["x"], dtype=float).ravel()
         rows.append((spent, int(stats["iter_count"]), str(stats["return_status"]), evals, x))
-    return {"rows": rows}
+    return rows
 
 
 def main() -> None:
@@ -151,7 +153,7 @@ def main() -> None:
     print(header)
     reference: list[Any] | None = None
     for name, variant in variants.items():
-        rows = replay(recorded, variant)["rows"]
+        rows = replay(recorded, variant)
         wall = sum(r[0] for r in rows)
         iters = sum(r[1] for r in rows)
         evals = sum(r[3] for r in rows)
