@@ -103,7 +103,10 @@ def replay(
     for name, (nlp, options, like) in recorded.problems.items():
         if name not in used and not any(recorded.problems[u][2] == name for u in used):
             continue
-        opts = {**options, "ipopt": {**options["ipopt"], **variant}}
+        ipopt = {k: v for k, v in variant.items() if k != "hess_lag"}
+        opts = {**options, "ipopt": {**options["ipopt"], **ipopt}}
+        if "hess_lag" in variant:  # null: CasADi's automatic Hessian
+            opts.pop("hess_lag", None)
         solvers[name] = nlp_model.plain_ipopt(name, nlp, opts, solvers.get(like or ""))
     rows = []
     for name, kwargs in recorded.calls:

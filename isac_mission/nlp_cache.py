@@ -9,7 +9,10 @@ horizon at M = 3, minutes at M = 12), so it never runs inside a plan:
 
 - `CompiledNlpCache(directory, compile=...)` loads a problem's compiled solver from the cache when
   it is there (a file per problem: its key hashes the NLP's expressions, options, CasADi's version
-  and the compiler flags, so any change of scenario or code is a new file);
+  and the compiler flags, so any change of scenario or code is a new file; a derivative given as
+  an option, the horizon's Hessian, is compiled too and enters the key by what it computes);
+- a second solver of the same NLP with other options (`like`: the horizon's warm-start instance)
+  takes the first one's compiled derivatives: one compile serves both;
 - otherwise it returns the interpreted solver at once and, with `compile="background"`, compiles
   in a child process (niced, one at a time) and switches to the compiled solver at its first solve
   after the file is written; with `compile="now"` it compiles before returning
@@ -34,6 +37,8 @@ import sys
 import tempfile
 import threading
 import time
+import weakref
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -59,8 +64,8 @@ JIT_FLAGS = ("-O1",)
 at a fifth of the compile time (21 against 110 s); -O0 compiles in half the time of -O1 but at
 M = 12 evaluated slower than the interpreter."""
 
-FORMAT = 1
-"""Bumped when what a cache file holds changes."""
+FORMAT = 2
+"""Bumped when what a cache file holds changes (2: Function-valued options compiled too)."""
 
 CompileMode = Literal["never", "background", "now"]
 
@@ -87,9 +92,10 @@ def find_compiler() -> str | None:
     return None
 
 
-def jit_options(compiler: str, directory: Path) -> dict[str, Any]:
-    """nlpsol's options that compile its functions with `compiler` into `directory` and keep the
-    shared object there (the saved solver links to it: loading needs no compiler)."""
+def jit_options(compiler: str, directory: Path, jit_name: str = "nlp") -> dict[str, Any]:
+    """A Function's (or nlpsol's) options that compile it (its functions) with `compiler` into
+    `directory`/jit_name and keep the shared object there (the saved solver links to it: loading
+    needs no compiler)."""
     return {
         "jit": True,
         "compiler": "shell",
@@ -101,10 +107,26 @@ def jit_options(compiler: str, directory: Path) -> dict[str, Any]:
             "directory": str(directory),
         },
         "jit_serialize": "link",
-        "jit_name": "nlp",
+        "jit_name": jit_name,
         "jit_temp_suffix": False,
         "jit_cleanup": False,
     }
+
+
+def compiled_function(
+    given: ca.Function, compiler: str, directory: Path, jit_name: str
+) -> ca.Function:
+    """`given` (an SX Function) compiled: nlpsol compiles the functions it generates, not the
+    ones it is given (the horizon's `hess_lag`)."""
+    inputs = given.sx_in()
+    return ca.Function(
+        given.name(),
+        inputs,
+        given.call(inputs),
+        given.name_in(),
+        given.name_out(),
+        jit_options(compiler, directory, jit_name),
+    )
 
 
 def nlp_function(name: str, nlp: dict[str, Any]) -> ca.Function:
@@ -113,18 +135,30 @@ def nlp_function(name: str, nlp: dict[str, Any]) -> ca.Function:
     return ca.Function(name, [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
 
 
+def split_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, ca.Function]]:
+    """nlpsol's options as (the JSON-able ones, the Functions among them: a given derivative
+    such as the horizon's `hess_lag`)."""
+    functions = {k: v for k, v in options.items() if isinstance(v, ca.Function)}
+    return {k: v for k, v in options.items() if k not in functions}, functions
+
+
 def problem_key(name: str, function: ca.Function, options: dict[str, Any]) -> str:
-    """sha256 (hex) of everything the compiled solver depends on."""
+    """sha256 (hex) of everything the compiled solver depends on (a Function among the options
+    by its serialized self)."""
+    plain, functions = split_options(options)
     digest = hashlib.sha256()
     header = {
         "format": FORMAT,
         "casadi": ca.CasadiMeta.version(),
         "name": name,
         "flags": JIT_FLAGS,
-        "options": options,
+        "options": plain,
+        "functions": sorted(functions),
     }
     digest.update(json.dumps(header, sort_keys=True, default=str).encode())
     digest.update(function.serialize().encode())
+    for option in sorted(functions):
+        digest.update(functions[option].serialize().encode())
     return digest.hexdigest()
 
 
@@ -138,7 +172,10 @@ def compile_solver(
     binary_dir = out.with_suffix("")
     binary_dir.mkdir(parents=True, exist_ok=True)
     os.chdir(binary_dir)
-    solver = ca.nlpsol(name, "ipopt", function, {**options, **jit_options(compiler, binary_dir)})
+    plain, given = split_options(options)
+    compiled = {k: compiled_function(f, compiler, binary_dir, k) for k, f in given.items()}
+    options = {**plain, **compiled, **jit_options(compiler, binary_dir)}
+    solver = ca.nlpsol(name, "ipopt", function, options)
     for source in [*binary_dir.glob("*.c"), *binary_dir.glob("*.o")]:
         source.unlink(missing_ok=True)
     partial = binary_dir / "solver.partial"
@@ -148,12 +185,15 @@ def compile_solver(
 
 class UpgradingSolver:
     """The interpreted solver until the compiled one is in the cache, then the compiled one
-    (checked at each call, which the NLP makes under its solve lock)."""
+    (checked at each call, which the NLP makes under its solve lock). upgrade: what gives the
+    compiled solver once the job is done (None: it stays interpreted)."""
 
-    def __init__(self, plain: NlpSolver, job: CompileJob, cache: CompiledNlpCache) -> None:
+    def __init__(
+        self, plain: NlpSolver, job: CompileJob, upgrade: Callable[[], NlpSolver | None]
+    ) -> None:
         self._current = plain
         self._job: CompileJob | None = job
-        self._cache = cache
+        self._upgrade_to = upgrade
         self._loaded = False
 
     @property
@@ -166,12 +206,17 @@ class UpgradingSolver:
         """The solver that solves now (the interpreted one until the upgrade)."""
         return self._current
 
+    @property
+    def job(self) -> CompileJob | None:
+        """The compile it waits for (None once it has upgraded or given up)."""
+        return self._job
+
     def _upgrade(self) -> None:
         job = self._job
         if job is None or not job.done.is_set():
             return
         self._job = None
-        loaded = self._cache.load(job.path)
+        loaded = self._upgrade_to()
         if loaded is not None:
             self._current = loaded
             self._loaded = True
@@ -215,6 +260,8 @@ class CompiledNlpCache:
     events: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
+        # The compiled solvers this cache loaded, by solver: their file's name.
+        self._compiled: weakref.WeakKeyDictionary[Any, str] = weakref.WeakKeyDictionary()
         self._queue: queue.Queue[CompileJob] = queue.Queue()
         self._worker: threading.Thread | None = None
         self._child: subprocess.Popen[bytes] | None = None
@@ -230,16 +277,29 @@ class CompiledNlpCache:
         options: dict[str, Any],
         like: NlpSolver | None = None,
     ) -> NlpSolver:
-        """The compiled solver of `nlp` from the cache, else an interpreted one (module doc);
-        like: an interpreted one takes its derivatives (nlp_model.shared_derivatives). The
-        file's key is the problem's alone: a compile never shares."""
+        """The compiled solver of `nlp` from the cache, else an interpreted one (module doc).
+        like: a solver of the same nlp (other options) that this factory returned. A compiled
+        one (or one waiting for its compile) gives its compiled derivatives, so one compile
+        serves both; an interpreted one its interpreted derivatives
+        (nlp_model.shared_derivatives)."""
+        if isinstance(like, UpgradingSolver) and like.job is not None:
+            job, cold = like.job, like
+
+            def upgrade() -> NlpSolver | None:
+                return plain_ipopt(name, nlp, options, cold.current) if cold.wait(0) else None
+
+            self._say(f"{name}: interpreted until {job.path.name} is compiled (shares it)")
+            return UpgradingSolver(plain_ipopt(name, nlp, options, like.current), job, upgrade)
+        if isinstance(like, UpgradingSolver):
+            like = like.current
+        if like is not None and like in self._compiled:
+            self._say(f"{name}: shares the compiled derivatives of {self._compiled[like]}")
+            return plain_ipopt(name, nlp, options, like)
         function = nlp_function(name, nlp)
         path = self.path(name, problem_key(name, function, options))
         loaded = self.load(path)
         if loaded is not None:
             return loaded
-        if isinstance(like, UpgradingSolver):
-            like = like.current
         if self.compiler is None or self.compile == "never":
             why = "no C compiler" if self.compiler is None else "compiling is off"
             self._say(f"{name}: interpreted ({why}; {path.name} not in the cache)")
@@ -251,7 +311,7 @@ class CompiledNlpCache:
             compiled = self.load(path)
             return compiled if compiled is not None else plain_ipopt(name, nlp, options, like)
         self._say(f"{name}: interpreted until {path.name} is compiled (in the background)")
-        return UpgradingSolver(plain_ipopt(name, nlp, options, like), job, self)
+        return UpgradingSolver(plain_ipopt(name, nlp, options, like), job, lambda: self.load(path))
 
     def load(self, path: Path) -> NlpSolver | None:
         """The compiled solver in `path`, or None (absent; a file that does not load is removed,
@@ -265,6 +325,7 @@ class CompiledNlpCache:
             path.unlink(missing_ok=True)
             return None
         self._say(f"{path.stem}: compiled, loaded from the cache")
+        self._compiled[solver] = path.name
         return solver
 
     def _say(self, line: str) -> None:
@@ -295,13 +356,17 @@ class CompiledNlpCache:
         with tempfile.TemporaryDirectory(dir=self.directory) as work:
             function_file = Path(work) / "nlp.casadi"
             job.function.save(str(function_file))
+            plain, functions = split_options(job.options)
+            function_files = {option: str(Path(work) / f"{option}.casadi") for option in functions}
+            for option, given in functions.items():
+                given.save(function_files[option])
             command = [
                 sys.executable,
                 "-m",
                 "isac_mission.nlp_cache",
                 job.name,
                 str(function_file),
-                json.dumps(job.options),
+                json.dumps({"options": plain, "functions": function_files}),
                 self.compiler,
                 str(job.path),
             ]
@@ -328,11 +393,15 @@ class CompiledNlpCache:
 
 
 def _main(argv: list[str]) -> int:
-    """The child: NAME NLP_FILE OPTIONS_JSON COMPILER OUT."""
+    """The child: NAME NLP_FILE OPTIONS_JSON COMPILER OUT (OPTIONS_JSON: {"options": nlpsol's
+    JSON-able options, "functions": {option: the file of a Function-valued one}})."""
     name, function_file, options_json, compiler, out = argv
     os.nice(10)
     function = ca.Function.load(function_file)
-    compile_solver(name, function, json.loads(options_json), compiler, Path(out))
+    given = json.loads(options_json)
+    options = given["options"]
+    options.update({k: ca.Function.load(path) for k, path in given["functions"].items()})
+    compile_solver(name, function, options, compiler, Path(out))
     return 0
 
 

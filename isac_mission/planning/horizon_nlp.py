@@ -13,8 +13,9 @@
                                               |q_i(s) - q_j(s)| >= D_s + 2e, |q_m(s) - k| >= D_s + 2e
          0 <= q_lm <= area                                             (operating area, bounds)
 
-with w_l = discount^(l-1) (times terminal_weight on the last slot). The derivatives are CasADi's
-(automatic differentiation, exact). Everything that changes per slot is a parameter: the UAVs'
+with w_l = discount^(l-1) (times terminal_weight on the last slot). The derivatives are exact:
+CasADi's automatic differentiation, but the Lagrangian's Hessian is assembled through each slot's
+information (planning/horizon_hessian.py: the same matrix at a third of the operations at M = 24). Everything that changes per slot is a parameter: the UAVs'
 positions and velocities, the serving and control BSs, the keep-out points, the predicted state,
 the prior information, the clearances c_l and the objective's scale.
 
@@ -33,7 +34,9 @@ tightened by SOLVER_MARGIN_M.
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any
 
 import casadi as ca
@@ -42,6 +45,7 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
+from isac_mission.planning.horizon_hessian import CoupledStage, bottleneck_hessian, unvech, vech
 from isac_mission.planning.legs import chord_point_clearance_m
 from isac_mission.planning.margins import (
     MIN_SHARE,
@@ -106,6 +110,33 @@ its plan (`warm_duals`): from the shifted plan alone IPOPT took a median 77 iter
 soak's tracking phase (docs/model.md, "Start points"). A cold start (no multipliers, or another
 problem's) keeps IPOPT's own initialisation: with zero multipliers pushed to these bounds the
 starts from rest stalled."""
+
+
+LiftedSlot = Callable[[ca.SX], tuple[ca.SX, ca.SX | None]]
+"""A slot's lifted terms as a function of its J_M [4, 4] (`lifted_slot` with the rest bound)."""
+
+
+def lifted_slot(
+    J_prior: ca.SX,
+    scale_j: ca.SX,
+    scale_p: ca.SX,
+    Pt: ca.SX | None,
+    weight: float,
+    F: FloatArray,
+    W: FloatArray,
+    J_info: ca.SX,
+) -> tuple[ca.SX, ca.SX | None]:
+    """One slot of the lifted recursion: (weight tr(C), vec(E (F C F^T + W) E - Pt) [16], None on
+    the last slot: Pt None) with C = (J_prior + J_info)^-1 [4, 4] (Jacobi-scaled by scale_j [4])
+    and E = diag(scale_p [4])."""
+    J = J_prior + J_info
+    C = scaled_inverse_sx(0.5 * (J + J.T), scale_j)
+    term = weight * ca.trace(C)
+    if Pt is None:
+        return term, None
+    E = ca.diag(scale_p)
+    P = ca.mtimes(ca.mtimes(ca.DM(F), C), ca.DM(F.T)) + ca.DM(W)
+    return term, ca.vec(ca.mtimes(ca.mtimes(E, P), E) - Pt)
 
 
 def horizon_weights(length: int, discount: float, terminal_weight: float) -> FloatArray:
@@ -270,6 +301,8 @@ class HorizonNLP:
         # inverses: a dense Hessian that took 53 % of a solve at M = 3 and most of the build;
         # lifted, each slot's terms couple its own UAVs with 16 numbers.
         lift = ca.SX.sym("lift", 16 * (L - 1))
+        n_z, n_u = int(z.numel()), int(u.numel())
+        stages: list[tuple[list[Any], LiftedSlot]] = []
         n_lift = int(lift.numel())
         ones4 = ca.SX.ones(4)
         lifted_rows: list[ca.SX] = []
@@ -281,10 +314,15 @@ class HorizonNLP:
             x_l = ca.mtimes(ca.DM(np.linalg.matrix_power(F, h)), x_pred)
             J = J_prior
             J_info = ca.SX.zeros(4, 4)
+            members = []
             for m in range(M):
                 qm = q(h, m)
                 em = eta[h * M + m]
-                J_info = J_info + information_terms(qm, em, x_l, self._sensing)
+                terms = information_terms(qm, em, x_l, self._sensing)
+                J_info = J_info + terms
+                i = 2 * (h * M + m)
+                index = np.array([i, i + 1, n_z + n_u + h * M + m])
+                members.append((index, ca.vertcat(z[i], z[i + 1], em), vech(terms)))
                 limits = []
                 if self.vehicle_model:
                     legs = (q(h - 1, m), v(h - 1, m), q(h, m), v(h, m), dt)
@@ -313,16 +351,17 @@ class HorizonNLP:
             dj, dp = scale_j[4 * h : 4 * h + 4], scale_p[4 * h : 4 * h + 4]
             C = scaled_inverse_sx(0.5 * (J + J.T), dj)
             objective = objective + weights[h] * ca.trace(C)
-            J_lifted = J_prior_lifted + J_info
-            C_lifted = scaled_inverse_sx(0.5 * (J_lifted + J_lifted.T), dj)
-            lifted_objective = lifted_objective + weights[h] * ca.trace(C_lifted)
+            Pt = ca.reshape(lift[16 * h : 16 * h + 16], 4, 4) if h + 1 < L else None
+            slot = partial(lifted_slot, J_prior_lifted, dj, dp, Pt, weights[h], F, W)
+            term, row = slot(J_info)
+            stages.append((members, slot))
+            lifted_objective = lifted_objective + term
             if h + 1 < L:
+                assert row is not None and Pt is not None
+                lifted_rows.append(row)
                 P = ca.mtimes(ca.mtimes(ca.DM(F), C), ca.DM(F.T)) + ca.DM(W)
                 J_prior = scaled_inverse_sx(0.5 * (P + P.T), dp)
                 E = ca.diag(dp)
-                P_lifted = ca.mtimes(ca.mtimes(ca.DM(F), C_lifted), ca.DM(F.T)) + ca.DM(W)
-                Pt = ca.reshape(lift[16 * h : 16 * h + 16], 4, 4)
-                lifted_rows.append(ca.vec(ca.mtimes(ca.mtimes(E, P_lifted), E) - Pt))
                 Pt_inv = scaled_inverse_sx(0.5 * (Pt + Pt.T), ones4)
                 J_prior_lifted = ca.mtimes(ca.mtimes(E, Pt_inv), E)
 
@@ -352,6 +391,7 @@ class HorizonNLP:
         n_eq = int(g_lifted.numel())
         self._solver_lbg = np.concatenate([self._lbg, np.zeros(n_eq)])
         self._solver_ubg = np.concatenate([self._ubg, np.zeros(n_eq)])
+        self.hess_lag = self._bottleneck_hessian(ca.vertcat(x, lift), p, g, lift, stages, f_scale)
         nlp = {
             "x": ca.vertcat(x, lift),
             "p": p,
@@ -360,6 +400,7 @@ class HorizonNLP:
         }
         opts: dict[str, Any] = {
             "print_time": False,
+            "hess_lag": self.hess_lag,
             "ipopt": {**IPOPT_OPTIONS, "max_iter": cfg.max_iterations},
         }
         with lock:
@@ -376,6 +417,45 @@ class HorizonNLP:
         # The lifted objective and equalities (the solver's, before the division by f_scale).
         self.lifted_problem = ca.Function(
             "lifted", [x, lift, p], [lifted_objective, g_lifted], ["x", "lift", "p"], ["f", "g"]
+        )
+
+    def _bottleneck_hessian(
+        self,
+        X: ca.SX,
+        p: ca.SX,
+        g: ca.SX,
+        lift: ca.SX,
+        stages: list[tuple[list[Any], LiftedSlot]],
+        f_scale: ca.SX,
+    ) -> ca.Function:
+        """nlpsol's hess_lag for the lifted NLP (planning/horizon_hessian.py): each slot's
+        objective term and lifted equalities as a function of vech(J_M) and the lifted
+        covariance before it."""
+        L = self.length
+        n_x, n_rows = self.n_x, int(g.numel())
+        lam_f = ca.SX.sym("lam_f")
+        lam_g = ca.SX.sym("lam_g", n_rows + 16 * (L - 1))
+        coupled = []
+        for h, (members, slot) in enumerate(stages):
+            last = h == self.length - 1
+            lam_row = ca.SX(0, 1) if last else lam_g[n_rows + 16 * h : n_rows + 16 * h + 16]
+
+            def phi(y: ca.SX, slot: LiftedSlot = slot, lam_row: ca.SX = lam_row) -> ca.SX:
+                term, row = slot(unvech(y))
+                value: ca.SX = lam_f * term / f_scale
+                return value if row is None else value + ca.dot(lam_row, row)
+
+            outer = lift[16 * (h - 1) : 16 * h] if h > 0 else ca.SX(0, 1)
+            outer_index = n_x + 16 * (h - 1) + np.arange(16) if h > 0 else np.zeros(0, int)
+            coupled.append(CoupledStage(members, phi, outer, outer_index))
+        rest = ca.dot(lam_g[:n_rows], g)
+        hess = bottleneck_hessian(X, rest, coupled)
+        return ca.Function(
+            "nlp_hess_l",
+            [X, p, lam_f, lam_g],
+            [hess],
+            ["x", "p", "lam_f", "lam_g"],
+            ["triu_hess_gamma_x_x"],
         )
 
     @property

@@ -38,7 +38,7 @@ class NlpSolver(Protocol):
 class IpoptFactory(Protocol):
     """Builds the solver of an NLP {"x", "p", "f", "g"} (SX) with nlpsol's options. The solvers it
     returns evaluate the same functions: a compiled one (isac_mission/nlp_cache.py) gives the
-    same numbers as the interpreted one (tests/numerics/test_nlp_cache.py).
+    same numbers as the interpreted one (tests/integration/test_nlp_cache.py).
 
     like: a solver this factory built for the same nlp (with other options): an interpreted
     solver built now may take its derivatives (`shared_derivatives`) instead of generating them."""

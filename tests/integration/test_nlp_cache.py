@@ -79,6 +79,32 @@ def test_a_compiled_solver_evaluates_and_plans_as_the_interpreted_one(
     assert_same_plans(plans(compiled_kit, inputs), plans(plain_kit, inputs))
 
 
+def test_the_warm_start_solver_shares_the_compiled_derivatives_of_the_cold_one(
+    tmp_path: Path, inputs: list[SlotInput]
+) -> None:
+    s = small_horizon()
+    cache = CompiledNlpCache(tmp_path, compile="now")
+    nlp = horizon_nlp(SolverKit(s, ipopt=cache))
+    assert [line.split(" in ")[0] for line in cache.events if "compiled in" in line] == [
+        "horizon: compiled"
+    ], cache.events
+    assert any(line.startswith("horizon_warm: shares the compiled") for line in cache.events)
+    assert len(list(tmp_path.glob("*.casadi"))) == 1
+    cold, warm = nlp.solver, nlp.warm_solver
+    assert isinstance(cold, ca.Function) and isinstance(warm, ca.Function)
+    for name in ("nlp_grad_f", "nlp_jac_g", "nlp_hess_l"):
+        # The very functions: compiled once, evaluated by both.
+        assert warm.get_function(name).serialize() == cold.get_function(name).serialize()
+    # A background compile: the warm solver upgrades with the cold one.
+    background = CompiledNlpCache(tmp_path / "again", compile="background")
+    again = horizon_nlp(SolverKit(s, ipopt=background))
+    assert isinstance(again.warm_solver, UpgradingSolver)
+    assert isinstance(again.solver, UpgradingSolver)
+    assert again.warm_solver.wait(COMPILE_TIMEOUT_S), background.events
+    assert again.solver.compiled
+    assert len(list((tmp_path / "again").glob("*.casadi"))) == 1
+
+
 def test_a_second_build_loads_from_the_cache_without_compiling(
     tmp_path: Path, inputs: list[SlotInput]
 ) -> None:
@@ -188,11 +214,13 @@ def test_the_compile_command_fills_the_cache_for_run(tmp_path: Path) -> None:
 
     done = compile_command(env)
     assert done.returncode == 0, done.stderr
-    # The fleet and the fleet with one vehicle out: the polish and the horizon's cold and warm
-    # solvers (docs/model.md, "Last slot's multipliers") each.
-    assert done.stdout.count("compiled in") == 6, done.stdout
-    for name in ("polish", "horizon", "horizon_warm"):
+    # The fleet and the fleet with one vehicle out: the polish and the horizon each; the
+    # horizon's warm-start solver (docs/model.md, "Last slot's multipliers") shares its cold
+    # solver's compiled derivatives.
+    assert done.stdout.count("compiled in") == 4, done.stdout
+    for name in ("polish", "horizon"):
         assert done.stdout.count(f"{name}: compiled in") == 2, done.stdout
-    assert len(list((tmp_path / "cache").glob("*.casadi"))) == 6
+    assert done.stdout.count("horizon_warm: shares the compiled derivatives") == 2, done.stdout
+    assert len(list((tmp_path / "cache").glob("*.casadi"))) == 4
     refused = compile_command({**env, COMPILE_ENV: "off"})
     assert refused.returncode == 2 and "no C compiler" in refused.stderr

@@ -30,3 +30,18 @@ def test_expressions_options_and_name_each_change_the_key() -> None:
     )
     other_name = problem_key("polish", nlp_function("polish", toy(2.0)), OPTIONS)
     assert len({base, other_constant, other_cap, other_name}) == 4
+
+
+def test_a_function_among_the_options_enters_the_key_by_what_it_computes() -> None:
+    """nlpsol's given derivatives (the horizon's hess_lag) are Functions: their text form names
+    them only, so the key hashes their serialized selves."""
+    x = ca.SX.sym("x", 2)
+
+    def with_hessian(weight: float) -> dict[str, object]:
+        return {**OPTIONS, "hess_lag": ca.Function("nlp_hess_l", [x], [weight * x])}
+
+    function = nlp_function("horizon", toy(2.0))
+    first = problem_key("horizon", function, with_hessian(2.0))
+    assert first == problem_key("horizon", function, with_hessian(2.0))
+    assert first != problem_key("horizon", function, with_hessian(3.0))
+    assert first != problem_key("horizon", function, OPTIONS)
