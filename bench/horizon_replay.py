@@ -14,7 +14,9 @@ quiet machine, and nothing beside it.
 
 Run: python bench/horizon_replay.py [--size 24] [--slots 30] [--seed 1]
          [--variant NAME='{"ipopt option": value, ...}' ...]
-     (default variants: the planner's options, and IPOPT's default MUMPS scalings)
+     (default variants: the planner's options, and IPOPT's default MUMPS scalings; the key
+     "hess_lag": null builds the variant with CasADi's automatic Hessian instead of the
+     planner's, docs/performance.md, "The Hessian through the information")
 """
 
 from __future__ import annotations
