@@ -24,7 +24,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import casadi as ca
-import numpy as np
 
 from isac_mission.types import IntArray
 
@@ -129,10 +128,4 @@ def bottleneck_hessian(x: ca.SX, rest: ca.SX, stages: Sequence[CoupledStage]) ->
         stage_hessian(stage, entries)
     keys = sorted(entries)
     values = ca.vertcat(*[entries[k] for k in keys]) if keys else ca.SX(0, 1)
-    return ca.SX.triplet(
-        np.array([k[0] for k in keys], dtype=int).tolist(),
-        np.array([k[1] for k in keys], dtype=int).tolist(),
-        values,
-        n,
-        n,
-    )
+    return ca.SX.triplet([k[0] for k in keys], [k[1] for k in keys], values, n, n)

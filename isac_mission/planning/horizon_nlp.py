@@ -14,10 +14,11 @@
          0 <= q_lm <= area                                             (operating area, bounds)
 
 with w_l = discount^(l-1) (times terminal_weight on the last slot). The derivatives are exact:
-CasADi's automatic differentiation, but the Lagrangian's Hessian is assembled through each slot's
-information (planning/horizon_hessian.py: the same matrix at a third of the operations at M = 24). Everything that changes per slot is a parameter: the UAVs'
-positions and velocities, the serving and control BSs, the keep-out points, the predicted state,
-the prior information, the clearances c_l and the objective's scale.
+CasADi's automatic differentiation, but the Lagrangian's Hessian is assembled through each
+slot's information (planning/horizon_hessian.py: the same matrix at 0.4 of the operations at
+M = 24). Everything that changes per slot is a parameter: the UAVs' positions and velocities, the
+serving and control BSs, the keep-out points, the predicted state, the prior information, the
+clearances c_l and the objective's scale.
 
 Lifted: what IPOPT solves has the scaled predicted covariance Pt_l = E_l P_l+1 E_l of every horizon
 slot but the last as 16 variables, with the explicit equality Pt_l = E_l (F C_l F^T + W) E_l, and
@@ -437,7 +438,7 @@ class HorizonNLP:
         lam_g = ca.SX.sym("lam_g", n_rows + 16 * (L - 1))
         coupled = []
         for h, (members, slot) in enumerate(stages):
-            last = h == self.length - 1
+            last = h == L - 1
             lam_row = ca.SX(0, 1) if last else lam_g[n_rows + 16 * h : n_rows + 16 * h + 16]
 
             def phi(y: ca.SX, slot: LiftedSlot = slot, lam_row: ca.SX = lam_row) -> ca.SX:
