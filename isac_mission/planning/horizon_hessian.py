@@ -1,4 +1,5 @@
-"""The Lagrangian's Hessian of an NLP whose dense coupling runs through a few numbers per stage.
+"""The Lagrangian's Hessian of an NLP whose dense coupling runs through a few numbers per stage,
+and the horizon's (`horizon_hess_lag`).
 
 In the horizon's NLP (planning/horizon_nlp.py) the M UAVs of a slot meet only in the slot's
 information J_M = sum_m T_m(x_m), 10 numbers (a symmetric 4 x 4), with x_m = (z_m, eta_m) one
@@ -24,6 +25,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import casadi as ca
+import numpy as np
 
 from isac_mission.types import IntArray
 
@@ -129,3 +131,50 @@ def bottleneck_hessian(x: ca.SX, rest: ca.SX, stages: Sequence[CoupledStage]) ->
     keys = sorted(entries)
     values = ca.vertcat(*[entries[k] for k in keys]) if keys else ca.SX(0, 1)
     return ca.SX.triplet([k[0] for k in keys], [k[1] for k in keys], values, n, n)
+
+
+LiftedSlot = Callable[[ca.SX], tuple[ca.SX, ca.SX | None]]
+"""One horizon slot's lifted terms as a function of its J_M [4, 4]: (its objective term, its
+lifted equalities [16], None on the last slot) (planning/horizon_nlp.lifted_slot, the rest
+bound)."""
+
+
+def horizon_hess_lag(
+    X: ca.SX,
+    p: ca.SX,
+    g: ca.SX,
+    lift: ca.SX,
+    stages: Sequence[tuple[Sequence[tuple[IntArray, ca.SX, ca.SX]], LiftedSlot]],
+    f_scale: ca.SX,
+) -> ca.Function:
+    """nlpsol's hess_lag (x, p, lam_f, lam_g) -> upper triangle, for the horizon's lifted NLP:
+    variables X [n] (the lifted ones `lift` [16 (L - 1)] last), parameters p, rows g [n_rows]
+    followed by the L - 1 slots' 16 lifted equalities, objective sum of the slots' terms /
+    f_scale. Per slot (`stages`): its UAVs' members (CoupledStage) and its LiftedSlot, whose
+    terms are a function of vech(J_M) and the lifted covariance before it."""
+    L = len(stages)
+    n_rows = int(g.numel())
+    n_x = int(X.numel()) - int(lift.numel())
+    lam_f = ca.SX.sym("lam_f")
+    lam_g = ca.SX.sym("lam_g", n_rows + 16 * (L - 1))
+    coupled = []
+    for h, (members, slot) in enumerate(stages):
+        last = h == L - 1
+        lam_row = ca.SX(0, 1) if last else lam_g[n_rows + 16 * h : n_rows + 16 * h + 16]
+
+        def phi(y: ca.SX, slot: LiftedSlot = slot, lam_row: ca.SX = lam_row) -> ca.SX:
+            term, row = slot(unvech(y))
+            value: ca.SX = lam_f * term / f_scale
+            return value if row is None else value + ca.dot(lam_row, row)
+
+        outer = lift[16 * (h - 1) : 16 * h] if h > 0 else ca.SX(0, 1)
+        outer_index = n_x + 16 * (h - 1) + np.arange(16) if h > 0 else np.zeros(0, int)
+        coupled.append(CoupledStage(members, phi, outer, outer_index))
+    hess = bottleneck_hessian(X, ca.dot(lam_g[:n_rows], g), coupled)
+    return ca.Function(
+        "nlp_hess_l",
+        [X, p, lam_f, lam_g],
+        [hess],
+        ["x", "p", "lam_f", "lam_g"],
+        ["triu_hess_gamma_x_x"],
+    )

@@ -35,7 +35,6 @@ tightened by SOLVER_MARGIN_M.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
@@ -46,7 +45,7 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
-from isac_mission.planning.horizon_hessian import CoupledStage, bottleneck_hessian, unvech, vech
+from isac_mission.planning.horizon_hessian import LiftedSlot, horizon_hess_lag, vech
 from isac_mission.planning.legs import chord_point_clearance_m
 from isac_mission.planning.margins import (
     MIN_SHARE,
@@ -111,10 +110,6 @@ its plan (`warm_duals`): from the shifted plan alone IPOPT took a median 77 iter
 soak's tracking phase (docs/model.md, "Start points"). A cold start (no multipliers, or another
 problem's) keeps IPOPT's own initialisation: with zero multipliers pushed to these bounds the
 starts from rest stalled."""
-
-
-LiftedSlot = Callable[[ca.SX], tuple[ca.SX, ca.SX | None]]
-"""A slot's lifted terms as a function of its J_M [4, 4] (`lifted_slot` with the rest bound)."""
 
 
 def lifted_slot(
@@ -392,7 +387,7 @@ class HorizonNLP:
         n_eq = int(g_lifted.numel())
         self._solver_lbg = np.concatenate([self._lbg, np.zeros(n_eq)])
         self._solver_ubg = np.concatenate([self._ubg, np.zeros(n_eq)])
-        self.hess_lag = self._bottleneck_hessian(ca.vertcat(x, lift), p, g, lift, stages, f_scale)
+        self.hess_lag = horizon_hess_lag(ca.vertcat(x, lift), p, g, lift, stages, f_scale)
         nlp = {
             "x": ca.vertcat(x, lift),
             "p": p,
@@ -418,45 +413,6 @@ class HorizonNLP:
         # The lifted objective and equalities (the solver's, before the division by f_scale).
         self.lifted_problem = ca.Function(
             "lifted", [x, lift, p], [lifted_objective, g_lifted], ["x", "lift", "p"], ["f", "g"]
-        )
-
-    def _bottleneck_hessian(
-        self,
-        X: ca.SX,
-        p: ca.SX,
-        g: ca.SX,
-        lift: ca.SX,
-        stages: list[tuple[list[Any], LiftedSlot]],
-        f_scale: ca.SX,
-    ) -> ca.Function:
-        """nlpsol's hess_lag for the lifted NLP (planning/horizon_hessian.py): each slot's
-        objective term and lifted equalities as a function of vech(J_M) and the lifted
-        covariance before it."""
-        L = self.length
-        n_x, n_rows = self.n_x, int(g.numel())
-        lam_f = ca.SX.sym("lam_f")
-        lam_g = ca.SX.sym("lam_g", n_rows + 16 * (L - 1))
-        coupled = []
-        for h, (members, slot) in enumerate(stages):
-            last = h == L - 1
-            lam_row = ca.SX(0, 1) if last else lam_g[n_rows + 16 * h : n_rows + 16 * h + 16]
-
-            def phi(y: ca.SX, slot: LiftedSlot = slot, lam_row: ca.SX = lam_row) -> ca.SX:
-                term, row = slot(unvech(y))
-                value: ca.SX = lam_f * term / f_scale
-                return value if row is None else value + ca.dot(lam_row, row)
-
-            outer = lift[16 * (h - 1) : 16 * h] if h > 0 else ca.SX(0, 1)
-            outer_index = n_x + 16 * (h - 1) + np.arange(16) if h > 0 else np.zeros(0, int)
-            coupled.append(CoupledStage(members, phi, outer, outer_index))
-        rest = ca.dot(lam_g[:n_rows], g)
-        hess = bottleneck_hessian(X, rest, coupled)
-        return ca.Function(
-            "nlp_hess_l",
-            [X, p, lam_f, lam_g],
-            [hess],
-            ["x", "p", "lam_f", "lam_g"],
-            ["triu_hess_gamma_x_x"],
         )
 
     @property
