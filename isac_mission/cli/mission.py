@@ -22,6 +22,7 @@ import numpy as np
 
 from isac_mission.bus import ZenohBus
 from isac_mission.bus.security import default_endpoint, secured_settings
+from isac_mission.cli.stopping import land_budget_s
 from isac_mission.config import Scenario
 from isac_mission.config.live_settings import LIVE_SETTINGS, LiveSettings
 from isac_mission.errors import IsacError
@@ -134,6 +135,11 @@ class LiveResult:
     planner_problems: list[str] = field(default_factory=list)
     """How each IPOPT problem was built: interpreted, loaded compiled, or compiled in the
     background (nlp_cache.py's events; the cache's own list, appended to while the mission flies)."""
+    interrupted: bool = False
+    """The mission was asked to stop (Ctrl-C, SIGTERM) before slot N was done."""
+    landing_abandoned: bool = False
+    """A second request to stop came while the fleet was landing: the service stopped waiting
+    for touchdown (the vehicles were sent LAND and land on their own)."""
 
 
 def planning_scenario(s: Scenario, opts: LiveOptions) -> Scenario:
@@ -152,12 +158,14 @@ async def fly_mission(
     initial_x: FloatArray | None = None,
     on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
     initial_errors: FloatArray | None = None,
+    leave: asyncio.Event | None = None,
 ) -> LiveResult:
     """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere.
     initial_x [4]: the tracker's initial estimate (None: the scenario's x0). On a multi-target
     scenario the multi-target ground loop runs instead (service/ground/multi_target.py):
     on_tracks(slot, latency_s) after each slot; initial_errors [T, 4]: added to each known
-    target's configured state to start its track (None: none)."""
+    target's configured state to start its track (None: none). `stop` ends the mission and
+    lands the fleet; `leave`, set while it lands, stops waiting for touchdown."""
     say = on_status or (lambda _msg: None)
     planning = planning_scenario(s, opts)
     n_keep_out = KEEP_OUT_CAPACITY if s.multi_target else 0
@@ -216,6 +224,7 @@ async def fly_mission(
             await _until_stopped(fleet.prepare_all(), stop)
             say("mission running")
             result.report = await ground_task
+            result.interrupted = not ground.state.done
         finally:
             stop.set()
             for task in (follower, mirror, ground_task):
@@ -227,10 +236,9 @@ async def fly_mission(
                 result.multi_target_slots = list(ground.slots)
             say("landing")
             try:
-                # Descent at about 1 m/s of simulation time, plus margin, in wall seconds.
-                land_budget_s = 60.0 + 3.0 * s.H / max(opts.speed, 1e-3)
-                async with asyncio.timeout(land_budget_s):
-                    await fleet.land_all()
+                async with asyncio.timeout(land_budget_s(s.H, opts.speed)):
+                    await _until_stopped(fleet.land_all(), leave or asyncio.Event())
+                result.landing_abandoned = leave is not None and leave.is_set()
             except (IsacError, TimeoutError) as err:
                 log.error("landing: %s", err)
                 result.report.last_error = f"landing: {err}"
@@ -239,7 +247,6 @@ async def fly_mission(
             result.fleet_counters = {
                 "plans applied": c.plans_applied,
                 "plans invalid": c.plans_invalid,
-                "plans late": c.plans_late,
                 "vehicles landed": sum(b.phase == "landed" for b in fleet.bridges),
                 "link losses": sum(b.counters.link_losses for b in fleet.bridges),
                 "link interruptions": sum(b.counters.link_interruptions for b in fleet.bridges),
@@ -302,9 +309,10 @@ async def run_serve(
     on_slot: Callable[[SlotEvent], None] | None = None,
     on_status: Callable[[str], None] | None = None,
     on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
+    leave: asyncio.Event | None = None,
 ) -> LiveResult:
     """Bridges and ground loop only: the world (or vehicles and sensing) runs elsewhere
-    (on_tracks: fly_mission's, for a multi-target scenario)."""
+    (on_tracks, leave: fly_mission's)."""
     settings = secured_settings(
         s.security.zenoh,
         s.mission_id,
@@ -313,7 +321,9 @@ async def run_serve(
         connect=opts.zenoh_connect,
     )
     with ZenohBus.open(settings) as bus:
-        return await fly_mission(s, opts, bus, stop, on_slot, on_status, on_tracks=on_tracks)
+        return await fly_mission(
+            s, opts, bus, stop, on_slot, on_status, on_tracks=on_tracks, leave=leave
+        )
 
 
 def ground_endpoint(s: Scenario, opts: LiveOptions) -> str:
@@ -359,6 +369,6 @@ def summarize_live(result: LiveResult) -> LiveSummary:
         solve_p95_ms=float(np.percentile(solve, 95)),
         latency_median_ms=float(np.median(lat)),
         latency_p99_ms=float(np.percentile(lat, 99)),
-        infeasible=tot.not_ok,
+        infeasible=tot.statuses["infeasible"],
         fallbacks=dict(tot.fallbacks),
     )

@@ -22,10 +22,11 @@ TRACKS_SIZE_IN: Final[tuple[float, float]] = (8.0, 7.0)
 
 
 def read_multi_target_trace(path: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """(config, slot lines) of a multi-target trace."""
+    """(config, slot lines) of a multi-target trace (its `end` lines left out)."""
     lines = Path(path).read_text().splitlines()
     head = loads_line(lines[0])
-    return dict(head["config"]), [dict(loads_line(line)) for line in lines[1:] if line]
+    parsed = [dict(loads_line(line)) for line in lines[1:] if line]
+    return dict(head["config"]), [line for line in parsed if "end" not in line]
 
 
 def plot_tracks(

@@ -13,6 +13,9 @@ summaries count them), from most to least planned:
 | `timeout`, `no vehicles` | the live budget passed; nothing can follow a plan | `hold_plan`: every vehicle holds where it is | service/ground/loop.py, planning/fleet.py |
 | `late` | a plan is published after its slot's end | that plan, marked | service/ground/loop.py |
 
+An operator's hold of every vehicle is no fallback: its slots have status `operator hold`
+(`OPERATOR_HOLD`), the hold plan, and no `fallback` (planning/fleet.py).
+
 Pure: no clock, no RNG, no I/O.
 """
 
@@ -37,6 +40,10 @@ from isac_mission.planning.margins import SafetyMargins, manoeuvre_margin_m
 from isac_mission.planning.problem import SlotInput, SlotProblem, slot_clearance_m
 from isac_mission.tracking.pcrb import PlanningObjective
 from isac_mission.types import BoolArray, FloatArray, IntArray, SlotPlan, SolveReport
+
+OPERATOR_HOLD = "operator hold"
+"""Status of a slot in which an operator's `hold` or `land` holds every vehicle: the hold plan,
+flown on the operator's word (no fallback, no error)."""
 
 NO_BS = -1
 """bs_of_uav of a vehicle outside the plan."""
@@ -210,17 +217,24 @@ def hold_plan(
     """Every vehicle holds where it is (uav_xy_m [M, 2]), with last slot's shares and association
     (a plan that needs no solver; its bound is evaluated for the record). Without a last
     association (a hold at the first slot) each vehicle gets the communication-optimal BS for
-    where it is (the exact assignment, no LP), and a vehicle outside the plan (`excluded`) none."""
+    where it is (the exact assignment, no LP). A vehicle outside the plan (`excluded`) gets no
+    BS and share 0, as in every widened plan; when every vehicle is outside it, nobody is
+    served: every share is 0 (the plan message's one case of shares that do not sum to 1)."""
     M = s.M
+    out = list(excluded)
     eta = np.array(prev_bandwidth_share, dtype=float)
-    eta[list(excluded)] = 0.0
-    eta = eta / eta.sum() if eta.sum() > 0 else np.full(M, 1.0 / M)
+    eta[out] = 0.0
+    if eta.sum() > 0:
+        eta = eta / eta.sum()
+    elif len(out) < M:
+        eta = np.full(M, 1.0 / (M - len(out)))
+        eta[out] = 0.0
     if prev_bs_of_uav is not None:
         assoc = np.array(prev_bs_of_uav, dtype=np.int64)
     else:
         costs = association_costs(uav_xy_m, s.bs_xy, dH=s.dH, rho0=s.rho0, B=s.B)
         assoc = optimal_assignment(costs, s.n_a)
-        assoc[list(excluded)] = NO_BS
+    assoc[out] = NO_BS
     objective = PlanningObjective(prior_information, target_state_pred, sensing)
     with np.errstate(divide="ignore"):
         pcrb = float(objective.value(uav_xy_m, np.maximum(eta, 1e-12)))
@@ -229,5 +243,7 @@ def hold_plan(
         assoc,
         eta,
         pcrb,
-        SolveReport(status, reason, solve_s=solve_s, fallback=status),
+        SolveReport(
+            status, reason, solve_s=solve_s, fallback="" if status == OPERATOR_HOLD else status
+        ),
     )

@@ -20,12 +20,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.planning.fallback import NO_BS, hold_plan
+from isac_mission.planning.fallback import NO_BS, OPERATOR_HOLD, hold_plan
 from isac_mission.planning.registry import planner
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.types import FloatArray, Gaussian, HorizonPlan, IntArray, SlotPlan
 
 Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
+
+OPERATOR_HOLD_REASON = "operator hold: every vehicle held or landed by an operator"
 
 BUILD_AHEAD_BUDGET_S = 10.0
 """Start-up seconds `prepare_fleet` may spend on the fleets with two or more vehicles out (the
@@ -109,8 +111,9 @@ class PlanningJob:
     uav_xy [M, 2], uav_v [M, 2]: positions and velocities now (m, m/s); prev_eta [M];
     prev_assoc [M] or None; prediction: the predicted target for the slot (its P is the
     planner's target_cov_pred); J_pred [4, 4]: the bound's prior information; excluded: vehicles
-    outside the plan (sorted); prev_plan: last slot's plan of the same active vehicles, over
-    those vehicles only (`active_part`), None when there is none or the active set changed.
+    outside the plan (sorted); operator_held: those of them an operator's `hold` or `land` took
+    out; prev_plan: last slot's plan of the same active vehicles, over those vehicles only
+    (`active_part`), None when there is none or the active set changed.
     """
 
     slot: int
@@ -124,6 +127,7 @@ class PlanningJob:
     J_pred: FloatArray
     excluded: tuple[int, ...] = ()
     prev_plan: SlotPlan | None = None
+    operator_held: tuple[int, ...] = ()
 
     @property
     def active(self) -> tuple[int, ...]:
@@ -134,6 +138,8 @@ class PlanningJob:
         """Plan the active vehicles and widen the plan to all of them (see the module doc)."""
         active = self.active
         if not active:
+            if set(self.excluded) <= set(self.operator_held):
+                return self.hold(OPERATOR_HOLD_REASON, OPERATOR_HOLD)
             return self.hold("hold: no vehicle can follow a plan (all excluded)", "no vehicles")
         idx = list(active)
         kit = self.kits.for_active(active)

@@ -11,12 +11,19 @@ and `null` reads back as NaN.
 
 from isac_mission.records.jsonlines import to_jsonable
 from isac_mission.records.reader import read_trace
-from isac_mission.records.slot import CONTRACT_KEYS, OPTIONAL_KEYS, SlotRecord, Trace
+from isac_mission.records.slot import (
+    CONTRACT_KEYS,
+    OPTIONAL_KEYS,
+    MissionEnd,
+    SlotRecord,
+    Trace,
+)
 from isac_mission.records.writer import TraceWriter
 
 __all__ = [
     "CONTRACT_KEYS",
     "OPTIONAL_KEYS",
+    "MissionEnd",
     "SlotRecord",
     "Trace",
     "TraceWriter",

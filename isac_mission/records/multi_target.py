@@ -1,6 +1,7 @@
 """The multi-target trace (docs/trace.md, "Multi-target traces"): line 1 is
-`{"format": TRACE_FORMAT, "config": {...}}`, every further line one slot (`slot_line`). The
-offline multi-target loop and the live ground loop write the same lines.
+`{"format": TRACE_FORMAT, "config": {...}}`, every further line one slot (`slot_line`), and
+live an `end` line where a run of the ground loop ended (`end_line`). The offline multi-target
+loop and the live ground loop write the same lines.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import numpy as np
 
 from isac_mission.model.detections import UavReport
 from isac_mission.records.jsonlines import dumps_line, to_jsonable
+from isac_mission.records.slot import MissionEnd
 from isac_mission.tracking.multi_target import TrackEstimate
 from isac_mission.types import FloatArray, SlotPlan
 
@@ -40,6 +42,11 @@ class MultiTargetSlot:
 def header_line(config: dict[str, Any]) -> str:
     """Line 1 of a multi-target trace: the format and the resolved configuration."""
     return dumps_line(to_jsonable({"format": TRACE_FORMAT, "config": config}))
+
+
+def end_line(end: MissionEnd) -> str:
+    """The line that says how a live run ended (as in a single-target trace: docs/trace.md)."""
+    return dumps_line(end.to_dict())
 
 
 def slot_line(o: MultiTargetSlot, extra: dict[str, Any] | None = None) -> str:

@@ -1,4 +1,5 @@
-"""Reading a trace file (docs/trace.md): line 1 the config, then one slot line each.
+"""Reading a trace file (docs/trace.md): line 1 the config, then one slot line each, and an
+`end` line where a live run of the ground loop ended.
 
 An incomplete final line (the one a killed writer was in the middle of) is dropped and flagged
 with `Trace.truncated`; any other line that does not parse, or breaks the slot order, raises
@@ -13,7 +14,7 @@ from typing import Any
 
 from isac_mission.errors import MessageError
 from isac_mission.records.jsonlines import loads_line
-from isac_mission.records.slot import SlotRecord, Trace, check_sequence
+from isac_mission.records.slot import MissionEnd, SlotRecord, Trace, check_sequence
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,7 @@ def scan_trace(path: Path) -> Scan:
     # pieces[-1] is b"" when the file ends with a newline, else the unterminated last line.
     config: dict[str, Any] | None = None
     slots: list[SlotRecord] = []
+    ends: list[MissionEnd] = []
     offset = good_end = 0
     truncated = tail_ok = False
     n_lines = len(pieces) if pieces[-1] else len(pieces) - 1
@@ -59,9 +61,12 @@ def scan_trace(path: Path) -> Scan:
                 config = _parse_config_line(text)
             else:
                 obj = loads_line(text)
-                rec = SlotRecord.from_dict(obj)
-                check_sequence(rec, slots[-1] if slots else None, config.get("M"))
-                slots.append(rec)
+                if isinstance(obj, dict) and "end" in obj:
+                    ends.append(MissionEnd.from_dict(obj))
+                else:
+                    rec = SlotRecord.from_dict(obj)
+                    check_sequence(rec, slots[-1] if slots else None, config.get("M"))
+                    slots.append(rec)
         except (MessageError, UnicodeDecodeError) as err:
             if is_last_unterminated and config is not None:
                 truncated = True
@@ -72,7 +77,7 @@ def scan_trace(path: Path) -> Scan:
         offset = good_end = end
     if config is None:
         raise MessageError(f"{path}: empty trace: no config line")
-    trace = Trace(config=config, slots=slots, path=path, truncated=truncated)
+    trace = Trace(config=config, slots=slots, path=path, truncated=truncated, ends=ends)
     return Scan(trace=trace, good_end=good_end, tail_unterminated_ok=tail_ok)
 
 

@@ -191,17 +191,63 @@ class SlotRecord:
     __hash__ = None  # type: ignore[assignment]
 
 
+END_STATUSES: Final = ("complete", "interrupted")
+"""How a live run of the ground loop ended: it traced slot N, or it was asked to stop before."""
+
+
+@dataclass(frozen=True)
+class MissionEnd:
+    """How one live run of a trace ended: its `{"end": {...}}` line (docs/trace.md, "End").
+
+    status: "complete" (slot N traced) or "interrupted" (stopped before: Ctrl-C, SIGTERM);
+    last_slot: the last slot traced when it ended (0: none); n_slots: the mission's N.
+    """
+
+    status: str
+    last_slot: int
+    n_slots: int
+
+    def to_dict(self) -> dict[str, Any]:
+        """The line's JSON object."""
+        return {"end": {"status": self.status, "last_slot": self.last_slot, "N": self.n_slots}}
+
+    @classmethod
+    def from_dict(cls, obj: Mapping[str, Any]) -> MissionEnd:
+        """From a parsed `{"end": {...}}` line; MessageError naming the field at fault."""
+        end = obj.get("end")
+        if set(obj) != {"end"} or not isinstance(end, dict):
+            raise MessageError('an end line must be {"end": {...}} alone')
+        status = as_str(end.get("status"), "end.status")
+        if status not in END_STATUSES:
+            raise MessageError(f"end.status: {status!r} is not one of {', '.join(END_STATUSES)}")
+        return cls(
+            status, as_int(end.get("last_slot"), "end.last_slot"), as_int(end.get("N"), "end.N")
+        )
+
+
 @dataclass(frozen=True)
 class Trace:
     """A trace read from disk: the config mapping and the slot records in file order.
 
-    truncated is True when an incomplete final line (a killed writer's) was dropped.
+    truncated is True when an incomplete final line (a killed writer's) was dropped; ends: the
+    `end` line of every live run that wrote to it, in file order (a resumed trace has one per
+    run that ended; none offline, and none after a kill).
     """
 
     config: dict[str, Any]
     slots: list[SlotRecord]
     path: Path | None = None
     truncated: bool = False
+    ends: list[MissionEnd] = field(default_factory=list)
+
+    @property
+    def end(self) -> MissionEnd | None:
+        """How the last run ended, if its end line follows the last slot (None: unknown, e.g.
+        killed, or offline)."""
+        last = self.slots[-1].slot if self.slots else 0
+        if self.ends and self.ends[-1].last_slot == last:
+            return self.ends[-1]
+        return None
 
     @property
     def method(self) -> str:

@@ -15,7 +15,7 @@ from typing import Any
 
 from isac_mission.records.jsonlines import dumps_line, to_jsonable
 from isac_mission.records.reader import scan_trace
-from isac_mission.records.slot import SlotRecord, check_sequence
+from isac_mission.records.slot import MissionEnd, SlotRecord, check_sequence
 
 
 class TraceWriter:
@@ -106,6 +106,12 @@ class TraceWriter:
         self._write_line(dumps_line(record.to_dict()))
         self._last = record
         self._written += 1
+
+    def write_end(self, end: MissionEnd) -> None:
+        """Append the line that says how this run ended (the live ground loop, at its stop)."""
+        if self._file.closed:
+            raise ValueError(f"{self._path}: trace writer is closed")
+        self._write_line(dumps_line(end.to_dict()))
 
     def close(self) -> None:
         """Close the file (idempotent)."""

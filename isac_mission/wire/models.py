@@ -266,7 +266,9 @@ class PlanWire(Envelope):
     assoc: list[int] = Field(
         description="BS index per UAV, or -1 for a vehicle outside the plan (share 0)."
     )
-    bandwidth_share: list[Share] = Field(description="eta per UAV; sums to 1.")
+    bandwidth_share: list[Share] = Field(
+        description="eta per UAV; sums to 1, or every share is 0 when no UAV has a BS."
+    )
     waypoints_xy_m: list[PlaneXY] = Field(description="Next waypoint per UAV (m).")
     end_velocity_mps: list[PlaneXY] | None = Field(
         default=None,
@@ -317,6 +319,8 @@ class PlanWire(Envelope):
                     raise refuse(f"plan.assoc[{i}]: -1 (no BS) with a share > 0")
         # numpy's sum (pairwise from 8 terms on); below 8 terms it adds in order, as sum() does.
         total = float(sum(shares)) if len(shares) < 8 else float(np.asarray(shares).sum())
+        if assoc is not None and max(assoc) < 0 and total == 0.0:
+            return shares  # nobody served (every vehicle held): every share 0
         if abs(total - 1.0) > SHARE_SUM_TOL:
             raise refuse(f"plan.bandwidth_share: sums to {total:.9g}, expected 1")
         return shares

@@ -16,6 +16,8 @@ import asyncio
 import socket
 from pathlib import Path
 
+import numpy as np
+
 from isac_mission.bus import ZenohBus, tcp_loopback
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.cli.mission import LiveOptions
@@ -119,10 +121,15 @@ async def _operate(s: Scenario, keys: Keys, seen: MavlinkListener, bus: ZenohBus
             await asyncio.to_thread(seen.wait_for_mode, sysid, "hold", 60.0)
         n = len(w.plans)
         await w.until(
-            lambda: any(p.plan.report.status == "no vehicles" for _, p in w.plans[n:]),
+            lambda: any(p.plan.report.status == "operator hold" for _, p in w.plans[n:]),
             WAIT_S,
-            "a plan with every vehicle held (status 'no vehicles')",
+            "a plan with every vehicle held (status 'operator hold')",
         )
+        # What the reply said: nobody served (share 0, no BS), and no error or fallback.
+        held = next(p.plan for _, p in w.plans[n:] if p.plan.report.status == "operator hold")
+        assert not held.report.fallback
+        np.testing.assert_array_equal(held.bandwidth_share, np.zeros(s.M))
+        np.testing.assert_array_equal(held.bs_of_uav, np.full(s.M, -1))
         reply = await w.request("resume-all-2", "resume")
         assert reply.accepted and reply.vehicles == (0, 1, 2)
         for sysid in (1, 2, 3):

@@ -11,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -373,6 +374,42 @@ def test_signal_mid_mission_lands_flushes_and_exits_zero(
     assert not trace.truncated
     assert len(trace.slots) >= 3
     assert [r.slot for r in trace.slots] == list(range(1, len(trace.slots) + 1))
+    # Said at once what happens next, and the summary and the trace say where it stopped.
+    flat = " ".join(stdout.split())
+    key = "Ctrl-C" if sig == signal.SIGINT else "SIGTERM"
+    assert f"{key}: stopping the mission after slot" in flat, stdout[-3000:]
+    assert "landing the fleet: about" in flat
+    assert "verdict: interrupted" in flat
+    assert f"stopped at slot {len(trace.slots)} of 60" in flat
+    assert trace.end is not None and trace.end.status == "interrupted"
+    assert trace.end.last_slot == len(trace.slots) and trace.end.n_slots == 60
+
+
+def test_a_second_ctrl_c_stops_waiting_for_the_landing(tmp_path: Path) -> None:
+    """The second Ctrl-C does what the first said: the command stops waiting for touchdown and
+    exits 0, the summary saying the vehicles were left landing."""
+    out = tmp_path / "run"
+    proc = _start_run(out, speed=2.0)
+    trace_path = out / DEFAULT_TRACE
+    try:
+        wait_for_slots(trace_path, 2, proc, timeout_s=180)
+        proc.send_signal(signal.SIGINT)
+        # The ground loop ends the trace when it stops, before the fleet lands (H = 100 m:
+        # about 38 s of landing at --speed 2).
+        deadline = time.monotonic() + 120
+        while read_trace(trace_path).end is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert read_trace(trace_path).end is not None, "the mission did not stop"
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr[-3000:]
+    flat = " ".join(stdout.split())
+    assert "Ctrl-C again: not waiting for the landing; exiting" in flat, stdout[-3000:]
+    assert "verdict: interrupted" in flat
+    assert "stopped waiting (they were sent LAND)" in flat
 
 
 def test_killed_run_leaves_every_completed_slot_readable(tmp_path: Path) -> None:

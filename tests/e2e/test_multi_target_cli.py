@@ -49,8 +49,9 @@ def test_serve_and_sim_fly_a_multi_target_mission(tmp_path: Path) -> None:
     assert not re.search(r"(rejected|internal errors)", serve_out), serve_out[-3000:]
     lines = (out / "trace_proposed.jsonl").read_text().splitlines()
     assert json.loads(lines[0])["format"] == TRACE_FORMAT
-    slots = [json.loads(line) for line in lines[1:]]
+    slots = [json.loads(line) for line in lines[1:-1]]
     assert [d["slot"] for d in slots] == list(range(1, SLOTS + 1))
+    assert json.loads(lines[-1])["end"]["status"] == "complete"
     # The world's truth reached the trace, with every measurement's origin.
     assert all(len(d["targets"]) >= 2 for d in slots)
     assert all(

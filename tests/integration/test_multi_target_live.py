@@ -85,6 +85,8 @@ async def test_a_live_multi_target_mission_tracks_every_target_in_the_scene(
 
     lines = result.trace_path.read_text().splitlines()
     assert json.loads(lines[0])["format"] == TRACE_FORMAT
-    assert len(lines) == SLOTS + 1
-    ids = {t["id"] for t in json.loads(lines[-1])["tracks"]}
+    # The slots, then the line that says the run ended complete (docs/trace.md, "End").
+    assert len(lines) == SLOTS + 2
+    assert json.loads(lines[-1]) == {"end": {"status": "complete", "last_slot": SLOTS, "N": SLOTS}}
+    ids = {t["id"] for t in json.loads(lines[-2])["tracks"]}
     assert ids == {t.track_id for t in last.tracks}

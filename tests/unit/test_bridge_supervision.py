@@ -85,3 +85,15 @@ def test_an_interruption_and_a_regain_together_ask_for_one_reentry() -> None:
     assert c.link_losses == 1
     assert w.observe(status(mode="hold", position_s=16.0), 16.0, True, True)
     assert c.link_interruptions == 1
+
+
+def test_a_position_heard_before_the_clock_is_no_interruption() -> None:
+    """A bridge on the world's clock stamps what it hears before the first clock message with
+    0; its first look is at the world's time (3.7 s here, the world started first): the next
+    position, 50 ms later, is no gap of 3.75 s. A real gap after that still is one."""
+    w, c = watch()
+    assert not w.observe(status(position_s=0.0), 3.7, True, True)
+    assert not w.observe(status(position_s=3.75), 3.75, True, True)
+    assert c.link_interruptions == 0
+    assert not w.observe(status(position_s=5.0), 5.0, True, True)
+    assert c.link_interruptions == 1

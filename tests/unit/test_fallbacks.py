@@ -7,6 +7,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from isac_mission.config import Scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo, summarize, trace_path
@@ -131,3 +132,47 @@ def test_a_plan_published_after_the_bridges_drop_it_is_marked_late(paper: Scenar
     assert late.report.reason.startswith("late: published at 14.5 s, its slot ended at 13.0 s")
     assert loop.report.counters["plans late"] == 1
     np.testing.assert_array_equal(late.uav_xy_m, plan.uav_xy_m)
+
+
+def test_an_operator_hold_of_every_vehicle_is_a_hold_not_a_failure(paper: Scenario) -> None:
+    """Every vehicle held by an operator: status `operator hold`, no fallback, and nobody
+    served (share 0, no BS), as the operator's reply says; the plan message carries it. A
+    vehicle out for another reason (a lost link) makes it `no vehicles`, a fallback."""
+    from isac_mission.wire import PlanMsg, decode_plan, encode_plan
+
+    s = paper
+    job = PlanningJob(
+        slot=4,
+        method="proposed",
+        kits=KitCache(SolverKit(s)),
+        uav_xy=s.uav_start_xy,
+        uav_v=None,
+        prev_eta=np.full(s.M, 1.0 / s.M),
+        prev_assoc=np.arange(s.M, dtype=np.int64) % s.K,
+        prediction=Gaussian(s.x0, s.P0),
+        J_pred=np.asarray(np.linalg.inv(s.P0), dtype=float),
+        excluded=tuple(range(s.M)),
+        operator_held=tuple(range(s.M)),
+    )
+    plan = job.run()
+    assert plan.report.status == "operator hold" and plan.report.fallback == ""
+    np.testing.assert_array_equal(plan.bandwidth_share, np.zeros(s.M))
+    np.testing.assert_array_equal(plan.bs_of_uav, np.full(s.M, -1))
+    sent = decode_plan(encode_plan(PlanMsg(4, 10.0, plan)), n_uavs=s.M)
+    np.testing.assert_array_equal(sent.plan.bandwidth_share, np.zeros(s.M))
+    lost = dataclasses.replace(job, operator_held=tuple(range(s.M - 1))).run()
+    assert lost.report.status == "no vehicles" and lost.report.fallback == "no vehicles"
+    np.testing.assert_array_equal(lost.bandwidth_share, np.zeros(s.M))
+    # Some vehicles held: the others share the bandwidth, the held ones have none.
+    some = dataclasses.replace(job, excluded=(0,), operator_held=(0,)).hold("timeout", "timeout")
+    assert some.bs_of_uav[0] == -1 and some.bandwidth_share[0] == 0.0
+    assert some.bandwidth_share.sum() == pytest.approx(1.0)
+
+
+def test_the_totals_count_each_status_by_name(paper: Scenario) -> None:
+    """`run`'s summary takes its infeasible slots from the infeasible status alone: an
+    operator's hold is counted as what it is."""
+    totals = MissionTotals()
+    for status in ("ok", "operator hold", "operator hold", "infeasible"):
+        totals.add(dataclasses.replace(read_like(paper, None), status=status))
+    assert totals.statuses == {"ok": 1, "operator hold": 2, "infeasible": 1}

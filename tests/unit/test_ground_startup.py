@@ -76,6 +76,28 @@ def test_the_gate_opens_only_when_every_vehicle_has_reported_over_a_live_link(
     assert gate.waits[-1].planned == (0, 1, 2)
 
 
+def test_a_normal_start_warns_of_nothing_and_a_start_without_a_vehicle_names_it(
+    wall: FakeWall, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Every vehicle reported at once: nothing logged (nothing is amiss); vehicles that never
+    reported: one warning naming each, none for the start itself."""
+    gate, vehicles = _rig(wall, startup_wait_s=10.0)
+    for m in range(3):
+        vehicles.on_telemetry(_tel(m, 5.0))
+    with caplog.at_level("INFO", logger="isac_mission.service.ground.startup"):
+        assert gate.try_open(vehicles, 5.0)
+    assert [r.levelname for r in caplog.records] == []
+    caplog.clear()
+    gate, vehicles = _rig(wall, startup_wait_s=10.0)
+    vehicles.on_telemetry(_tel(1, 5.0))
+    assert not gate.try_open(vehicles, 5.0)
+    wall.t += 10.5
+    with caplog.at_level("INFO", logger="isac_mission.service.ground.startup"):
+        assert gate.try_open(vehicles, 5.0)
+    warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert [w.split(":")[0] for w in warnings] == ["vehicle 0", "vehicle 2"]
+
+
 def test_after_the_timeout_the_gate_plans_those_that_reported_and_excludes_the_rest(
     wall: FakeWall,
 ) -> None:

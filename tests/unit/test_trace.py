@@ -288,3 +288,31 @@ def test_stack_gives_per_slot_arrays(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back.stack("pcrb_trace"), [r.pcrb_trace for r in records])
     assert back.stack("plan_xy").shape == (3, M, 2)
     assert np.isnan(back.stack("plan_xy")).all()
+
+
+def test_an_interrupted_run_says_so_and_a_resumed_one_reads_through_it(tmp_path: Path) -> None:
+    """A live run that stops before slot N ends its trace with `{"end": {"status":
+    "interrupted", "last_slot": k, "N": N}}`; the reader keeps the slots, the ends in order,
+    and says how the last run ended only when nothing was traced after its end line."""
+    from isac_mission.records import MissionEnd
+
+    path = tmp_path / "run.jsonl"
+    write_trace(path, 2)
+    with TraceWriter.resume(path) as writer:
+        writer.write_end(MissionEnd("interrupted", 2, 5))
+    first = read_trace(path)
+    assert [r.slot for r in first.slots] == [1, 2]
+    assert first.end == MissionEnd("interrupted", 2, 5)
+    assert json.loads(path.read_text().splitlines()[-1]) == {
+        "end": {"status": "interrupted", "last_slot": 2, "N": 5}
+    }
+    with TraceWriter.resume(path) as writer:
+        assert writer.last_record is not None and writer.last_record.slot == 2
+        writer.write_slot(make_record(3))
+    resumed = read_trace(path)
+    assert [r.slot for r in resumed.slots] == [1, 2, 3]
+    assert resumed.ends == [MissionEnd("interrupted", 2, 5)] and resumed.end is None
+    with path.open("a") as f:
+        f.write('{"end": {"status": "paused", "last_slot": 3, "N": 5}}\n')
+    with pytest.raises(MessageError, match=r"line 6: end\.status: 'paused'"):
+        read_trace(path)

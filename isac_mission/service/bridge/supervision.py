@@ -42,6 +42,10 @@ class LinkWatch:
         the vehicle reports the offboard-loss hold (the gap may be shorter than link loss)."""
         self._gap_until_s = -math.inf
         """Until this time a mode change is put down to the last gap (override.py)."""
+        self._watch_from_s: float | None = None
+        """Simulation time of the first `observe`: positions stamped before it are not compared
+        (a bridge fed by the world's clock stamps what it hears before the first clock message
+        with 0, and that is no time the vehicle was heard at)."""
 
     @property
     def index(self) -> int:
@@ -92,7 +96,9 @@ class LinkWatch:
     def _watch_interruptions(
         self, st: VehicleStatus, now_s: float, want_offboard: bool, reentry_idle: bool
     ) -> bool:
-        if st.position_s is not None:
+        if self._watch_from_s is None:
+            self._watch_from_s = now_s
+        if st.position_s is not None and st.position_s >= self._watch_from_s:
             last, self._last_position_s = self._last_position_s, st.position_s
             if last is not None and st.position_s - last > self.settings.interruption_after_s:
                 log.warning(

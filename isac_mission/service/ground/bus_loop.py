@@ -18,6 +18,7 @@ from typing import Protocol
 from isac_mission.bus import Subscription, ZenohBus
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
+from isac_mission.records import MissionEnd
 from isac_mission.service.ground.control import ControlDesk, ControlledMission
 from isac_mission.service.ground.exclusion import VehicleWatch
 from isac_mission.service.ground.report import GroundReport
@@ -73,6 +74,13 @@ class BusLoop:
     def s(self) -> Scenario:
         """The scenario planned with (an operator's `set` changes it: control.py)."""
         return self.state.scenario
+
+    def mission_end(self, last_traced: int) -> MissionEnd:
+        """How this run stands as it ends (the trace's `end` line): complete once slot N is
+        done, else interrupted (it was asked to stop first); last_traced: the last slot in the
+        trace (a slot processed but whose record waited for the next plan is not in it)."""
+        status = "complete" if self.state.done else "interrupted"
+        return MissionEnd(status, last_traced, self.s.N)
 
     # ------------------------------------------------------------------ for the subclass
 

@@ -167,6 +167,10 @@ class VehicleWatch:
         """Vehicle -> "ok" or "lost", as last reported."""
         return {m: t.link for m, t in self.telemetry.items()}
 
+    def operator_held(self) -> tuple[int, ...]:
+        """The excluded vehicles an operator's `hold` or `land` took out (sorted)."""
+        return tuple(sorted(m for m in self.excluded if m in self.held))
+
     def status(self) -> dict[int, str]:
         """Vehicle -> "active" or "excluded: <why>" (for the health message)."""
         return {

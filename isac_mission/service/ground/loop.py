@@ -20,6 +20,7 @@ import numpy as np
 
 from isac_mission.bus import ZenohBus
 from isac_mission.config import Scenario
+from isac_mission.planning.fallback import OPERATOR_HOLD
 from isac_mission.planning.fleet import PlanningJob
 from isac_mission.planning.slot import SolverKit
 from isac_mission.records import SlotRecord, TraceWriter
@@ -94,6 +95,8 @@ class GroundLoop(BusLoop):
 
     def _close_trace(self) -> None:
         if self.writer is not None:
+            last = self.writer.last_record
+            self.writer.write_end(self.mission_end(0 if last is None else last.slot))
             self.writer.close()
 
     def _handlers(self) -> dict[str, Callable[[bytes], None]]:
@@ -227,6 +230,7 @@ class GroundLoop(BusLoop):
             self.vehicles.velocities(self.t_s),
             tuple(self.vehicles.excluded),
             boundary_xy,
+            self.vehicles.operator_held(),
         )
         self.planning = asyncio.get_running_loop().create_task(
             self._plan(job, latency_from, record), name=f"plan-{job.slot}"
@@ -277,7 +281,9 @@ class GroundLoop(BusLoop):
             pending = self.state.commit(job, plan)
             msg = PlanMsg(pending.slot, self.t_s, pending.plan)
             self._publish(self.keys.plan, lambda: encode_plan(msg))
-            if plan.report.status != "ok":
+            if plan.report.status == OPERATOR_HOLD:
+                log.info("slot %d: %s", pending.slot, plan.report.reason)
+            elif plan.report.status != "ok":
                 self.report.last_error = f"slot {pending.slot}: {plan.report.reason}"
                 log.warning("slot %d: %s", pending.slot, plan.report.reason)
         latency = 0.0

@@ -127,10 +127,12 @@ class MissionState:
         uav_v: FloatArray | None = None,
         excluded: tuple[int, ...] = (),
         boundary_xy: FloatArray | None = None,
+        operator_held: tuple[int, ...] = (),
     ) -> PlanningJob:
         """Predict slot n+1: the planning job from the UAVs' current positions uav_xy [M, 2]
         (and velocities uav_v [M, 2], for a dynamics-aware planner), planning without the
-        `excluded` vehicles (planning/fleet.py). Nothing changes until `commit`. A vehicle that
+        `excluded` vehicles (planning/fleet.py; `operator_held`: those an operator took out).
+        Nothing changes until `commit`. A vehicle that
         follows last slot's plan starts from that plan's end state (`leg_start_state`; where
         the vehicles were at the slot boundary: boundary_xy [M, 2], NaN = unknown). The
         job carries the planner's prev_plan: last slot's plan when the active vehicles are the
@@ -160,6 +162,7 @@ class MissionState:
             J_pred=predicted.prior,
             excluded=excluded,
             prev_plan=prev_plan,
+            operator_held=tuple(sorted(operator_held)),
         )
 
     def commit(self, job: PlanningJob, plan: SlotPlan) -> PendingSlot:

@@ -34,7 +34,8 @@ from isac_mission.bus import ZenohBus
 from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.model.detections import UavReport
-from isac_mission.planning.fleet import KitCache, active_part, widen_plan
+from isac_mission.planning.fallback import NO_BS, OPERATOR_HOLD
+from isac_mission.planning.fleet import OPERATOR_HOLD_REASON, KitCache, active_part, widen_plan
 from isac_mission.planning.multi_target import (
     KEEP_OUT_CAPACITY,
     check_multi_target_method,
@@ -43,7 +44,7 @@ from isac_mission.planning.multi_target import (
     plan_for_tracks,
 )
 from isac_mission.planning.slot import Method, SolverKit
-from isac_mission.records.multi_target import MultiTargetSlot, header_line, slot_line
+from isac_mission.records.multi_target import MultiTargetSlot, end_line, header_line, slot_line
 from isac_mission.service.ground.assembler import DetectionAssembler
 from isac_mission.service.ground.bus_loop import BusLoop
 from isac_mission.service.ground.mission import leg_start_state
@@ -161,10 +162,13 @@ class MultiTargetMission:
         uav_xy: FloatArray,
         uav_v: FloatArray | None,
         excluded: tuple[int, ...],
+        operator_held: tuple[int, ...] = (),
     ) -> tuple[int, SlotPlan]:
         """(the ID of the track planned around, the plan of slot + 1): thread-safe (touches only
         its arguments and the kits). The `excluded` vehicles (sorted) are left out: the others
-        are planned with them as keep-out points (planning/fleet.py), and they hold."""
+        are planned with them as keep-out points (planning/fleet.py), and they hold; when
+        every one of them is `operator_held` (an operator's hold or land), the slot's status is
+        `operator hold`."""
         s = self._scenario
         prev = self.last_plan if self.last_excluded == excluded else None
         if not excluded:
@@ -173,7 +177,10 @@ class MultiTargetMission:
             )
         active = tuple(m for m in range(s.M) if m not in excluded)
         if not active:
-            hold = hold_without_track(s, uav_xy, self.eta, self.assoc)
+            # Nobody is served: every share 0, no BS (planning/fallback.hold_plan's rule).
+            hold = hold_without_track(s, uav_xy, np.zeros(s.M), np.full(s.M, NO_BS))
+            if set(excluded) <= set(operator_held):
+                return 0, _with_status(hold, OPERATOR_HOLD, OPERATOR_HOLD_REASON)
             return 0, _with_status(hold, "no vehicles", "hold: every vehicle is excluded")
         idx = list(active)
         kit = self.kits.for_active(active)
@@ -268,7 +275,8 @@ def _origins(truth: TruthSetMsg | None, m: int, k: int) -> IntArray:
 
 def _with_status(plan: SlotPlan, status: str, reason: str, solve_s: float = 0.0) -> SlotPlan:
     """A hold plan with its status, why, and the time spent before it (s)."""
-    report = SolveReport(status, reason, solve_s=solve_s, fallback=status)
+    fallback = "" if status == OPERATOR_HOLD else status
+    report = SolveReport(status, reason, solve_s=solve_s, fallback=fallback)
     return replace(plan, report=report)
 
 
@@ -337,6 +345,8 @@ class MultiTargetGround(BusLoop):
 
     def _close_trace(self) -> None:
         if self._trace is not None:
+            last = self.slots[-1].slot if self.slots else 0
+            self._write_line(end_line(self.mission_end(last)))
             self._trace.close()
 
     def _write_line(self, line: str) -> None:
@@ -419,12 +429,13 @@ class MultiTargetGround(BusLoop):
     ) -> None:
         st = self.state
         excluded = tuple(sorted(self.vehicles.excluded))
+        held = self.vehicles.operator_held()
         v = self.vehicles.velocities(self.t_s)
         if st.last_plan is not None and not excluded:
             uav_xy, v = leg_start_state(uav_xy, v, st.last_plan, range(self.s.M), boundary_xy)
         predictions = st.predict()
         self.planning = asyncio.get_running_loop().create_task(
-            self._plan(st.slot + 1, predictions, uav_xy, v, excluded, latency_from, done),
+            self._plan(st.slot + 1, predictions, uav_xy, v, excluded, held, latency_from, done),
             name=f"plan-{st.slot + 1}",
         )
 
@@ -435,6 +446,7 @@ class MultiTargetGround(BusLoop):
         uav_xy: FloatArray,
         uav_v: FloatArray,
         excluded: tuple[int, ...],
+        operator_held: tuple[int, ...],
         latency_from: float | None,
         done: MultiTargetSlot | None,
     ) -> None:
@@ -442,7 +454,7 @@ class MultiTargetGround(BusLoop):
         t0 = time.perf_counter()
         budget = self.settings.plan_budget_s
         future = in_daemon_thread(
-            lambda: st.plan(predictions, uav_xy, uav_v, excluded), f"plan-{n}"
+            lambda: st.plan(predictions, uav_xy, uav_v, excluded, operator_held), f"plan-{n}"
         )
         try:
             async with asyncio.timeout(budget):
@@ -466,7 +478,7 @@ class MultiTargetGround(BusLoop):
             st.commit(n, planned_for, plan, uav_xy, excluded)
             msg = PlanMsg(n, self.t_s, plan)
             self._publish(self.keys.plan, lambda: encode_plan(msg))
-            if plan.report.status != "ok":
+            if plan.report.status not in ("ok", OPERATOR_HOLD):
                 self.report.last_error = f"slot {n}: {plan.report.reason}"
             latency = 0.0 if latency_from is None else time.monotonic() - latency_from
             if latency_from is not None:

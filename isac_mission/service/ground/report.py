@@ -39,14 +39,15 @@ class MissionTotals:
     position_sq_error_m2: float = 0.0
     velocity_sq_error_m2ps2: float = 0.0
     pcrb_trace_sum: float = 0.0
-    not_ok: int = 0
+    statuses: Counter[str] = field(default_factory=Counter)
+    """Slots by status (the records' `status`: ok, infeasible, operator hold, ...)."""
     fallbacks: Counter[str] = field(default_factory=Counter)
     """Slots whose method's answer was not flown, by kind (the records' `fallback`)."""
 
     def add(self, record: SlotRecord) -> None:
         self.slots += 1
         self.pcrb_trace_sum += float(record.pcrb_trace)
-        self.not_ok += record.status != "ok"
+        self.statuses[record.status] += 1
         if record.fallback:
             self.fallbacks[record.fallback] += 1
         if record.target_true is not None:

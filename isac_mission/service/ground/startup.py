@@ -127,12 +127,15 @@ class PlanningGate:
             vehicles.exclude(m, f"no fresh telemetry within {self.settings.startup_wait_s:g} s")
         self.closed = False
         self.waits.append(GateWait(self.reason, waited, tuple(ready)))
-        log.warning(
-            "%s: planning again after %.2f s of wall time, vehicles %s reported",
-            self.reason,
-            waited,
-            ready,
-        )
+        # A start is no "again" (and a vehicle that did not report was warned of as excluded):
+        # only a reopening after a stall or a resume is news.
+        if self.reason != "start":
+            log.warning(
+                "%s: planning again after %.2f s of wall time, vehicles %s reported",
+                self.reason,
+                waited,
+                ready,
+            )
         return True
 
     def slots_to_skip(self, state: MissionState, t_s: float, t0_s: float) -> range:
