@@ -17,7 +17,10 @@ tests/numerics/test_bootstrap_coverage.py checks it). When every resample gives 
 (e.g. a method against itself) the interval is that value.
 
 Statistics take arrays [..., R] (runs on the last axis) and return [...]: they are evaluated on all
-resamples at once. `reduction_of_means` and `reduction_of_rms` are the report's (in %).
+resamples at once. `change_of_means` and `change_of_rms` are `simulate`'s (in %, negative: the
+method is lower than the reference), both through `change_pct`; `reduction_of_means` and
+`reduction_of_rms` are their negatives (positive: lower), which summary.json's `against_proposed`
+and the live-vs-simulate bench report.
 """
 
 from __future__ import annotations
@@ -49,6 +52,28 @@ class Interval:
 
     def contains(self, value: float) -> bool:
         return self.low <= value <= self.high
+
+
+def change_pct(value: ArrayLike, reference: ArrayLike) -> FloatArray:
+    """How far `value` is above `reference`, in % of it: 100 (value / reference - 1), elementwise.
+
+    Negative when `value` is lower than `reference` (for a bound or an error: better). Every
+    comparison table of `simulate` computes its percentages here."""
+    return np.asarray(100.0 * (np.asarray(value, dtype=float) / np.asarray(reference) - 1.0))
+
+
+def change_of_means(reference: FloatArray, other: FloatArray) -> FloatArray:
+    """% change of `other`'s mean over runs against `reference`'s: 100 (mean o / mean r - 1).
+
+    For per-run means of a per-slot quantity (same slots per run), the mean over runs is the
+    pooled mean (e.g. the mission-mean tr(PCRB))."""
+    return change_pct(other.mean(axis=-1), reference.mean(axis=-1))
+
+
+def change_of_rms(reference_ms: FloatArray, other_ms: FloatArray) -> FloatArray:
+    """% change of an RMSE pooled over runs, from per-run mean squared errors:
+    100 (sqrt(mean o / mean r) - 1) (runs with the same number of slots pool by the mean)."""
+    return change_pct(np.sqrt(other_ms.mean(axis=-1)), np.sqrt(reference_ms.mean(axis=-1)))
 
 
 def reduction_of_means(baseline: FloatArray, other: FloatArray) -> FloatArray:

@@ -1,13 +1,14 @@
 """`simulate` on a multi-target scenario (docs/model.md, "Several targets"): every method on the
-same runs (common random numbers), the tracking figures per method, each method's GOSPA and
-per-target errors against `proposed`'s with paired bootstrap intervals, the traces
-(docs/trace.md, "Multi-target traces") and summary.json.
+same runs (common random numbers), the tracking figures per method, each method's GOSPA
+against the first method's (`proposed` by default) as a % change with its paired bootstrap
+interval (comparison.change_convention: negative = lower, better), the traces (docs/trace.md,
+"Multi-target traces") and summary.json.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +19,12 @@ from rich.console import Console
 from rich.table import Table
 
 from isac_mission.config import Scenario
-from isac_mission.experiment.bootstrap import paired_bootstrap, reduction_of_means
+from isac_mission.experiment.bootstrap import (
+    change_of_means,
+    paired_bootstrap,
+    reduction_of_means,
+)
+from isac_mission.experiment.comparison import NEEDS_TWO_RUNS, Change, change_convention
 from isac_mission.experiment.multi_target_loop import run_multi_target
 from isac_mission.experiment.multi_target_metrics import (
     RunFigures,
@@ -27,7 +33,12 @@ from isac_mission.experiment.multi_target_metrics import (
     summarize_tracking,
 )
 from isac_mission.experiment.multi_target_plots import save_tracks_png
-from isac_mission.experiment.report import interval_cell, print_table
+from isac_mission.experiment.report import (
+    change_cell,
+    missing_caption,
+    print_table,
+    runs_text,
+)
 from isac_mission.model.run_noise import draw_multi_target_noise
 from isac_mission.planning.multi_target import check_multi_target_method, multi_target_kit
 from isac_mission.planning.registry import LABELS
@@ -143,6 +154,56 @@ def target_table(s: Scenario, summaries: dict[str, TrackingSummary]) -> Table:
     return table
 
 
+def gospa_against_reference(
+    by_method: Mapping[str, MethodRuns], reference: str, runs: int, seed: int
+) -> tuple[Table, dict[str, Any]]:
+    """Each method's mission-mean GOSPA against `reference`'s as a % change (change_of_means:
+    negative = lower, better), paired bootstrap 95 % interval over runs (none with one run: the
+    caption says so), and plan time median (ms). Returns the table and summary.json's
+    `against_baseline` rows: `gospa_change_pct` [estimate, low, high] (low, high None with one
+    run) and `gospa_reduction_pct` (the reduction, the opposite sign; None with one run)."""
+    ref = LABELS.get(reference, reference)
+    base = np.array([f.gospa_m.mean() for f in by_method[reference].figures])
+    changes: dict[str, Change] = {}
+    rows: dict[str, Any] = {}
+    for m, r in by_method.items():
+        g = np.array([f.gospa_m.mean() for f in r.figures])
+        reduction: list[float] | None = None
+        if runs >= 2:
+            iv = paired_bootstrap(base, g, change_of_means, seed=seed)
+            c = Change(iv.estimate, iv)
+            red = paired_bootstrap(base, g, reduction_of_means, seed=seed)
+            reduction = [red.estimate, red.low, red.high]
+        else:
+            c = Change(float(change_of_means(base, g)), None, NEEDS_TWO_RUNS)
+        changes[m] = c
+        rows[m] = {
+            "gospa_reduction_pct": reduction,
+            "gospa_change_pct": [
+                c.estimate,
+                None if c.interval is None else c.interval.low,
+                None if c.interval is None else c.interval.high,
+            ],
+            "plan_time_median_ms": 1e3 * float(np.median(r.solve_s)),
+        }
+    others = [c for m, c in changes.items() if m != reference]
+    table = Table(
+        title=f"GOSPA of each method against {ref}: {change_convention(ref)}; "
+        f"paired bootstrap 95% interval over {runs_text(runs)}",
+        caption=missing_caption(others, runs),
+    )
+    table.add_column("method")
+    table.add_column("GOSPA change", justify="right")
+    table.add_column("plan time median (ms)", justify="right")
+    for m, c in changes.items():
+        table.add_row(
+            LABELS.get(m, m),
+            "(reference)" if m == reference else change_cell(c),
+            f"{rows[m]['plan_time_median_ms']:.1f}",
+        )
+    return table, rows
+
+
 def multi_target_report(
     s: Scenario,
     methods: Sequence[str],
@@ -161,27 +222,12 @@ def multi_target_report(
     )
     summaries = {m: summarize_tracking(r.figures) for m, r in by_method.items()}
     title = (
-        f"{s.mission_id}: {runs} runs, {len(s.targets)} targets, seeds {seed}..{seed + runs - 1}"
+        f"{s.mission_id}: {runs_text(runs)}, {len(s.targets)} targets, "
+        f"seeds {seed}..{seed + runs - 1}"
     )
     print_table(console, tracking_table(s, summaries, title))
     print_table(console, target_table(s, summaries))
-    baseline = methods[0]
-    against = Table(title=f"against {LABELS.get(baseline, baseline)} (paired 95 % intervals)")
-    against.add_column("method")
-    against.add_column("GOSPA reduction %", justify="right")
-    against.add_column("plan time median (ms)", justify="right")
-    rows: dict[str, Any] = {}
-    base = np.array([f.gospa_m.mean() for f in by_method[baseline].figures])
-    for m, r in by_method.items():
-        g = np.array([f.gospa_m.mean() for f in r.figures])
-        iv = paired_bootstrap(base, g, reduction_of_means, seed=seed) if runs >= 2 else None
-        against.add_row(
-            LABELS.get(m, m), interval_cell(iv), f"{1e3 * float(np.median(r.solve_s)):.1f}"
-        )
-        rows[m] = {
-            "gospa_reduction_pct": None if iv is None else [iv.estimate, iv.low, iv.high],
-            "plan_time_median_ms": 1e3 * float(np.median(r.solve_s)),
-        }
+    against, rows = gospa_against_reference(by_method, methods[0], runs, seed)
     print_table(console, against)
     summary = {
         "scenario": s.mission_id,

@@ -1,5 +1,9 @@
 """`simulate`'s report: Monte Carlo with a progress bar, the tables, summary.json and the plots.
 
+Both comparison tables put each method against `proposed` (the reference) as a % change,
+100 (method / proposed - 1) from bootstrap.change_pct: negative = lower (better) than `proposed`.
+Each states it in its title; with one run the interval column's caption says why there is none.
+
 Tables print whole when the output is not a terminal (a pipe, a log file, CI): `print_table`
 renders them at least TABLE_WIDTH_NOT_TERMINAL columns wide (wider if a table needs it) instead
 of rich's 80-column default, which cuts cells ("Prop…", "0.02…").
@@ -8,7 +12,7 @@ of rich's 80-column default, which cuts cells ("Prop…", "0.02…").
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict
 from pathlib import Path
 
@@ -18,10 +22,14 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from isac_mission.config import Scenario
-from isac_mission.experiment.bootstrap import Interval
+from isac_mission.experiment.bootstrap import Interval, change_pct
 from isac_mission.experiment.comparison import (
     BASELINE,
-    FIGURES,
+    CHANGES,
+    NEEDS_TWO_RUNS,
+    Change,
+    change_convention,
+    changes_against_reference,
     reductions_against_baseline,
     run_figures,
 )
@@ -108,6 +116,11 @@ def figures_table(summaries: Sequence[MethodSummary], title: str) -> Table:
     return t
 
 
+def runs_text(runs: int) -> str:
+    """'1 run', '20 runs'."""
+    return f"{runs} run" if runs == 1 else f"{runs} runs"
+
+
 def interval_cell(iv: Interval | None) -> str:
     """'+18.6 % [16.6, 20.5]' (estimate and interval, %), or '-' when there is none."""
     if iv is None:
@@ -115,20 +128,53 @@ def interval_cell(iv: Interval | None) -> str:
     return f"{iv.estimate:+.1f} % [{iv.low:+.1f}, {iv.high:+.1f}]"
 
 
-def against_baseline_table(
-    reductions: dict[str, dict[str, Interval | None]], runs: int, level: float = 0.95
+def change_cell(c: Change) -> str:
+    """'+18.6 % [+16.6, +20.5]' (% change and its interval), '+18.6 %' (no interval: the
+    table's caption says why), or '-' (no value)."""
+    if c.interval is not None:
+        return interval_cell(c.interval)
+    return "-" if c.estimate is None else f"{c.estimate:+.1f} %"
+
+
+def missing_caption(changes: Iterable[Change], runs: int) -> str | None:
+    """The caption that says why cells have no interval (or no value), None when all have one."""
+    why = sorted({c.missing for c in changes if c.missing is not None})
+    notes = [
+        f"no interval: {w} ({runs_text(runs)} here)" if w == NEEDS_TWO_RUNS else f"'-': {w}"
+        for w in why
+    ]
+    return "; ".join(notes) or None
+
+
+def against_reference_table(
+    changes: dict[str, dict[str, Change]], runs: int, level: float = 0.95
 ) -> Table:
-    """Per method: % reduction of each figure against `proposed` with its paired interval."""
+    """Per method: % change of each figure against `proposed` with its paired interval."""
+    ref = LABELS[BASELINE]
     t = Table(
-        title=f"Against {LABELS[BASELINE]}: % reduction (positive = lower than {LABELS[BASELINE]}), "
-        f"paired bootstrap {level:.0%} interval over {runs} runs"
+        title=f"Each method against {ref}: {change_convention(ref)}; "
+        f"paired bootstrap {level:.0%} interval over {runs_text(runs)}",
+        caption=missing_caption((c for row in changes.values() for c in row.values()), runs),
     )
     t.add_column("method")
-    for key in FIGURES:
+    for key in CHANGES:
         t.add_column(FIGURE_HEADS[key], justify="right")
-    for method, row in reductions.items():
-        t.add_row(LABELS.get(method, method), *(interval_cell(row[k]) for k in FIGURES))
+    for method, row in changes.items():
+        t.add_row(LABELS.get(method, method), *(change_cell(row[k]) for k in CHANGES))
     return t
+
+
+def change_record(c: Change, level: float = 0.95) -> dict[str, float | str | None]:
+    """summary.json's form of a Change: estimate, low, high (%, None without an interval),
+    level, and `missing` (why there is no interval, else None)."""
+    iv = c.interval
+    return {
+        "estimate": c.estimate,
+        "low": None if iv is None else iv.low,
+        "high": None if iv is None else iv.high,
+        "level": level if iv is None else iv.level,
+        "missing": c.missing,
+    }
 
 
 def print_table(console: Console, table: Table) -> None:
@@ -147,11 +193,23 @@ def print_table(console: Console, table: Table) -> None:
     wide.print(table)
 
 
+BENCHMARKS = ("sd", "aba", "crb")
+"""The benchmarks the paper reports reductions against (PAPER_REDUCTIONS)."""
+
+
+def paper_change_pct(reduction: float) -> float:
+    """The paper's % reduction of the proposed method against a benchmark (proposed =
+    (1 - reduction / 100) x benchmark) as the benchmark's % change against the proposed method."""
+    return float(change_pct(1.0, 1.0 - reduction / 100.0))
+
+
 def reduction_rows(by_method: dict[str, MethodSummary]) -> list[dict[str, float | str | None]]:
-    """The proposed method's % reductions against each benchmark, beside the paper's."""
+    """The proposed method's % reductions against each benchmark, beside the paper's
+    (summary.json's `reductions`: positive = the proposed method lower; the printed table is
+    `benchmark_rows`)."""
     p = by_method["proposed"]
     rows: list[dict[str, float | str | None]] = []
-    for bench in ("sd", "aba", "crb"):
+    for bench in BENCHMARKS:
         if bench not in by_method:
             continue
         b = by_method[bench]
@@ -169,18 +227,59 @@ def reduction_rows(by_method: dict[str, MethodSummary]) -> list[dict[str, float 
     return rows
 
 
-def reduction_table(rows: list[dict[str, float | str | None]]) -> Table:
-    t = Table(title="Proposed vs benchmarks: % reduction (positive = proposed is better)")
-    for col in ("vs", "tr(PCRB)", "loc RMSE", "paper loc", "vel RMSE", "paper vel"):
-        t.add_column(col, justify="right" if col != "vs" else "left")
+def benchmark_rows(by_method: dict[str, MethodSummary]) -> list[dict[str, float | str]]:
+    """Each benchmark's % change against the proposed method (change_pct: negative = the
+    benchmark lower), mean tr(PCRB) and RMSEs over slots 1..N, beside the paper's reductions
+    restated the same way (paper_change_pct); summary.json's `benchmarks_against_proposed`."""
+    p = by_method[BASELINE]
+    rows: list[dict[str, float | str]] = []
+    for bench in BENCHMARKS:
+        if bench not in by_method:
+            continue
+        b = by_method[bench]
+        loc_paper, vel_paper = PAPER_REDUCTIONS[bench]
+        rows.append(
+            {
+                "benchmark": bench,
+                "pcrb_change_pct": float(change_pct(b.pcrb_total, p.pcrb_total)),
+                "loc_change_pct": float(change_pct(b.loc_rmse, p.loc_rmse)),
+                "loc_paper_change_pct": paper_change_pct(loc_paper),
+                "vel_change_pct": float(change_pct(b.vel_rmse, p.vel_rmse)),
+                "vel_paper_change_pct": paper_change_pct(vel_paper),
+            }
+        )
+    return rows
+
+
+def benchmark_table(rows: list[dict[str, float | str]]) -> Table:
+    """Each benchmark against the proposed method beside the paper, in the sign convention of
+    every comparison table (change_convention); the caption gives the paper's printed figures."""
+    ref = LABELS[BASELINE]
+    printed = ", ".join(
+        f"{LABELS[str(r['benchmark'])]} {PAPER_REDUCTIONS[str(r['benchmark'])][0]:.1f} % / "
+        f"{PAPER_REDUCTIONS[str(r['benchmark'])][1]:.1f} %"
+        for r in rows
+    )
+    t = Table(
+        title=f"Each benchmark against {ref}, beside the paper: {change_convention(ref)}",
+        caption=f"paper loc / paper vel: the paper's reductions of {ref}'s RMSEs against each "
+        f"benchmark ({printed}) as the benchmark's change against {ref}",
+    )
+    for col in ("method", "tr(PCRB)", "loc RMSE", "paper loc", "vel RMSE", "paper vel"):
+        t.add_column(col, justify="right" if col != "method" else "left")
     for r in rows:
         t.add_row(
             LABELS[str(r["benchmark"])],
-            f"{r['pcrb_pct']:+.1f} %",
-            f"{r['loc_pct']:+.1f} %",
-            f"{r['loc_paper_pct']:.1f} %",
-            f"{r['vel_pct']:+.1f} %",
-            f"{r['vel_paper_pct']:.1f} %",
+            *(
+                f"{float(r[k]):+.1f} %"
+                for k in (
+                    "pcrb_change_pct",
+                    "loc_change_pct",
+                    "loc_paper_change_pct",
+                    "vel_change_pct",
+                    "vel_paper_change_pct",
+                )
+            ),
         )
     return t
 
@@ -226,20 +325,24 @@ def simulate_report(
             workers=workers,
         )
     summaries: dict[str, MethodSummary] = {m: summarize(results[m]) for m in methods}
-    print_table(console, summary_table(list(summaries.values()), f"{s.mission_id}: {runs} runs"))
-    rows = reduction_rows(summaries) if "proposed" in summaries else []
-    if rows:
-        print_table(console, reduction_table(rows))
+    print_table(
+        console, summary_table(list(summaries.values()), f"{s.mission_id}: {runs_text(runs)}")
+    )
+    rows = reduction_rows(summaries) if BASELINE in summaries else []
+    bench_rows = benchmark_rows(summaries) if BASELINE in summaries else []
+    if bench_rows:
+        print_table(console, benchmark_table(bench_rows))
     figures: dict[str, dict[str, FloatArray]] = {m: run_figures(results[m]) for m in methods}
     print_table(
         console,
         figures_table(
-            list(summaries.values()), f"{s.mission_id}: tr(PCRB) and errors, {runs} runs"
+            list(summaries.values()), f"{s.mission_id}: tr(PCRB) and errors, {runs_text(runs)}"
         ),
     )
+    changes = changes_against_reference(figures, seed=seed)
+    if changes:
+        print_table(console, against_reference_table(changes, runs))
     against = reductions_against_baseline(figures, seed=seed)
-    if against:
-        print_table(console, against_baseline_table(against, runs))
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = {
         "config": s.trace_config(),
@@ -247,9 +350,13 @@ def simulate_report(
         "seed": seed,
         "methods": {m: asdict(v) for m, v in summaries.items()},
         "reductions": rows,
+        "benchmarks_against_proposed": bench_rows,
         "against_proposed": {
             m: {k: None if iv is None else asdict(iv) for k, iv in row.items()}
             for m, row in against.items()
+        },
+        "change_against_proposed": {
+            m: {k: change_record(c) for k, c in row.items()} for m, row in changes.items()
         },
         "per_run": {m: {k: v.tolist() for k, v in f.items()} for m, f in figures.items()},
     }

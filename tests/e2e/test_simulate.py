@@ -55,8 +55,10 @@ def test_simulate_writes_table_traces_and_plots_that_pass_the_independent_checks
         config, out, "--runs", "2", "--methods", "proposed,sd,aba,crb,comm", "--seed", "7"
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
+    flat = " ".join(proc.stdout.split())  # titles and captions wrap at their table's width
     for label in ("Proposed", "SD", "ABA", "CRB-criterion", "Comm-optimal", "61.1 %", "paper loc"):
-        assert label in proc.stdout
+        assert label in flat
+    assert flat.count("negative = lower (better) than Proposed") == 2  # both comparison tables
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["methods"]) == {"proposed", "sd", "aba", "crb", "comm"}
     for png in ("fig2a_trajectories.png", "fig2b_bandwidth.png", "fig3_performance.png"):

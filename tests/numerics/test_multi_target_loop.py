@@ -213,7 +213,7 @@ def test_the_report_prints_its_tables_and_writes_traces(scenario: Scenario, tmp_
         s, ["sd", "aba"], runs=2, seed=3, out_dir=tmp_path, workers=1, console=Console(file=printed)
     )
     text = printed.getvalue()
-    for label in ("GOSPA (m)", "ID switches / run", "known: RMSE", "GOSPA reduction %", "ABA"):
+    for label in ("GOSPA (m)", "ID switches / run", "known: RMSE", "GOSPA change", "ABA"):
         assert label in text
     assert set(summary["methods"]) == {"sd", "aba"}
     lines = (tmp_path / "traces" / "aba_run001.jsonl").read_text().splitlines()

@@ -1,19 +1,22 @@
-"""Report tables print whole when the output is not a terminal (a pipe, a log file, CI)."""
+"""Report tables print whole when the output is not a terminal (a pipe, a log file, CI), and the
+paper comparison table states its sign convention."""
 
 from __future__ import annotations
 
 import io
 import re
 
+import pytest
 from rich.console import Console
 
 from isac_mission.experiment.montecarlo import MethodSummary
 from isac_mission.experiment.report import (
     LABELS,
     TABLE_WIDTH_NOT_TERMINAL,
+    benchmark_rows,
+    benchmark_table,
+    paper_change_pct,
     print_table,
-    reduction_rows,
-    reduction_table,
     summary_table,
 )
 
@@ -77,18 +80,37 @@ def test_summary_table_prints_every_number_whole_to_a_non_terminal() -> None:
     assert max(len(line) for line in text.splitlines()) <= TABLE_WIDTH_NOT_TERMINAL
 
 
-def test_reduction_table_prints_whole_to_a_non_terminal() -> None:
-    rows = reduction_rows(_summaries())
+def test_benchmark_table_prints_whole_to_a_non_terminal() -> None:
+    rows = benchmark_rows(_summaries())
     out = io.StringIO()
-    print_table(Console(file=out), reduction_table(rows))
+    print_table(Console(file=out), benchmark_table(rows))
     text = out.getvalue()
+    flat = " ".join(text.split())  # the title and caption wrap at the table's width
     assert "…" not in text
-    assert "Proposed vs benchmarks: % reduction (positive = proposed is better)" in text
+    assert "negative = lower (better) than Proposed" in flat
+    assert "(SD 61.1 % / 59.9 %, ABA 22.8 % / 29.1 %, CRB-criterion 9.0 % / 12.0 %)" in flat
     cells = _row_cells(text)
     for r in rows:
-        for key in ("pcrb_pct", "loc_pct", "vel_pct"):
+        for key in (
+            "pcrb_change_pct",
+            "loc_change_pct",
+            "loc_paper_change_pct",
+            "vel_change_pct",
+            "vel_paper_change_pct",
+        ):
             assert f"{r[key]:+.1f} %" in cells
-        assert f"{r['loc_paper_pct']:.1f} %" in cells and f"{r['vel_paper_pct']:.1f} %" in cells
+
+
+def test_the_papers_reductions_restated_as_the_benchmarks_change() -> None:
+    """The paper: the proposed RMSE 61.1 % below SD's, i.e. SD's 1 / 0.389 of it, +157.1 %."""
+    assert paper_change_pct(61.1) == pytest.approx(100 * (1 / 0.389 - 1))
+    assert paper_change_pct(0.0) == 0.0
+    by_method = _summaries()  # every benchmark above the proposed method: positive changes
+    assert all(
+        float(r[k]) > 0
+        for r in benchmark_rows(by_method)
+        for k in ("pcrb_change_pct", "loc_change_pct", "vel_change_pct")
+    )
 
 
 def test_plain_rich_print_would_cut_the_summary_table_at_80_columns() -> None:
