@@ -1,8 +1,9 @@
 """`isac-mission ARGS` with one plan that is still solving when the mission ends.
 
 `python -m tests.support.slow_solve SLOT SOLVE_S ARGS...` runs the real command line (`run` or
-`serve` ARGS) in this process, except that the plan of slot SLOT first runs an IPOPT solve of
-about SOLVE_S wall seconds (long_native_solve), on the planner's thread, then plans as usual.
+`serve` ARGS) in this process, except that the plan of slot SLOT (`every`: of every slot) first
+runs a native solve of about SOLVE_S wall seconds (long_native_solve), on the planner's thread,
+then plans as usual: a machine too slow for the mission's pace.
 With `--plan-budget` below SOLVE_S the ground loop holds that slot and goes on; the solve is in
 native code when the mission ends: what used to abort the process at exit ("FATAL: exception not
 rethrown", exit 134).
@@ -37,11 +38,12 @@ def long_native_solve(wall_s: float) -> None:
 
 
 def main(argv: list[str]) -> None:
-    slow_slot, solve_s, cli_args = int(argv[0]), float(argv[1]), argv[2:]
+    every = argv[0] == "every"
+    slow_slot, solve_s, cli_args = -1 if every else int(argv[0]), float(argv[1]), argv[2:]
     original = fleet_plan.PlanningJob.run
 
     def run(self: fleet_plan.PlanningJob, *args: Any, **kwargs: Any) -> Any:
-        if self.slot == slow_slot:
+        if every or self.slot == slow_slot:
             print("slow solve started", file=sys.stderr, flush=True)
             long_native_solve(solve_s)
         return original(self, *args, **kwargs)
