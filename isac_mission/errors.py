@@ -23,3 +23,13 @@ class SolverError(IsacError):
 
 class MissingDependencyError(IsacError):
     """An optional dependency is not installed. The message names the pip extra that brings it."""
+
+
+class PortInUseError(ConfigError):
+    """A port this process must listen on is taken by another process. `port` is the port,
+    `endpoint` what was to listen there (e.g. the Zenoh endpoint `tcp/127.0.0.1:7447`)."""
+
+    def __init__(self, message: str, *, port: int, endpoint: str) -> None:
+        super().__init__(message)
+        self.port = port
+        self.endpoint = endpoint

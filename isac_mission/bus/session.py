@@ -21,16 +21,18 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
+import socket
 from collections.abc import AsyncIterator
 from types import TracebackType
 from typing import Any, Final
 
 import zenoh
 
-from isac_mission.bus.settings import BusSecurity, BusSettings
+from isac_mission.bus.settings import BusSecurity, BusSettings, endpoint_parts
 from isac_mission.bus.zenoh_config import config_entries
-from isac_mission.errors import ConfigError
+from isac_mission.errors import ConfigError, PortInUseError
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +43,71 @@ def make_config(settings: BusSettings) -> zenoh.Config:
     for key, value in config_entries(settings).items():
         cfg.insert_json5(key, value)
     return cfg
+
+
+_STREAM_PROTOCOLS: Final = frozenset({"tcp", "tls", "ws"})
+"""Zenoh link protocols over TCP; `udp` and `quic` are over UDP."""
+_PROBED_HOSTS: Final = {"127.0.0.1": "127.0.0.1", "localhost": "127.0.0.1"}
+"""Hosts whose ports `listen_port_in_use` probes (the network rule: binds on 127.0.0.1 only)."""
+_IN_USE_TEXTS: Final = ("Address already in use", "AddrInUse", "os error 98")
+"""How Zenoh's open error says a listener's port is taken (for hosts that are not probed)."""
+
+
+def listen_port_in_use(endpoint: str) -> bool:
+    """True when another socket holds the port Zenoh would listen on for `endpoint` (a probe
+    bind on 127.0.0.1, TCP with SO_REUSEADDR as Zenoh's listener, or UDP for udp/quic). False
+    for port 0 (ephemeral), a free port, or a host other than 127.0.0.1 / localhost (not
+    probed)."""
+    try:
+        p = endpoint_parts(endpoint)
+    except ConfigError:
+        return False
+    if p.host not in _PROBED_HOSTS or p.port == 0:
+        return False
+    kind = socket.SOCK_STREAM if p.proto in _STREAM_PROTOCOLS else socket.SOCK_DGRAM
+    with socket.socket(socket.AF_INET, kind) as probe:
+        if kind == socket.SOCK_STREAM:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((_PROBED_HOSTS[p.host], p.port))
+        except OSError as err:
+            return err.errno == errno.EADDRINUSE
+    return False
+
+
+def port_in_use_error(endpoint: str) -> PortInUseError:
+    """The PortInUseError for a listen endpoint whose port is taken (its message names the
+    endpoint and the port; the caller adds the option that moves it)."""
+    try:
+        port = endpoint_parts(endpoint).port
+    except ConfigError:
+        port = 0
+    return PortInUseError(
+        f"zenoh: cannot listen on {endpoint}: port {port} is in use by another process",
+        port=port,
+        endpoint=endpoint,
+    )
+
+
+def check_listen_endpoints(endpoints: tuple[str, ...]) -> None:
+    """PortInUseError for the first of `endpoints` whose port another process holds
+    (`listen_port_in_use`): a process checks before it starts what depends on its session."""
+    for endpoint in endpoints:
+        if listen_port_in_use(endpoint):
+            raise port_in_use_error(endpoint)
+
+
+def _busy_listen_endpoint(settings: BusSettings, message: str) -> str | None:
+    """The listen endpoint of `settings` whose port is taken, after Zenoh refused to open with
+    `message`: a probed endpoint whose port is held, else one that Zenoh's message names as in
+    use; None when the failure is something else."""
+    for endpoint in settings.listen:
+        if listen_port_in_use(endpoint):
+            return endpoint
+    for endpoint in settings.listen:
+        if endpoint in message and any(text in message for text in _IN_USE_TEXTS):
+            return endpoint
+    return None
 
 
 def _security_summary(sec: BusSecurity | None) -> str:
@@ -159,13 +226,17 @@ class ZenohBus:
     def open(cls, settings: BusSettings | None = None) -> ZenohBus:
         """Open a session (blocking: about 0.5 s when a connect endpoint is up).
 
-        Raises ConfigError for invalid settings or when Zenoh refuses to open (client mode with
-        no reachable endpoint, a listen port in use, ...).
+        Raises PortInUseError (a ConfigError) when a listen endpoint's port is taken by another
+        process, ConfigError for invalid settings or when Zenoh refuses to open for another
+        reason (client mode with no reachable endpoint, ...).
         """
         s = settings if settings is not None else BusSettings()
         try:
             session = zenoh.open(make_config(s))
         except zenoh.ZError as err:
+            busy = _busy_listen_endpoint(s, str(err))
+            if busy is not None:
+                raise port_in_use_error(busy) from None
             raise ConfigError(
                 f"zenoh: cannot open a {s.mode} session "
                 f"(listen {list(s.listen)}, connect {list(s.connect)}): {err}"

@@ -47,6 +47,39 @@ def endpoint_host(endpoint: str) -> str:
     return m["host"]
 
 
+@dataclass(frozen=True)
+class EndpointParts:
+    """A Zenoh endpoint `proto/host:port[?...]` taken apart: rest is what follows the port
+    (`?...` options, or "")."""
+
+    proto: str
+    host: str
+    port: int
+    rest: str = ""
+
+
+def endpoint_parts(endpoint: str) -> EndpointParts:
+    """`endpoint` taken apart; ConfigError if malformed (as `endpoint_host`)."""
+    endpoint_host(endpoint)
+    m = _ENDPOINT_RE.match(endpoint)
+    assert m is not None  # endpoint_host checked it
+    return EndpointParts(m["proto"], m["host"], int(m["port"]), m["rest"] or "")
+
+
+def endpoint_port(endpoint: str) -> int:
+    """The port of a Zenoh endpoint `proto/host:port[?...]`; ConfigError if malformed."""
+    return endpoint_parts(endpoint).port
+
+
+def endpoint_with_port(endpoint: str, port: int) -> str:
+    """`endpoint` with its port replaced by `port` (protocol, host and options kept);
+    ConfigError if the endpoint is malformed or the port outside 0-65535."""
+    p = endpoint_parts(endpoint)
+    out = f"{p.proto}/{p.host}:{int(port)}{p.rest}"
+    endpoint_host(out)
+    return out
+
+
 def tcp_loopback(port: int) -> str:
     """`tcp/127.0.0.1:<port>`."""
     return f"tcp/127.0.0.1:{int(port)}"

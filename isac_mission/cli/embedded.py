@@ -21,16 +21,22 @@ from isac_mission.cli.app import (
     ConfigArg,
     ImpairLinkOpt,
     InjectLinkLossOpt,
+    SpeedOpt,
     app,
     err_console,
     load_or_exit,
+    number_check,
 )
 from isac_mission.cli.ports import (
+    ZENOH_LISTEN_HINT,
     GcsLocalBasePortOpt,
     GcsPortOpt,
     MavlinkBasePortOpt,
     MavlinkLocalBasePortOpt,
+    PortOffsetOpt,
+    PortOptionError,
     port_options,
+    zenoh_endpoint,
 )
 from isac_mission.config import ImpairmentConfig, apply_impairment_flags
 from isac_mission.errors import ConfigError
@@ -45,16 +51,20 @@ if TYPE_CHECKING:
 @app.command("sim")
 def sim(
     config: ConfigArg,
-    speed: Annotated[
-        float, typer.Option(help="Simulation seconds per wall second (inf: as fast as possible).")
-    ] = 1.0,
+    speed: SpeedOpt = 1.0,
     lockstep: Annotated[
         bool, typer.Option(help="Hold the clock at each slot boundary until the next plan.")
     ] = False,
     lockstep_timeout: Annotated[
-        float, typer.Option(help="Wall seconds to wait for a plan in lockstep.")
+        float,
+        typer.Option(
+            callback=number_check(above=0.0),
+            help="Wall seconds to wait for a plan in lockstep (> 0).",
+        ),
     ] = 30.0,
-    seed: Annotated[int | None, typer.Option(help="Noise seed (default: the config's).")] = None,
+    seed: Annotated[
+        int | None, typer.Option(min=0, help="Noise seed (default: the config's).")
+    ] = None,
     zenoh_listen: Annotated[
         list[str] | None, typer.Option(help="Zenoh endpoint to listen on (repeatable).")
     ] = None,
@@ -62,7 +72,8 @@ def sim(
         list[str] | None,
         typer.Option(
             help="Zenoh endpoint to connect to (repeatable; default tcp/127.0.0.1:7447, or "
-            "tls/127.0.0.1:7447 with security.zenoh.tls)."
+            "tls/127.0.0.1:7447 with security.zenoh.tls, + --port-offset; none when "
+            "--zenoh-listen is given)."
         ),
     ] = None,
     zenoh_mode: Annotated[str, typer.Option(help="Zenoh mode: peer, client or router.")] = "peer",
@@ -70,6 +81,7 @@ def sim(
     mavlink_local_base_port: MavlinkLocalBasePortOpt = None,
     gcs_port: GcsPortOpt = None,
     gcs_local_base_port: GcsLocalBasePortOpt = None,
+    port_offset: PortOffsetOpt = 0,
     start: Annotated[
         str,
         typer.Option(help="Slot 0 begins: immediate, or offboard (all vehicles up in OFFBOARD)."),
@@ -88,17 +100,29 @@ def sim(
     import logging
     import signal
 
-    from isac_mission.bus.security import default_endpoint, secured_settings
+    from isac_mission.bus.security import secured_settings
+    from isac_mission.bus.session import check_listen_endpoints
+    from isac_mission.errors import PortInUseError
     from sim.world import run_world
     from sim.world_options import WorldOptions, parse_outages, parse_serial_links
 
     s = load_or_exit(config)
-    if not logging.getLogger().handlers:
-        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     listen = tuple(zenoh_listen or ())
-    connect = tuple(zenoh_connect or ()) or (
-        () if listen else (default_endpoint(s.security.zenoh),)
-    )
+    try:
+        connect = tuple(zenoh_connect or ()) or (
+            () if listen else (zenoh_endpoint(s, port_offset),)
+        )
+        ports = port_options(
+            s,
+            mavlink_base_port,
+            mavlink_local_base_port,
+            gcs_port,
+            gcs_local_base_port,
+            offset=port_offset,
+        )
+    except PortOptionError as err:
+        err_console.print(str(err), highlight=False, markup=False)
+        raise typer.Exit(2) from None
     try:
         # Security on: logs in as the world role (README, "Security").
         bus = secured_settings(
@@ -115,17 +139,21 @@ def sim(
             lockstep_timeout_s=lockstep_timeout,
             seed=seed,
             bus=bus,
-            **port_options(
-                s, mavlink_base_port, mavlink_local_base_port, gcs_port, gcs_local_base_port
-            ),
+            **ports,
             start=start,  # type: ignore[arg-type]
             link_outages=parse_outages(inject_link_loss or [], s.M),
             impairment=world_impairment(s, impair_link or []),
             serial_links=parse_serial_links(serial_link or [], s.M),
         )
+        check_listen_endpoints(listen)
+    except PortInUseError as err:
+        err_console.print(f"{err}; {ZENOH_LISTEN_HINT}", highlight=False, markup=False)
+        raise typer.Exit(2) from None
     except (ConfigError, ValueError) as err:
         err_console.print(f"[bold red]invalid option[/] {err}", highlight=False)
         raise typer.Exit(2) from None
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
 
     async def _main() -> None:
         stop = asyncio.Event()
@@ -145,6 +173,9 @@ def sim(
 
     try:
         asyncio.run(_main())
+    except PortInUseError as err:  # taken since the check above (sim listens where told)
+        err_console.print(f"{err}; {ZENOH_LISTEN_HINT}", highlight=False, markup=False)
+        raise typer.Exit(2) from None
     except (ConfigError, OSError) as err:  # OSError: a port taken, a serial device missing
         err_console.print(f"[bold red]cannot start the world[/] {err}", highlight=False)
         raise typer.Exit(1) from None
@@ -176,9 +207,10 @@ async def run_embedded(
     on_slot: Callable[[SlotEvent], None] | None = None,
     on_status: Callable[[str], None] | None = None,
     on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
+    leave: asyncio.Event | None = None,
 ) -> LiveResult:
     """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh
-    (on_tracks: fly_mission's, for a multi-target scenario)."""
+    (on_tracks, leave: fly_mission's)."""
     from isac_mission.bus import ZenohBus
     from isac_mission.bus.security import secured_settings
     from isac_mission.cli.mission import fly_mission, ground_endpoint
@@ -218,7 +250,7 @@ async def run_embedded(
         world = asyncio.create_task(run_world(s, world_opts, world_stop))
         try:
             return await fly_mission(
-                s, opts, bus, stop, on_slot, on_status, initial_x, on_tracks, initial_errors
+                s, opts, bus, stop, on_slot, on_status, initial_x, on_tracks, initial_errors, leave
             )
         finally:
             world_stop.set()

@@ -11,23 +11,30 @@ from rich.table import Table
 
 from isac_mission.cli.app import (
     ConfigArg,
-    ConsoleOpt,
     ImpairLinkOpt,
     InjectLinkLossOpt,
+    LiveConsoleOpt,
     NoConsoleOpt,
     PlanBudgetOpt,
     PublicOpt,
+    SeedOpt,
+    SpeedOpt,
     app,
     console,
     err_console,
     load_or_exit,
 )
 from isac_mission.cli.ports import (
+    ZENOH_LISTEN_HINT,
+    ZENOH_PORT_HINT,
     GcsLocalBasePortOpt,
     GcsPortOpt,
     MavlinkBasePortOpt,
     MavlinkLocalBasePortOpt,
-    port_options,
+    PortOffsetOpt,
+    PortOptionError,
+    ServeMavlinkBasePortOpt,
+    mission_ports,
 )
 from isac_mission.planning.registry import methods_help
 from isac_mission.quiet import quiet_highs_banner
@@ -59,6 +66,31 @@ def resolved_method(method: str | None, s: Scenario, out_dir: Path, resume: bool
     return live_default_method(s.multi_target)
 
 
+def resume_problem(s: Scenario, trace: Path) -> str | None:
+    """Why `serve --resume` must not continue `trace` for `s` (None: it may): the trace is
+    complete (its last slot is N: nothing left to fly), it does not read, or `s` is a
+    multi-target mission (which cannot resume a trace yet). Reads the file, never writes it."""
+    from isac_mission.errors import MessageError
+    from isac_mission.records.progress import trace_progress
+
+    if trace.exists():
+        try:
+            progress = trace_progress(trace)
+        except MessageError as err:
+            return f"cannot continue {trace}: {err}"
+        if progress.last_slot >= s.N:
+            return (
+                f"the trace is complete: {progress.last_slot}/{s.N} slots in {trace}; nothing "
+                "to resume (start a new mission without --resume, or in another --out)"
+            )
+    if s.multi_target:
+        return (
+            f"{s.mission_id} is a multi-target mission, which cannot resume a trace yet "
+            "(docs/service.md, 'Several intruders'); start it without --resume"
+        )
+    return None
+
+
 def _live(
     config: Path,
     *,
@@ -79,17 +111,37 @@ def _live(
     link_outages: list[str],
     link_impairment: list[str] | None = None,
     vehicle_links: list[str] | None = None,
+    serve_console: bool = False,
     console_address: str | None = None,
     console_public: bool = False,
+    port_offset: int = 0,
 ) -> None:
-    """Shared body of `run` and `serve`: the console (unless console_address is None), live
-    progress, summary, plots; exit 0 on SIGINT/SIGTERM."""
+    """Shared body of `run` and `serve`: the console (when serve_console: on console_address,
+    default 127.0.0.1:8080 + port_offset), live progress, summary, plots; exit 0 on
+    SIGINT/SIGTERM. Bad input (an option, a port in use, a finished trace to resume) exits 2
+    with one line, before anything is opened."""
     import logging
 
+    from isac_mission.bus.session import check_listen_endpoints
     from isac_mission.cli.mission import LiveOptions
+    from isac_mission.errors import PortInUseError
     from isac_mission.planning.registry import METHODS
 
     s = load_or_exit(config)
+    try:
+        ports = mission_ports(
+            s,
+            port_offset,
+            zenoh=zenoh_listen,
+            console=console_address,
+            mavlink_base_port=mavlink_base_port,
+            mavlink_local_base_port=mavlink_local_base_port,
+            gcs_port=gcs_port,
+            gcs_local_base_port=gcs_local_base_port,
+        )
+    except PortOptionError as err:
+        err_console.print(str(err), highlight=False, markup=False)
+        raise typer.Exit(2) from None
     out_dir = (
         out
         if out is not None
@@ -112,6 +164,17 @@ def _live(
         except ConfigError as err:
             err_console.print(f"--method: {err}", highlight=False)
             raise typer.Exit(2) from None
+    if resume:
+        problem = resume_problem(s, out_dir / f"trace_{method}.jsonl")
+        if problem is not None:
+            err_console.print(f"--resume: {problem}", highlight=False, markup=False)
+            raise typer.Exit(2)
+    try:
+        check_listen_endpoints((ports.zenoh,))
+    except PortInUseError as err:
+        hint = ZENOH_PORT_HINT if zenoh_listen is None else ZENOH_LISTEN_HINT
+        err_console.print(f"{err}; {hint}", highlight=False, markup=False)
+        raise typer.Exit(2) from None
     quiet_highs_banner()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     if link_outages:
@@ -145,11 +208,9 @@ def _live(
         method=method,
         seed=seed,
         out_dir=out_dir,
-        zenoh_endpoint=zenoh_listen,
+        zenoh_endpoint=ports.zenoh,
         zenoh_connect=tuple(zenoh_connect),
-        **port_options(
-            s, mavlink_base_port, mavlink_local_base_port, gcs_port, gcs_local_base_port
-        ),
+        **ports.mavlink,
         vehicle_links=tuple(vehicle_links or ()),
         resume=resume,
         plan_budget_s=plan_budget if plan_budget > 0 else None,
@@ -157,12 +218,12 @@ def _live(
         link_impairment=tuple(link_impairment or ()),
     )
     console_server = None
-    if console_address is not None:
+    if serve_console:
         from isac_mission.cli.mission import ground_endpoint
         from isac_mission.cli.view import start_live_console
 
         console_server = start_live_console(
-            s, opts.method, ground_endpoint(s, opts), console_address, public=console_public
+            s, opts.method, ground_endpoint(s, opts), ports.console, public=console_public
         )
     code = 0
     try:
@@ -215,10 +276,12 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
     from rich.live import Live
 
     from isac_mission.cli.mission import LiveResult, run_serve, summarize_live
-    from isac_mission.errors import IsacError
+    from isac_mission.cli.stopping import StopRequests
+    from isac_mission.errors import IsacError, PortInUseError
     from isac_mission.service.ground.report import SlotEvent
 
     status = {"phase": "starting", "line": ""}
+    last_slot = [0]
 
     def render() -> Table:
         t = Table.grid(padding=(0, 2))
@@ -234,6 +297,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
             live.update(render())
 
         def on_tracks(o: MultiTargetSlot, latency_s: float) -> None:
+            last_slot[0] = o.slot
             confirmed = sum(t.confirmed for t in o.tracks)
             present = int(np.all(np.isfinite(o.truth), axis=1).sum())
             status["line"] = (
@@ -246,6 +310,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
 
         def on_slot(ev: SlotEvent) -> None:
             r = ev.record
+            last_slot[0] = r.slot
             err = "-" if ev.position_error_m is None else f"{ev.position_error_m:6.2f} m"
             links = " ".join(f"{m}:{v}" for m, v in sorted(ev.links.items())) or "-"
             status["line"] = (
@@ -255,23 +320,38 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
             )
             live.update(render())
 
+        requests = StopRequests(s.H, opts.speed, embedded=not serve_only)
+
         async def main_task() -> object:
-            stop = asyncio.Event()
+            stop, leave = asyncio.Event(), asyncio.Event()
             loop = asyncio.get_running_loop()
+
+            def on_signal(name: str) -> None:
+                action, line = requests.on_signal(name, last_slot[0], s.N)
+                live.console.print(line, highlight=False)
+                if action == "stop":
+                    stop.set()
+                elif action == "leave":
+                    leave.set()
+
             for sig in (signal.SIGINT, signal.SIGTERM):
-                loop.add_signal_handler(sig, stop.set)
+                loop.add_signal_handler(sig, on_signal, sig.name)
             try:
                 if serve_only:
-                    return await run_serve(s, opts, stop, on_slot, on_status, on_tracks)
+                    return await run_serve(s, opts, stop, on_slot, on_status, on_tracks, leave)
                 from isac_mission.cli.embedded import run_embedded
 
-                return await run_embedded(s, opts, stop, on_slot, on_status, on_tracks)
+                return await run_embedded(s, opts, stop, on_slot, on_status, on_tracks, leave)
             finally:
                 for sig in (signal.SIGINT, signal.SIGTERM):
                     loop.remove_signal_handler(sig)
 
         try:
             result = asyncio.run(main_task())
+        except PortInUseError as err:  # taken since _live's check: as busy as it was then
+            live.stop()
+            err_console.print(f"{err}; {ZENOH_PORT_HINT}", highlight=False, markup=False)
+            raise typer.Exit(2) from None
         except IsacError as err:
             err_console.print(f"[bold red]mission failed:[/] {err}")
             raise typer.Exit(1) from None
@@ -280,6 +360,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
     ahead = f"built for {s.M} vehicles and, ahead, for {result.sizes_built_ahead}"
     for line in [ahead, *result.planner_problems]:
         console.print(f"planner problems: {line}", highlight=False)
+    _print_verdict(s, opts, result, last_slot[0])
     if s.multi_target:
         _multi_target_summary(s, opts, result, out_dir)
         return
@@ -327,6 +408,39 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
     console.print(f"trace: {result.trace_path}")
 
 
+def _print_verdict(s: Scenario, opts: LiveOptions, result: LiveResult, last_slot: int) -> None:
+    """The summary's first lines: nominal, interrupted or degraded, why, and what to do
+    (cli/verdict.py), for one target or several; last_slot: the last slot traced."""
+    import os
+
+    from isac_mission.cli.verdict import MissionFigures, mission_verdict
+
+    counters = {**result.report.counters, **result.fleet_counters}
+    statuses = {k.removeprefix("slots "): n for k, n in counters.items() if k.startswith("slots ")}
+    figures = MissionFigures(
+        slots=counters.get("slots", 0),
+        n_slots=s.N,
+        statuses=statuses,
+        counters=counters,
+        vehicles=s.M,
+        landed=result.fleet_counters.get("vehicles landed", 0),
+        interrupted=result.interrupted,
+        landing_abandoned=result.landing_abandoned,
+        speed=opts.speed,
+        lockstep=opts.lockstep,
+        compiled_meanwhile=any("in the background" in e for e in result.planner_problems),
+        load_1min=os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+        cores=os.cpu_count() or 1,
+        last_slot=last_slot,
+    )
+    verdict = mission_verdict(figures)
+    style = {"nominal": "bold green", "interrupted": "bold yellow"}.get(verdict.word, "bold red")
+    head, *rest = verdict.lines()
+    console.print(f"[{style}]{head}[/]")
+    for line in rest:
+        console.print(line, highlight=False, markup=False)
+
+
 def _multi_target_summary(
     s: Scenario, opts: LiveOptions, result: LiveResult, out_dir: Path
 ) -> None:
@@ -369,7 +483,6 @@ MethodOpt = Annotated[
         "proposed (horizon plans one target)."
     ),
 ]
-SpeedOpt = Annotated[float, typer.Option(help="Simulation seconds per wall second.")]
 
 
 @app.command()
@@ -380,25 +493,24 @@ def run(
         bool, typer.Option(help="The world waits at each slot for its plan.")
     ] = False,
     method: MethodOpt = None,
-    seed: Annotated[
-        int | None, typer.Option(help="World noise seed (default: the config's).")
-    ] = None,
+    seed: SeedOpt = None,
     out: Annotated[Path | None, typer.Option(help="Output folder (trace, plots).")] = None,
     zenoh_listen: Annotated[
         str | None,
         typer.Option(
             help="Zenoh endpoint the ground loop listens on (default tcp/127.0.0.1:7447, or "
-            "tls/127.0.0.1:7447 with security.zenoh.tls)."
+            "tls/127.0.0.1:7447 with security.zenoh.tls, + --port-offset)."
         ),
     ] = None,
     mavlink_base_port: MavlinkBasePortOpt = None,
     mavlink_local_base_port: MavlinkLocalBasePortOpt = None,
     gcs_port: GcsPortOpt = None,
     gcs_local_base_port: GcsLocalBasePortOpt = None,
+    port_offset: PortOffsetOpt = 0,
     plan_budget: PlanBudgetOpt = 1.0,
     inject_link_loss: InjectLinkLossOpt = None,
     impair_link: ImpairLinkOpt = None,
-    console_address: ConsoleOpt = "127.0.0.1:8080",
+    console_address: LiveConsoleOpt = None,
     no_console: NoConsoleOpt = False,
     console_public: PublicOpt = False,
 ) -> None:
@@ -422,8 +534,10 @@ def run(
         plan_budget=plan_budget,
         link_outages=inject_link_loss or [],
         link_impairment=impair_link or [],
-        console_address=None if no_console else console_address,
+        serve_console=not no_console,
+        console_address=console_address,
         console_public=console_public,
+        port_offset=port_offset,
     )
 
 
@@ -436,21 +550,19 @@ def serve(
         str | None,
         typer.Option(
             help="Zenoh endpoint to listen on (default tcp/127.0.0.1:7447, or "
-            "tls/127.0.0.1:7447 with security.zenoh.tls)."
+            "tls/127.0.0.1:7447 with security.zenoh.tls, + --port-offset)."
         ),
     ] = None,
     zenoh_connect: Annotated[
         list[str] | None, typer.Option(help="Zenoh endpoints to connect to.")
     ] = None,
-    mavlink_base_port: Annotated[
-        int | None,
-        typer.Option(
-            help="The bridge of vehicle m listens on 127.0.0.1:(P + m) (default: the scenario's "
-            "links.offboard_base_port, PX4 SITL's offboard ports 14540)."
-        ),
-    ] = None,
+    mavlink_base_port: ServeMavlinkBasePortOpt = None,
+    port_offset: PortOffsetOpt = 0,
     resume: Annotated[
-        bool, typer.Option(help="Continue the trace in --out after its last slot.")
+        bool,
+        typer.Option(
+            help="Continue the trace in --out after its last slot (refused when it is complete)."
+        ),
     ] = False,
     plan_budget: PlanBudgetOpt = 1.0,
     vehicle_link: Annotated[
@@ -460,7 +572,7 @@ def serve(
             "M=udpin:127.0.0.1:PORT (repeatable; docs/service.md, 'Links')."
         ),
     ] = None,
-    console_address: ConsoleOpt = "127.0.0.1:8080",
+    console_address: LiveConsoleOpt = None,
     no_console: NoConsoleOpt = False,
     console_public: PublicOpt = False,
 ) -> None:
@@ -484,8 +596,10 @@ def serve(
         plan_budget=plan_budget,
         link_outages=[],
         vehicle_links=vehicle_link,
-        console_address=None if no_console else console_address,
+        serve_console=not no_console,
+        console_address=console_address,
         console_public=console_public,
+        port_offset=port_offset,
     )
 
 

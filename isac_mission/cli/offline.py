@@ -66,7 +66,9 @@ def check_config(config: ConfigArg) -> None:
 def simulate(
     config: ConfigArg,
     runs: Annotated[int, typer.Option(min=1, help="Monte Carlo runs.")] = 20,
-    seed: Annotated[int | None, typer.Option(help="Base seed (default: the config's).")] = None,
+    seed: Annotated[
+        int | None, typer.Option(min=0, help="Base seed (default: the config's).")
+    ] = None,
     out: Annotated[
         Path | None, typer.Option(help="Output folder (traces, plots, summary).")
     ] = None,

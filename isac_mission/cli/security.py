@@ -10,11 +10,16 @@ import typer
 from isac_mission.cli.app import app, console, err_console, load_or_exit
 from isac_mission.errors import ConfigError
 
+MAX_CERT_DAYS = 36500
+"""The longest validity `gen-certs` makes (100 years; X.509 dates end in 9999)."""
+
 
 @app.command("gen-certs")
 def gen_certs(
     out_dir: Annotated[Path, typer.Argument(help="Folder for ca.pem, server.pem and their keys.")],
-    days: Annotated[int, typer.Option(min=1, help="Validity in days.")] = 365,
+    days: Annotated[
+        int, typer.Option(min=1, max=MAX_CERT_DAYS, help="Validity in days (at most 100 years).")
+    ] = 365,
     force: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
 ) -> None:
     """A local CA and a TLS certificate for 127.0.0.1 / localhost (made with the

@@ -37,7 +37,8 @@ def sweep(
         ),
     ] = None,
     seed: Annotated[
-        int | None, typer.Option(help="Base seed (default: the grid's, else the config's).")
+        int | None,
+        typer.Option(min=0, help="Base seed (default: the grid's, else the config's)."),
     ] = None,
     plots: Annotated[bool, typer.Option(help="Write RMSE-vs-parameter PNGs.")] = True,
     live_settings: Annotated[
@@ -64,7 +65,9 @@ def sweep(
 
         plan = sw.plan_sweep(config, grid, seed, LIVE_SETTINGS if live_settings else None)
     except ConfigError as err:
-        err_console.print(f"[bold red]invalid sweep[/]\n{err}", highlight=False)
+        from rich.markup import escape
+
+        err_console.print(f"[bold red]invalid sweep:[/] {escape(str(err))}", highlight=False)
         raise typer.Exit(2) from None
     use_dask = not serial and (workers > 0 or scheduler is not None)
     if use_dask:

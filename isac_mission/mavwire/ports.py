@@ -28,6 +28,9 @@ GCS_LOCAL_BASE_PORT: Final = 18570
 """PX4 SITL instance i's ground-station link binds UDP 18570 + i."""
 MAX_VEHICLES: Final = 254
 """System ids 1..254: vehicle indices 0..253 (255 is the ground station)."""
+MAX_PORT: Final = 65535
+HIGHEST_BASE_PORT: Final = MAX_PORT - (MAX_VEHICLES - 1)
+"""The highest base port that leaves room for MAX_VEHICLES vehicles (base + m, m < 254)."""
 GCS_SYSTEM_ID: Final = 255
 """Our MAVLink system id (a ground station's, as QGroundControl)."""
 GCS_COMPONENT_ID: Final[int] = mavlink2.MAV_COMP_ID_MISSIONPLANNER  # 190
@@ -40,6 +43,6 @@ Address = tuple[str, int]
 def check_base_port(name: str, port: int, n: int = MAX_VEHICLES) -> str | None:
     """None if `port` .. `port` + n - 1 are UDP ports, or 0 (ephemeral); else a message naming
     `name`."""
-    if port == 0 or 1 <= port <= 65535 - (n - 1):
+    if port == 0 or 1 <= port <= MAX_PORT - (n - 1):
         return None
     return f"{name} must be 0 (ephemeral) or leave room for {n} vehicles (got {port})"

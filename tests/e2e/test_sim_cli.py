@@ -1,19 +1,23 @@
-"""`isac-mission sim CONFIG` as its own process: detections on Zenoh, clean exit on SIGINT/SIGTERM."""
+"""`isac-mission sim CONFIG` as its own process: detections on Zenoh, clean exit on SIGINT/SIGTERM;
+with `--port-offset N` every port it uses moves by N."""
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import signal
+import socket
 import sys
 from pathlib import Path
 
 import pytest
 
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
+from isac_mission.cli.ports import mission_ports
 from isac_mission.config import load_scenario
 from isac_mission.wire import Keys, decode_detection
-from tests.support.ports import free_tcp_port, udp_sinks
+from tests.support.ports import LOOPBACK, free_port_offsets, free_tcp_port, udp_sinks
 
 ROOT = Path(__file__).resolve().parents[2]
 START_TIMEOUT_S = 60.0  # interpreter start + imports on a loaded 2-core machine
@@ -73,6 +77,62 @@ async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
                 out, _ = await asyncio.wait_for(proc.communicate(), EXIT_TIMEOUT_S)
                 assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
                 assert b"world stopped" in out
+            finally:
+                if proc.returncode is None:
+                    proc.kill()
+                    await proc.wait()
+        finally:
+            observer.close()
+
+
+async def test_sim_with_a_port_offset_meets_the_ground_and_the_gcs_on_the_offset_ports(
+    config_path: Path,
+) -> None:
+    scenario = load_scenario(config_path)
+    table = mission_ports(scenario, 0).table(scenario.M)
+    tcp = tuple(p for use, ports in table.items() if "TCP" in use for p in ports)
+    udp = tuple(p for use, ports in table.items() if "UDP" in use for p in ports)
+    (offset,) = free_port_offsets(tcp, udp)
+    moved = mission_ports(scenario, offset).table(scenario.M)
+    keys = Keys(scenario.mission_id)
+    with contextlib.ExitStack() as held:
+        # Where the vehicles send: the service's offboard ports and the ground station's.
+        sinks = []
+        for port in (*moved["offboard (UDP)"], *moved["ground station (UDP)"]):
+            sink = held.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+            sink.bind((LOOPBACK, port))
+            sinks.append(sink)
+        endpoint = tcp_loopback(moved["zenoh (TCP)"][0])
+        observer = await ZenohBus.open_async(BusSettings.hub(endpoint))
+        try:
+            sub = observer.subscribe(keys.detections_all)
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable,
+                "-m",
+                "isac_mission.cli",
+                "sim",
+                str(config_path),
+                "--speed",
+                "10",
+                "--port-offset",
+                str(offset),
+                cwd=ROOT,
+                env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                stdout=asyncio.subprocess.PIPE,
+                stderr=asyncio.subprocess.STDOUT,
+            )
+            try:
+                key, data = await sub.get(START_TIMEOUT_S)
+                assert key == keys.detections(decode_detection(data, n_uavs=scenario.M).uav)
+                gcs = sinks[-1]
+                gcs.setblocking(False)
+                datagram = await asyncio.wait_for(
+                    asyncio.get_running_loop().sock_recv(gcs, 65535), START_TIMEOUT_S
+                )
+                assert datagram[:1] == b"\xfd"  # MAVLink 2 from a vehicle's GCS link
+                proc.send_signal(signal.SIGINT)
+                out, _ = await asyncio.wait_for(proc.communicate(), EXIT_TIMEOUT_S)
+                assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
             finally:
                 if proc.returncode is None:
                     proc.kill()

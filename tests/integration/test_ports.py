@@ -94,3 +94,27 @@ def test_udp_sinks_hold_the_block_and_free_it_after() -> None:
     for port in range(base, base + 3):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.bind(("127.0.0.1", port))
+
+
+def test_free_port_offsets_move_every_port_onto_free_ports_apart() -> None:
+    tcp, udp = (7447, 8080), (14540, 14541, 14550, 18570)
+    first, second = ports.free_port_offsets(tcp, udp, count=2, spacing=100)
+    assert second == first + 100
+    socks: list[socket.socket] = []
+    try:
+        for offset in (first, second):
+            for bases, kind in ((tcp, socket.SOCK_STREAM), (udp, socket.SOCK_DGRAM)):
+                for base in bases:
+                    port = base + offset
+                    assert ports.BLOCK_PORTS[0] <= port < ports.BLOCK_PORTS[1]
+                    s = socket.socket(socket.AF_INET, kind)
+                    socks.append(s)
+                    s.bind((ports.LOOPBACK, port))
+    finally:
+        for s in socks:
+            s.close()
+
+
+def test_free_port_offsets_refuse_ports_spread_wider_than_the_blocks() -> None:
+    with pytest.raises(RuntimeError, match="do not fit"):
+        ports.free_port_offsets((1000,), (60000,))

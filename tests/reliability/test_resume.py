@@ -327,7 +327,9 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(
     _assert_every_slot_once(trace, n_slots)
     # The file still starts with the first run's config line, then every slot once.
     lines = _strict_json_lines(path)
-    assert "config" in lines[0] and [ln["slot"] for ln in lines[1:]] == list(range(1, n_slots + 1))
+    # ... and the line that says the resumed run ended complete (the killed one wrote none).
+    assert lines[-1] == {"end": {"status": "complete", "last_slot": n_slots, "N": n_slots}}
+    assert "config" in lines[0] and [ln["slot"] for ln in lines[1:-1]] == list(range(1, n_slots + 1))
     for a, b in zip(before.slots, trace.slots, strict=False):
         assert a == b  # the completed slots are untouched
     s_dt, s_kappa = float(trace.config["dt"]), float(trace.config["kappa"])

@@ -14,6 +14,8 @@ binds it, so callers that can retry on `OSError` should.
   keyword arguments (`world_kwargs()`) or CLI options (`cli_args()`);
   `sitl_ports_and_blocks(n, sizes)` with further blocks none of which overlaps another
   (`disjoint_port_blocks`).
+- `free_port_offsets(tcp, udp, count)`: offsets that move a set of ports (a mission's, at
+  `--port-offset 0`) onto free ports, for `--port-offset`.
 - `udp_sinks(n)`: n consecutive UDP ports bound (and so kept) for the duration of a `with` block,
   for a test that must receive what vehicles send to base + m; yields the base.
 """
@@ -206,3 +208,36 @@ def sitl_ports_and_blocks(
         (n, n, n, 1, *sizes), tries
     )
     return SitlPorts(offboard, offboard_local, gcs, gcs_local), more
+
+
+def free_port_offsets(
+    tcp: tuple[int, ...], udp: tuple[int, ...], count: int = 1, spacing: int = 100, tries: int = 50
+) -> list[int]:
+    """`count` port offsets N, N + spacing, ... (`isac-mission run --port-offset`) such that
+    every port p + offset, for p in `tcp` (TCP) and in `udp` (UDP), lies in BLOCK_PORTS (below
+    the ephemeral range) and all were free at once a moment ago. RuntimeError when BLOCK_PORTS
+    cannot hold the spread of the ports, or after `tries` attempts."""
+    every = (*tcp, *udp)
+    low = BLOCK_PORTS[0] - min(every)
+    high = BLOCK_PORTS[1] - 1 - max(every) - spacing * (count - 1)
+    if low > high:
+        raise RuntimeError(f"ports {min(every)}..{max(every)} do not fit in {BLOCK_PORTS}")
+    rng = random.Random()
+    for _ in range(tries):
+        first = rng.randint(low, high)
+        offsets = [first + k * spacing for k in range(count)]
+        socks: list[socket.socket] = []
+        try:
+            for offset in offsets:
+                for ports, kind in ((tcp, socket.SOCK_STREAM), (udp, socket.SOCK_DGRAM)):
+                    for port in ports:
+                        s = socket.socket(socket.AF_INET, kind)
+                        socks.append(s)
+                        s.bind((LOOPBACK, port + offset))
+        except OSError:  # taken, or two offsets' ports overlap
+            continue
+        finally:
+            for s in socks:
+                s.close()
+        return offsets
+    raise RuntimeError(f"no {count} free port offsets for TCP {tcp} and UDP {udp}")
