@@ -7,10 +7,16 @@ updates to push to the pages as `(topic, data)` pairs (`console.feed`). A bad pa
 by reason (`wire.rejection_reason`) and changes nothing. `snapshot()` is everything a page that
 has just connected needs. All data are JSON-ready (lists, floats, str), SI units.
 
-A multi-target mission's `track_set` and `truth_set` (docs/bus.md) become the state topics
-`tracks` (every track, with its 2-sigma ellipse and, once the slot's truth is known, each present
-target's distance to the nearest confirmed track) and `truths` (the present targets);
-`detection_set` is taken as `detection` is.
+`track` carries, once known, the truth of its own slot (`truth_of_slot`: the world's next truth
+may reach the page first, and the feed keeps only the latest `truth`). A multi-target mission's
+`track_set` and `truth_set` (docs/bus.md) become the state topics `tracks` and `truths` (the
+latest present targets). `tracks` holds every track with its 2-sigma ellipse and, once the
+slot's truth is known, the targets present then (`truths_of_slot`), each present target's
+distance to the nearest confirmed track (`target_errors`), and per confirmed track its distance
+to the nearest present target (`error_m`) and the target it follows (`target`). Per confirmed
+track, its position bound and its error are kept by slot (`track_series`, in the snapshot; the
+last slots' rows ride with each `tracks` update) for the page's charts. `detection_set` is
+taken as `detection` is.
 """
 
 from __future__ import annotations
@@ -33,6 +39,13 @@ TRAIL_POINTS: Final = 3000
 TRAIL_STEP_M: Final = 0.5
 SERIES_SLOTS: Final = 20_000
 """Slots of time series kept."""
+TRACK_SERIES_SLOTS: Final = 5_000
+"""Slots of per-track series kept (a multi-target mission's charts)."""
+TRACK_ROWS_SENT: Final = 16
+"""Slots of per-track series sent with each `tracks` update."""
+DEFAULT_FOLLOW_GATE_M: Final = 10.0
+"""A confirmed track follows a target when it is the target's nearest confirmed track and within
+this distance (m): the scenario's GOSPA cutoff `multi_target.gospa_cutoff_m` when it has one."""
 REPLIES_KEPT: Final = 50
 
 Update = tuple[str, Any]
@@ -60,6 +73,12 @@ class MissionView:
         self.estimate_by_slot: dict[int, list[float]] = {}
         self.truths_by_slot: dict[int, list[dict[str, Any]]] = {}
         self.confirmed_by_slot: dict[int, list[list[float]]] = {}
+        self.track_series: dict[int, dict[str, Any]] = {}
+        multi = config.get("multi_target")
+        gate = multi.get("gospa_cutoff_m") if isinstance(multi, dict) else None
+        self.follow_gate_m = (
+            float(gate) if isinstance(gate, int | float) and gate > 0 else DEFAULT_FOLLOW_GATE_M
+        )
         self.detection_wall_s: dict[int, float] = {}
         self.received: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
@@ -118,6 +137,7 @@ class MissionView:
         del d["J"]
         self.estimate_by_slot[n] = list(d["x"])
         _trim(self.estimate_by_slot, n)
+        d["truth_of_slot"] = self.truth_by_slot.get(n)
         point: dict[str, Any] = {"slot": n, "pcrb_trace": d["pcrb_trace"]}
         point |= {"pcrb_pos": d["pcrb_pos"], "pcrb_vel": d["pcrb_vel"]}
         error = position_error_m(d["x"], self.truth_by_slot.get(n))
@@ -130,6 +150,10 @@ class MissionView:
         self.truth_by_slot[n] = list(d["target_x"])
         _trim(self.truth_by_slot, n)
         out = self._state("truth", d)
+        track = self.latest.get("track")
+        if track is not None and int(track["slot"]) == n:  # the truth of the estimate's slot
+            track["truth_of_slot"] = self.truth_by_slot[n]
+            out += self._state("track", track)
         error = position_error_m(self.estimate_by_slot.get(n, [float("nan")] * 2), d["target_x"])
         if error is not None:
             out += self._point({"slot": n, "error_m": error})
@@ -142,9 +166,13 @@ class MissionView:
         d["received_wall_s"] = now
         self.confirmed_by_slot[n] = [list(tr["x"]) for tr in d["tracks"] if tr["confirmed"]]
         _trim(self.confirmed_by_slot, n)
+        self._track_points(d)
         truths = self.truths_by_slot.get(n)
         if truths is not None:
             d["target_errors"] = _target_errors(truths, self.confirmed_by_slot[n])
+            self._follow(d, truths)
+        d["truths_of_slot"] = truths
+        d["series_rows"] = self._recent_track_rows()
         return self._state("tracks", d)
 
     def _truth_set(self, d: dict[str, Any], now: float) -> list[Update]:
@@ -159,8 +187,57 @@ class MissionView:
         confirmed = self.confirmed_by_slot.get(n)
         if tracks is not None and confirmed is not None and int(tracks["slot"]) == n:
             tracks["target_errors"] = _target_errors(present, confirmed)
+            self._follow(tracks, present)
+            tracks["truths_of_slot"] = present
+            tracks["series_rows"] = self._recent_track_rows()
             out += self._state("tracks", tracks)
         return out
+
+    def _track_points(self, d: dict[str, Any]) -> None:
+        """Each confirmed track's position bound (m^2) at the slot of `track_set` d, kept for
+        the charts as `pcrb/<id>`."""
+        n = int(d["slot"])
+        row = self.track_series.setdefault(n, {"slot": n})
+        for track in d["tracks"]:
+            if track["confirmed"]:
+                row[f"pcrb/{track['id']}"] = float(track["pcrb_position_trace"])
+        _trim(self.track_series, n, TRACK_SERIES_SLOTS)
+
+    def _recent_track_rows(self) -> list[dict[str, Any]]:
+        """The per-track series of the last TRACK_ROWS_SENT slots (copies): `tracks` is a state
+        topic, so a page may not see every slot's; these rows fill its charts' gaps."""
+        recent = sorted(self.track_series)[-TRACK_ROWS_SENT:]
+        return [dict(self.track_series[n]) for n in recent]
+
+    def _follow(self, d: dict[str, Any], present: list[dict[str, Any]]) -> None:
+        """Per confirmed track of `track_set` d: `error_m`, its distance (m) to the nearest
+        present target, and `target`, the index of the target it follows (None when it follows
+        none: it is not that target's nearest confirmed track within the follow gate). The
+        errors are kept for the charts as `error/<id>`."""
+        n = int(d["slot"])
+        confirmed = [tr for tr in d["tracks"] if tr["confirmed"]]
+        nearest_track: dict[int, tuple[float, int]] = {}
+        for truth in present:
+            for tr in confirmed:
+                dist = position_error_m(tr["x"], truth["x"])
+                best = nearest_track.get(truth["index"])
+                if dist is not None and (best is None or dist < best[0]):
+                    nearest_track[truth["index"]] = (dist, int(tr["id"]))
+        row = self.track_series.setdefault(n, {"slot": n})
+        for tr in confirmed:
+            errors = [position_error_m(tr["x"], t["x"]) for t in present]
+            finite = [e for e in errors if e is not None]
+            tr["error_m"] = min(finite) if finite else None
+            followed = [
+                (dist, index)
+                for index, (dist, track_id) in nearest_track.items()
+                if track_id == tr["id"] and dist <= self.follow_gate_m
+            ]
+            tr["target"] = min(followed)[1] if followed else None
+            if tr["error_m"] is not None:
+                row[f"error/{tr['id']}"] = tr["error_m"]
+        _trim(self.track_series, n, TRACK_SERIES_SLOTS)
+        d["follow_gate_m"] = self.follow_gate_m
 
     def _detection(self, d: dict[str, Any], now: float) -> list[Update]:
         n = int(d["slot"])
@@ -199,12 +276,15 @@ class MissionView:
 
     def snapshot(self) -> dict[str, Any]:
         """Everything a page needs when it connects: config, latest state of each topic,
-        trails [M][k][2], the series (sorted by slot), the recent replies, the stats."""
+        trails [M][k][2], the series (sorted by slot), a multi-target mission's per-track
+        series (`pcrb/<id>` m^2, `error/<id>` m, sorted by slot), the recent replies, the
+        stats."""
         return {
             "config": self.config,
             "latest": self.latest,
             "trails": {str(m): list(t) for m, t in self.trails.items()},
             "series": [self.series[n] for n in sorted(self.series)],
+            "track_series": [self.track_series[n] for n in sorted(self.track_series)],
             "replies": list(self.replies),
             "stats": self.stats(),
         }

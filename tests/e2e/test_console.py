@@ -6,7 +6,8 @@
   planning and memory alone;
 - `view` over `simulate` traces: slider, play/pause, two methods side by side;
 - with Zenoh security on, a page without the operator password cannot send a control;
-- `serve` (the world in a separate `sim`) serves the same live page.
+- `serve` (the world in a separate `sim`) serves the same live page, which names the mission's
+  phase from take-off to landing and never shows a slot outside 1..N.
 """
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ from tests.support.ports import free_tcp_port, sitl_ports
 from tests.support.sim_harness import async_wait_until
 
 KEYS = Keys("paper")
+PHASES = ["starting", "take-off", "running", "landing", "done"]
+"""The phases the page names, in their order."""
 PAGE_TIMEOUT_MS = 240_000
 V_MAX_MPS = 25.0
 TELEMETRY_HZ = 10.0
@@ -100,6 +103,17 @@ async def observe(settings: BusSettings) -> AsyncIterator[Observer]:
         with contextlib.suppress(asyncio.CancelledError):
             await task
         bus.close()
+
+
+RECORD_SLOTS = """
+window.__slotTexts = [];
+document.addEventListener("DOMContentLoaded", () => {
+  const e = document.getElementById("slot");
+  new MutationObserver(() => window.__slotTexts.push(e.textContent))
+    .observe(e, { childList: true, characterData: true, subtree: true });
+});
+"""
+"""Records every text the page's slot counter shows."""
 
 
 async def slot_of(page: Any) -> int:
@@ -361,6 +375,7 @@ async def test_serve_serves_the_console_of_a_mission_whose_world_runs_elsewhere(
         await asyncio.to_thread(wait_http, url, serve)
         async with browser() as b:
             page = await b.new_page()
+            await page.add_init_script(RECORD_SLOTS)
             await page.goto(url)
             # The world starts once the page is open: `serve` flies nothing before it, so the
             # page cannot miss the mission (a 12-slot mission at --speed 10 lasts seconds, about
@@ -373,9 +388,25 @@ async def test_serve_serves_the_console_of_a_mission_whose_world_runs_elsewhere(
             )
             drawn = await page.evaluate("window.consoleState.M.drawn")
             assert sorted(drawn) == ["0", "1", "2"]
+            # Through the take-off the slot counter showed no slot (the clock said -1).
+            texts = await page.evaluate("window.__slotTexts")
+            assert texts and all(t == "-" or 1 <= int(t) <= 12 for t in texts), texts
+            # After the 12 slots the page says the fleet lands (the world's clock counts on).
+            await page.wait_for_function(
+                "['landing', 'done'].includes(document.getElementById('phase').dataset.phase)",
+                timeout=PAGE_TIMEOUT_MS,
+            )
+            texts = await page.evaluate("window.__slotTexts")
+            phases = [e["phase"] for e in await page.evaluate("window.consoleState.M.phaseLog")]
         out, err = await asyncio.to_thread(serve.communicate, None, 300)
         assert serve.returncode == 0, err[-3000:]
         assert f"console: {url}" in out
+        # The slot counter showed only slots of the mission (the clock's -1 before the start
+        # and its slots past N never), through the phases in their order.
+        assert texts and all(t == "-" or 1 <= int(t) <= 12 for t in texts), texts
+        seen = [p for i, p in enumerate(phases) if i == 0 or p != phases[i - 1]]
+        assert seen[0] in ("starting", "take-off") and seen[-1] in ("landing", "done"), seen
+        assert "running" in seen and seen == sorted(seen, key=PHASES.index), seen
     finally:
         if world is not None:
             stop(world, 60)

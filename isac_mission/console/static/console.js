@@ -1,24 +1,88 @@
 // The isac-mission console page: live (WebSocket updates) or replay (`isac-mission view`).
-// Everything it draws is also kept in window.consoleState (positions drawn, latencies measured),
-// for tests and benchmarks.
+// Everything it draws is also kept in window.consoleState (positions drawn, labels placed, the
+// phase shown, latencies measured), for tests and benchmarks.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
 const S = {
   mode: null, config: null, latest: {}, trails: {}, series: new Map(), replies: [], sent: {},
   console: {}, token: null, dirty: false, chartsDirty: true, runs: [], frame: 1, playing: null,
+  trackSeries: new Map(), airborne: {},
+  follow: false, insetTrack: "", rxMs: {},
 };
 const M = {  // measurements, read by the tests and bench/console.py
   loadStart: performance.timeOrigin, firstMapWallMs: null, drawn: {}, telemetryReceived: 0,
   telemetryDrawn: 0, latenciesMs: [], drawnIds: [], redrawMs: [], frames: 0,
+  phase: null, phaseLog: [], map: null, inset: null, charts: {},
 };
 window.consoleState = { S, M };
 let pendingTelemetry = [];
+const TRACK_SERIES_SLOTS = 5000;
+const CHARTED_TRACKS = 8;
+
+// ------------------------------------------------------------------------- the mission's phase
+
+// The phase of a live mission from what the bus says (docs/console.md, "The mission's phase"):
+// the world's clock (its mission start and slot), the ground loop's health status and each
+// vehicle's telemetry (armed, landed). {phase: "starting" | "take-off" | "running" | "landing" |
+// "done", slot: the slot shown, 1..N, or null, stopped: the ground loop stopped before slot N}.
+// Running, the slot shown is the one being flown: the clock's slot (the last one ended) + 1.
+function missionPhase(c, latest) {
+  const N = c && c.N > 0 ? c.N : null;
+  const clock = latest.clock, health = latest.health;
+  const tel = [];
+  for (let m = 0; m < (c ? c.M : 0); m++) { const t = latest["telemetry/" + m]; if (t) tel.push(t); }
+  const airborne = tel.some((t) => t.armed && !t.landed);
+  const status = health ? health.status : null;
+  const started = !!(clock && clock.mission_t0 != null && clock.slot >= 0);
+  const clamp = (k) => (N ? Math.min(Math.max(k, 1), N) : Math.max(k, 1));
+  if (status === "done" || status === "stopped" || (started && N && clock.slot > N)) {
+    const stopped = status === "stopped";
+    const slot = stopped ? (health.slot >= 1 ? clamp(health.slot) : null) : N;
+    return { phase: airborne ? "landing" : "done", slot, stopped };
+  }
+  if (started) return { phase: "running", slot: clamp(clock.slot + 1), stopped: false };
+  if (airborne || tel.some((t) => t.armed)) return { phase: "take-off", slot: null, stopped: false };
+  return { phase: "starting", slot: null, stopped: false };
+}
+
+function showPhase(ph) {
+  const c = S.config, e = $("phase");
+  const word = ph.phase + (ph.stopped ? " (stopped)" : "");
+  e.textContent = word; e.dataset.phase = ph.phase; e.className = "badge phase " + ph.phase;
+  const slotText = ph.slot == null ? "-" : String(ph.slot);
+  $("slot").textContent = slotText; $("slot").dataset.slot = ph.slot == null ? "" : String(ph.slot);
+  $("slots-total").textContent = c && c.N ? " / " + c.N : "";
+  const last = M.phaseLog[M.phaseLog.length - 1];
+  if (!last || last.phase !== ph.phase || last.slot !== slotText || last.stopped !== ph.stopped) {
+    M.phaseLog.push({ phase: ph.phase, slot: slotText, stopped: ph.stopped });
+  }
+  if (M.phaseLog.length > 5000) M.phaseLog.splice(0, 2500);
+  M.phase = ph;
+}
 
 // ------------------------------------------------------------------------- scene building
 
-function liveScene() {
-  const c = S.config, plan = S.latest.plan, track = S.latest.track, truth = S.latest.truth;
+// The tracker's cue before the mission starts (config x0 and P0; on a multi-target mission every
+// target whose prior is known): where the target is expected, drawn dashed.
+function cuesOf(c) {
+  if (!c) return [];
+  const ellipse = ellipse2sigma(c.P0);
+  if (Array.isArray(c.targets) && c.targets.length) {
+    return c.targets.map((t, i) => ({ t, i })).filter(({ t }) => t.prior_known && t.first_slot === 0)
+      .map(({ t, i }) => ({ xy: t.x0, ellipse, label: "target " + (i + 1) + " cue (before the start)" }));
+  }
+  return c.x0 ? [{ xy: c.x0, ellipse, label: "target cue (before the start)" }] : [];
+}
+
+function targetNames(c) { return c && Array.isArray(c.targets) ? c.targets.map((t) => t.name || "") : []; }
+
+// A vehicle on the ground: landed, or not armed; `landed` once it has flown (else on the ground).
+function onGround(t) { return !!t && (t.landed || !t.armed); }
+
+function liveScene(ph) {
+  const c = S.config, plan = S.latest.plan, track = S.latest.track;
+  const before = ph.phase === "starting" || ph.phase === "take-off";
   const uavs = [];
   for (let m = 0; m < (c ? c.M : 0); m++) {
     const t = S.latest["telemetry/" + m];
@@ -26,16 +90,22 @@ function liveScene() {
       m, xy: t ? t.position_xy_m : null, trail: S.trails[m] || [], mode: t ? t.mode : null,
       link: t ? t.link : null, wp: plan ? plan.waypoints_xy_m[m] : null,
       eta: plan ? plan.bandwidth_share[m] : null, bs: plan ? plan.assoc[m] : null,
+      landed: onGround(t) && (!!S.airborne[m] || ph.phase === "landing" || ph.phase === "done"),
     });
   }
+  const tracks = S.latest.tracks;
+  // the truth of the estimate's slot (the world's next truth may already have arrived)
+  const truth = track ? track.truth_of_slot || null : S.latest.truth ? S.latest.truth.target_x : null;
+  const truths = tracks ? tracks.truths_of_slot || undefined : S.latest.truths ? S.latest.truths.present : undefined;
   return {
-    config: c,
+    config: c, follow: S.follow, targetNames: targetNames(c),
     layers: [{
       label: "live", colour: colourOf(0), uavs,
       target: track ? { xy: track.x, ellipse: track.ellipse } : null,
-      truth: truth ? truth.target_x : null,
-      tracks: S.latest.tracks ? S.latest.tracks.tracks : undefined,
-      truths: S.latest.truths ? S.latest.truths.present : undefined,
+      truth,
+      cues: before && !track && !tracks ? cuesOf(c) : [],
+      tracks: tracks ? tracks.tracks : undefined,
+      truths,
     }],
   };
 }
@@ -56,7 +126,70 @@ function replayScene() {
     };
   });
   M.replayDrawn = layers.map((L) => ({ label: L.label, uavs: L.uavs.map((u) => u.xy) }));
-  return { config: S.config, layers };
+  return { config: S.config, follow: S.follow, layers };
+}
+
+// What the close-up shows: the estimate (or the chosen track, or the cue before the start), its
+// 2-sigma ellipse, the truth of its slot, and the vehicles and waypoints that fall in the window.
+function insetFocus(scene, ph) {
+  const L0 = scene.layers[0];
+  if (!L0) return null;
+  const items = [];
+  let centre = null, note = "";
+  if (S.mode === "replay") {
+    scene.layers.forEach((L, i) => {
+      if (!L.target || !L.target.xy || L.target.xy[0] == null) return;
+      if (!centre) centre = L.target.xy;
+      items.push({ kind: "estimate", xy: L.target.xy, ellipse: L.target.ellipse, colour: scene.layers.length > 1 ? L.colour : ESTIMATE_COLOUR, label: scene.layers.length > 1 ? L.label : "" });
+    });
+    if (L0.truth) items.push({ kind: "truth", xy: L0.truth, label: "truth" });
+  } else if (L0.tracks) {
+    const chosen = chooseTrack(L0.tracks);
+    if (chosen) {
+      centre = chosen.x;
+      items.push({ kind: "estimate", xy: chosen.x, ellipse: chosen.ellipse, label: "T" + chosen.id, dashed: !chosen.confirmed });
+      for (const t of L0.tracks) if (t !== chosen) items.push({ kind: "estimate", xy: t.x, ellipse: t.ellipse, label: "T" + t.id, dashed: !t.confirmed, far: true });
+      const target = (L0.truths || []).find((t) => t.index === chosen.target);
+      if (target) items.push({ kind: "truth", xy: target.x, label: targetName(scene, target.index) });
+      note = "T" + chosen.id + (target ? " follows " + targetName(scene, target.index) + ", " + fmtMetres(Math.hypot(chosen.x[0] - target.x[0], chosen.x[1] - target.x[1])) + " off" : "");
+    }
+  } else if (L0.target && L0.target.xy) {
+    centre = L0.target.xy;
+    items.push({ kind: "estimate", xy: L0.target.xy, ellipse: L0.target.ellipse, label: "estimate" });
+    if (L0.truth) {
+      items.push({ kind: "truth", xy: L0.truth, label: "truth" });
+      note = "error " + fmtMetres(Math.hypot(L0.target.xy[0] - L0.truth[0], L0.target.xy[1] - L0.truth[1]));
+    }
+  } else if (L0.cues && L0.cues.length) {
+    centre = L0.cues[0].xy;
+    items.push({ kind: "estimate", xy: centre, ellipse: L0.cues[0].ellipse, label: "cue", dashed: true });
+    note = ph.phase + ": the tracker's cue; tracking starts with slot 1";
+  }
+  if (!centre) return null;
+  const e = items[0] && items[0].ellipse;
+  if (e) note = "2\u03c3 " + fmtMetres(e.a_m) + " \u00d7 " + fmtMetres(e.b_m) + (note ? " \u00b7 " + note : "");
+  let nearest = null;
+  for (const L of scene.layers) {
+    const colour = (u) => (scene.layers.length > 1 ? L.colour : colourOf(u.m));
+    for (const u of L.uavs) {
+      if (u.xy && u.xy[0] != null) {
+        items.push({ kind: "uav", xy: u.xy, colour: colour(u), label: "U" + u.m });
+        const d = Math.hypot(u.xy[0] - centre[0], u.xy[1] - centre[1]);
+        if (!nearest || d < nearest.d) nearest = { m: u.m, d };
+      }
+      if (u.wp) items.push({ kind: "waypoint", xy: u.wp, colour: colour(u) });
+    }
+  }
+  if (nearest) note += (note ? " \u00b7 " : "") + "nearest UAV U" + nearest.m + " " + fmtMetres(nearest.d);
+  return { centre, items, note };
+}
+
+// The track the close-up follows: the one chosen in the list, else the confirmed one with the
+// lowest id, else the first.
+function chooseTrack(tracks) {
+  if (!tracks || !tracks.length) return null;
+  const id = Number(S.insetTrack);
+  return tracks.find((t) => S.insetTrack !== "" && t.id === id) || tracks.filter((t) => t.confirmed).sort((a, b) => a.id - b.id)[0] || tracks[0];
 }
 
 // ------------------------------------------------------------------------- rendering
@@ -64,12 +197,23 @@ function replayScene() {
 function render() {
   S.dirty = false;
   const t0 = performance.now();
-  const scene = S.mode === "replay" ? replayScene() : liveScene();
-  drawMap($("map"), scene);
+  const ph = S.mode === "replay" ? { phase: "replay", slot: S.frame } : missionPhase(S.config, S.latest);
+  const scene = S.mode === "replay" ? replayScene() : liveScene(ph);
+  M.map = drawMap($("map"), scene);
+  M.labels = M.map.labels;
+  const box = $("inset-panel"), inset = $("inset");
+  const width = Math.max(200, Math.min(560, box.clientWidth - 22));
+  if (inset.width !== width) inset.width = width;
+  const focus = insetFocus(scene, ph);
+  M.inset = drawInset(inset, focus);
+  $("inset-note").textContent = focus ? focus.note : "";
+  $("map-scale").textContent = M.map.s ? (M.map.follow ? "following the target: " : "whole area: ") + "100 px = " + fmtMetres(100 / M.map.s) : "";
   if (S.mode !== "replay") {  // a multi-target mission's tracks and targets, as drawn
     const L = scene.layers[0];
     M.tracksDrawn = (L.tracks || []).map((t) => ({ id: t.id, confirmed: t.confirmed, x: t.x[0], y: t.x[1] }));
     M.truthsDrawn = (L.truths || []).map((t) => ({ index: t.index, x: t.x[0], y: t.x[1] }));
+    M.cuesDrawn = (L.cues || []).map((q) => ({ x: q.xy[0], y: q.xy[1], label: q.label }));
+    showPhase(ph);
   }
   const now = Date.now();
   if (M.firstMapWallMs === null && S.config) M.firstMapWallMs = now;
@@ -87,7 +231,7 @@ function render() {
   // The map every frame; the tables at most 4 times and the charts once a second (live), so
   // that a busy mission costs the browser little; a trailing frame shows the final state.
   const replay = S.mode === "replay";
-  if (replay || t0 - lastPanelsMs >= 250) { renderPanels(); lastPanelsMs = t0; } else later();
+  if (replay || t0 - lastPanelsMs >= 250) { renderPanels(ph); lastPanelsMs = t0; } else later();
   if (S.chartsDirty) {
     if (replay || t0 - lastChartsMs >= 1000) { renderCharts(); S.chartsDirty = false; lastChartsMs = t0; } else later();
   }
@@ -117,21 +261,40 @@ function rows(table, pairs) {
   }));
 }
 
-function renderPanels() {
+// A plan that is not the one being flown: the last one after the mission, or one more than a
+// slot behind the slot being flown (a plan the ground loop did not publish, or one the console
+// refused); "" when it is current.
+function planAge(plan, ph) {
+  if (!plan) return "";
+  if (ph.phase === "landing" || ph.phase === "done") return "last plan, slot " + plan.slot;
+  if (ph.phase === "running" && ph.slot != null && plan.slot < ph.slot - 1) return "plan of slot " + plan.slot + ", " + (ph.slot - plan.slot) + " slots old";
+  return "";
+}
+
+// Vehicle m's share and association as the plan says: "no BS" for assoc -1, share 0 as "0".
+function planShare(plan, m) {
+  if (!plan) return "-";
+  const k = plan.assoc[m], eta = plan.bandwidth_share[m];
+  return (k < 0 ? "no BS" : "BS" + k) + " \u03b7 " + (eta === 0 ? "0" : fmt(eta, 3));
+}
+
+function renderPanels(ph) {
   const c = S.config;
   if (!c) return;
   $("mission").textContent = c.mission_id || "";
   if (S.mode === "replay") return renderReplayPanels();
   const clock = S.latest.clock, plan = S.latest.plan, track = S.latest.track, health = S.latest.health;
-  const slot = clock ? clock.slot : health ? health.slot : null;
-  $("slot").textContent = slot == null ? "-" : String(slot);
-  $("slot").dataset.slot = slot == null ? "" : String(slot);
-  $("slots-total").textContent = c.N ? " / " + c.N : "";
   $("method").textContent = c.method || "-";
   $("plan-status").textContent = plan ? plan.status : "-";
   showReason(plan);
+  const age = planAge(plan, ph);
+  const phaseText = ph.phase === "running" ? "running, slot " + ph.slot + " of " + c.N
+    : ph.phase === "landing" || ph.phase === "done"
+      ? ph.phase + (ph.stopped ? ", stopped after " + (ph.slot == null ? "no slot" : "slot " + ph.slot) + " of " + c.N : ", after slot " + c.N + " of " + c.N)
+      : ph.phase + ", before slot 1";
   rows($("mission-table"), [
-    ["plan slot", plan ? String(plan.slot) : "-"],
+    ["phase", phaseText],
+    ["plan slot", plan ? String(plan.slot) + (age ? " (" + age + ")" : "") : "-", age ? "stale" : ""],
     ["tr(PCRB)", track ? fmt(track.pcrb_trace, 4) : "-"],
     ["  position / velocity", track ? fmt(track.pcrb_pos, 4) + " / " + fmt(track.pcrb_vel, 4) : "-"],
     ["plan objective", plan ? fmt(plan.objective, 4) : "-"],
@@ -141,13 +304,22 @@ function renderPanels() {
   ].concat(severalTargetsRows(S.latest.tracks)));
   const veh = health ? health.vehicles || {} : {};
   const vrows = [];
+  const nowMs = Date.now();
   for (let m = 0; m < c.M; m++) {
     const t = S.latest["telemetry/" + m];
-    const state = veh[String(m)] || "-";
-    const share = plan ? fmt(plan.bandwidth_share[m], 3) : "-";
-    const bs = plan ? (plan.assoc[m] < 0 ? "none" : "BS" + plan.assoc[m]) : "-";
-    const desc = t ? `${t.mode}, link ${t.link}${t.override ? ", " + t.override : ""}` : "no telemetry";
-    vrows.push(["U" + m + " " + desc, `${bs} \u03b7 ${share} \u00b7 ${state}`, state.startsWith("excluded") ? "reason" : ""]);
+    const ground = onGround(t);
+    const landed = ground && (!!S.airborne[m] || ph.phase === "landing" || ph.phase === "done");
+    let state = veh[String(m)] || "-";
+    if (landed) state = state.startsWith("excluded") ? "landed \u00b7 " + state : "landed";
+    let desc = "no telemetry";
+    if (t) {
+      const what = ground ? (landed ? "landed" : "on the ground") + (t.armed ? ", armed" : ", disarmed") : t.mode;
+      desc = `${what}, link ${t.link}${t.override && !ground ? ", " + t.override : ""}`;
+      const quiet = (nowMs - (S.rxMs["telemetry/" + m] || nowMs)) / 1000;
+      if (quiet > 5) desc += `, no telemetry for ${quiet.toFixed(0)} s`;
+    }
+    const share = planShare(plan, m) + (age ? " (" + age + ")" : "");
+    vrows.push(["U" + m + " " + desc, `${share} \u00b7 ${state}`, state.startsWith("excluded") || state.includes("excluded") ? "reason" : age ? "stale" : ""]);
   }
   rows($("vehicles"), vrows);
   const counters = health ? Object.entries(health.counters).sort() : [];
@@ -155,10 +327,13 @@ function renderPanels() {
   const extra = [["console pages", String(cons.pages ?? "-")], ["console bus", cons.status || "-"]];
   for (const [k, v] of Object.entries(cons.rejected || {})) extra.push(["console rejected " + k, String(v)]);
   rows($("health"), counters.map(([k, v]) => [k, String(v)]).concat(extra, health && health.last_error ? [["last error", health.last_error]] : []));
+  renderInsetChoice();
 }
 
 // A multi-target mission's tracks (how many of each kind) and, once the slot's truth is known,
-// each present target's distance to the nearest confirmed track; nothing on a single-target one.
+// each present target (1-based, in the scenario's order) with the track that follows it (the
+// nearest confirmed track within the follow gate) and its distance to the nearest confirmed
+// track; nothing on a single-target mission.
 function severalTargetsRows(tracks) {
   if (!tracks) return [];
   const confirmed = tracks.tracks.filter((t) => t.confirmed);
@@ -166,10 +341,31 @@ function severalTargetsRows(tracks) {
     ["tracks (slot " + tracks.slot + ")", confirmed.length + " confirmed, " + (tracks.tracks.length - confirmed.length) + " tentative"],
     ["  confirmed ids", confirmed.length ? confirmed.map((t) => "T" + t.id).join(" ") : "-"],
   ];
+  const scene = { targetNames: targetNames(S.config) };
   for (const e of tracks.target_errors || []) {
-    out.push(["target t" + e.index + " error", e.error_m == null ? "no confirmed track" : fmt(e.error_m, 2) + " m"]);
+    const follower = confirmed.find((t) => t.target === e.index);
+    const value = follower ? "T" + follower.id + ", " + fmt(e.error_m, 2) + " m"
+      : e.error_m == null ? "no confirmed track"
+        : "no track within " + fmt(tracks.follow_gate_m, 0) + " m (nearest " + fmt(e.error_m, 1) + " m)";
+    out.push([targetName(scene, e.index), value]);
   }
   return out;
+}
+
+function renderInsetChoice() {
+  const sel = $("inset-track"), tracks = S.latest.tracks;
+  sel.hidden = !tracks;
+  if (!tracks) return;
+  const want = ["", ...tracks.tracks.map((t) => String(t.id))];
+  const have = [...sel.options].map((o) => o.value);
+  if (want.join(",") === have.join(",")) return;
+  const keep = S.insetTrack;
+  sel.replaceChildren(...want.map((v) => {
+    const o = document.createElement("option"); o.value = v;
+    o.textContent = v === "" ? "close-up: lowest confirmed track" : "close-up: T" + v;
+    return o;
+  }));
+  sel.value = want.includes(keep) ? keep : "";
 }
 
 function showReason(plan) {
@@ -181,6 +377,7 @@ function showReason(plan) {
 function renderReplayPanels() {
   const rowsOut = [];
   $("slot").textContent = String(S.frame); $("slot").dataset.slot = String(S.frame);
+  $("slots-total").textContent = " / " + $("slider").max;
   $("replay-slot").textContent = "slot " + S.frame + " / " + $("slider").max;
   $("method").textContent = S.runs.map((r) => r.label).join(", ");
   const first = S.runs[0] && S.runs[0].frames[S.frame - 1];
@@ -204,20 +401,39 @@ function seriesPoints(key) {
   return out;
 }
 
+// Per confirmed track (the CHARTED_TRACKS seen last), its `pcrb` or `error` series.
+function trackSeries(kind) {
+  const slots = [...S.trackSeries.keys()].sort((a, b) => a - b);
+  const lastSeen = new Map();
+  for (const n of slots) for (const k of Object.keys(S.trackSeries.get(n))) if (k.startsWith("pcrb/") || k.startsWith("error/")) lastSeen.set(Number(k.split("/")[1]), n);
+  const ids = [...lastSeen.entries()].sort((a, b) => b[1] - a[1] || a[0] - b[0]).slice(0, CHARTED_TRACKS).map(([id]) => id).sort((a, b) => a - b);
+  return ids.map((id) => ({
+    label: "T" + id, colour: colourOf(id - 1),
+    points: slots.map((n) => [n, S.trackSeries.get(n)[kind + "/" + id]]),
+  }));
+}
+
 function renderCharts() {
   if (S.mode === "replay") {
     const per = (key) => S.runs.map((r, i) => ({ label: r.label, colour: colourOf(i), points: r.frames.map((f) => [f.slot, f[key]]) }));
-    drawChart($("chart-pcrb"), per("pcrb_trace"), { log: true, cursor: S.frame });
-    drawChart($("chart-error"), per("error_m"), { cursor: S.frame });
-    drawChart($("chart-time"), per("solve_ms"), { cursor: S.frame });
+    M.charts.pcrb = drawChart($("chart-pcrb"), per("pcrb_trace"), { log: true, cursor: S.frame });
+    M.charts.error = drawChart($("chart-error"), per("error_m"), { cursor: S.frame });
+    M.charts.time = drawChart($("chart-time"), per("solve_ms"), { cursor: S.frame });
     return;
   }
-  drawChart($("chart-pcrb"), [
-    { label: "position", colour: "#1565c0", points: seriesPoints("pcrb_pos") },
-    { label: "velocity", colour: "#c62828", points: seriesPoints("pcrb_vel") },
-  ], { log: true });
-  drawChart($("chart-error"), [{ label: "|estimate - truth|", colour: "#2e7d32", points: seriesPoints("error_m") }]);
-  drawChart($("chart-time"), [
+  if (S.latest.tracks || S.trackSeries.size) {  // several targets: one line per confirmed track
+    $("caption-pcrb").textContent = "position bound per confirmed track (m\u00b2), log scale";
+    $("caption-error").textContent = "per confirmed track: distance to the nearest target (m)";
+    M.charts.pcrb = drawChart($("chart-pcrb"), trackSeries("pcrb"), { log: true, empty: "no confirmed track yet" });
+    M.charts.error = drawChart($("chart-error"), trackSeries("error"), { empty: S.latest.truths ? "no confirmed track yet" : "no truth from the world" });
+  } else {
+    M.charts.pcrb = drawChart($("chart-pcrb"), [
+      { label: "position", colour: "#1565c0", points: seriesPoints("pcrb_pos") },
+      { label: "velocity", colour: "#c62828", points: seriesPoints("pcrb_vel") },
+    ], { log: true });
+    M.charts.error = drawChart($("chart-error"), [{ label: "|estimate - truth|", colour: "#2e7d32", points: seriesPoints("error_m") }]);
+  }
+  M.charts.time = drawChart($("chart-time"), [
     { label: "solve", colour: "#6a1b9a", points: seriesPoints("solve_ms") },
     { label: "detection to plan", colour: "#ef6c00", points: seriesPoints("det_to_plan_ms") },
   ]);
@@ -230,6 +446,10 @@ function applySnapshot(d) {
   for (const [m, t] of Object.entries(d.trails || {})) S.trails[m] = t;
   S.series = new Map((d.series || []).map((p) => [p.slot, p]));
   S.replies = d.replies || []; S.console = d.console || {};
+  S.trackSeries = new Map((d.track_series || []).map((p) => [p.slot, p]));
+  for (const [topic, data] of Object.entries(S.latest)) {
+    if (topic.startsWith("telemetry/") && data.armed && !data.landed) S.airborne[data.uav] = true;
+  }
   renderReplies(); showRole();
   S.chartsDirty = true;
 }
@@ -239,6 +459,8 @@ function apply(u) {
   if (topic === "snapshot") return applySnapshot(data);
   if (topic.startsWith("telemetry/")) {
     M.telemetryReceived++;
+    S.rxMs[topic] = Date.now();
+    if (data.armed && !data.landed) S.airborne[data.uav] = true;
     for (const p of pendingTelemetry) if (p.uav === data.uav) p.superseded = true;
     pendingTelemetry.push(data);
     S.latest[topic] = data;
@@ -258,7 +480,22 @@ function apply(u) {
     S.console = data; showRole();
   } else {
     S.latest[topic] = data;
+    keepBySlot(topic, data);
   }
+}
+
+// A multi-target mission's per-track series (its charts), from the tracks as they arrive (the
+// snapshot brings the history).
+function keepBySlot(topic, data) {
+  if (topic === "tracks") {
+    for (const row of data.series_rows || []) bounded(S.trackSeries, row.slot, row, TRACK_SERIES_SLOTS);
+    S.chartsDirty = true;
+  }
+}
+
+function bounded(map, slot, value, keep) {
+  map.set(slot, value);
+  if (map.size > keep) for (const k of [...map.keys()].sort((a, b) => a - b).slice(0, map.size - keep)) map.delete(k);
 }
 
 function connect() {
@@ -281,7 +518,9 @@ function showRole() {
   $("controls").hidden = !live;
   $("login-form").hidden = !secured || !!S.token;
   const r = $("role");
-  if (!live) { r.textContent = "replay"; r.className = "badge"; return; }
+  r.hidden = !live;  // a replay says so once, in the link badge
+  $("phase").hidden = !live;
+  if (!live) return;
   if (!secured) { r.textContent = "operator (security off)"; r.className = "badge ok"; }
   else if (S.token) { r.textContent = "operator"; r.className = "badge ok"; }
   else { r.textContent = "read-only"; r.className = "badge ro"; }
@@ -381,8 +620,14 @@ function startReplay(data) {
   showFrame(1);
 }
 
+function wireView() {
+  $("follow").addEventListener("change", () => { S.follow = $("follow").checked; S.chartsDirty = true; schedule(); });
+  $("inset-track").addEventListener("change", () => { S.insetTrack = $("inset-track").value; schedule(); });
+}
+
 async function main() {
   wireControls();
+  wireView();
   const snap = await (await fetch("/api/snapshot")).json();
   applySnapshot(snap);
   if (snap.mode === "replay") {
