@@ -35,6 +35,18 @@ def config_path(tmp_path: Path) -> Path:
     return path
 
 
+async def _start_sim(config_path: Path, *args: str) -> asyncio.subprocess.Process:
+    """`isac-mission sim CONFIG --speed 10 ARGS` (stdout and stderr together, unbuffered)."""
+    return await asyncio.create_subprocess_exec(
+        *(sys.executable, "-m", "isac_mission.cli", "sim", str(config_path), "--speed", "10"),
+        *args,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.STDOUT,
+    )
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
     config_path: Path, sig: signal.Signals
@@ -46,28 +58,11 @@ async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
         observer = await ZenohBus.open_async(BusSettings.hub(endpoint))
         try:
             sub = observer.subscribe(keys.detections_all)
-            proc = await asyncio.create_subprocess_exec(
-                sys.executable,
-                "-m",
-                "isac_mission.cli",
-                "sim",
-                str(config_path),
-                "--speed",
-                "10",
-                "--zenoh-connect",
-                endpoint,
-                "--mavlink-base-port",
-                str(mav_base),
-                "--mavlink-local-base-port",
-                "0",
-                "--gcs-port",
-                str(gcs_port),
-                "--gcs-local-base-port",
-                "0",
-                cwd=ROOT,
-                env={**os.environ, "PYTHONUNBUFFERED": "1"},
-                stdout=asyncio.subprocess.PIPE,
-                stderr=asyncio.subprocess.STDOUT,
+            proc = await _start_sim(
+                config_path,
+                *("--zenoh-connect", endpoint, "--mavlink-base-port", str(mav_base)),
+                *("--mavlink-local-base-port", "0", "--gcs-port", str(gcs_port)),
+                *("--gcs-local-base-port", "0"),
             )
             try:
                 key, data = await sub.get(START_TIMEOUT_S)
@@ -106,21 +101,7 @@ async def test_sim_with_a_port_offset_meets_the_ground_and_the_gcs_on_the_offset
         observer = await ZenohBus.open_async(BusSettings.hub(endpoint))
         try:
             sub = observer.subscribe(keys.detections_all)
-            proc = await asyncio.create_subprocess_exec(
-                sys.executable,
-                "-m",
-                "isac_mission.cli",
-                "sim",
-                str(config_path),
-                "--speed",
-                "10",
-                "--port-offset",
-                str(offset),
-                cwd=ROOT,
-                env={**os.environ, "PYTHONUNBUFFERED": "1"},
-                stdout=asyncio.subprocess.PIPE,
-                stderr=asyncio.subprocess.STDOUT,
-            )
+            proc = await _start_sim(config_path, "--port-offset", str(offset))
             try:
                 key, data = await sub.get(START_TIMEOUT_S)
                 assert key == keys.detections(decode_detection(data, n_uavs=scenario.M).uav)

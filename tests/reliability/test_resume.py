@@ -41,6 +41,7 @@ from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import bound_update, compare_pcrb, cv_model, jacobian
 from tests.support.live_cli import DEFAULT_TRACE, serve_argv, sim_argv, start, wait_for_slots
 from tests.support.ports import free_port_block, sitl_ports
+from tests.support.trace_files import slot_record
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -48,33 +49,8 @@ ROOT = Path(__file__).resolve().parents[2]
 # --------------------------------------------------------------------------- helpers
 
 
-def _record(n: int, m: int = 3) -> SlotRecord:
-    """A plausible slot record n (values change with n, so records differ)."""
-    rng = np.random.default_rng(n)
-    a = rng.normal(size=(4, 4))
-    P = a @ a.T + 4 * np.eye(4)
-    return SlotRecord(
-        slot=n,
-        method="proposed",
-        status="ok",
-        uav_xy_m=rng.uniform(0, 3000, size=(m, 2)),
-        bandwidth_share=np.full(m, 1 / m),
-        assoc=np.arange(m) % 2,
-        target_true=rng.uniform(0, 3000, size=4),
-        target_est=rng.uniform(0, 3000, size=4),
-        target_pred=rng.uniform(0, 3000, size=4),
-        r_diag=rng.uniform(0.1, 2.0, size=2 * m),
-        pcrb_trace=float(n),
-        solve_ms=12.5,
-        P=P,
-        J=np.linalg.inv(P),
-        plan_xy=rng.uniform(0, 3000, size=(m, 2)),
-        extra={"received": m, "latency_ms": 3.0},
-    )
-
-
 def _write(path: Path, config: dict[str, object], slots: range) -> list[SlotRecord]:
-    records = [_record(n, int(config["M"])) for n in slots]  # type: ignore[call-overload]
+    records = [slot_record(n, int(config["M"])) for n in slots]  # type: ignore[call-overload]
     with TraceWriter(path, config, fsync=True) as w:
         for r in records:
             w.write_slot(r)
@@ -127,7 +103,7 @@ def test_torn_last_line_is_dropped_and_the_resumed_trace_is_clean_json_lines(
     path = tmp_path / "trace.jsonl"
     config: dict[str, object] = {"M": 3, "N": 10, "method": "proposed"}
     records = _write(path, config, range(1, 5))
-    line = json.dumps(_record(5).to_dict(), separators=(",", ":")).encode()
+    line = json.dumps(slot_record(5).to_dict(), separators=(",", ":")).encode()
     n = int(cut * len(line)) if isinstance(cut, float) else cut
     with path.open("ab") as f:
         f.write(line[:n])  # n < len(line): the closing brace is missing
@@ -136,11 +112,11 @@ def test_torn_last_line_is_dropped_and_the_resumed_trace_is_clean_json_lines(
     assert [r.slot for r in torn.slots] == [1, 2, 3, 4]
     with TraceWriter.resume(path, fsync=True) as w:
         assert w.last_record == records[-1]
-        w.write_slot(_record(5))
-        w.write_slot(_record(6))
+        w.write_slot(slot_record(5))
+        w.write_slot(slot_record(6))
     back = read_trace(path)
     _assert_every_slot_once(back, 6)
-    assert back.slots[4] == _record(5)
+    assert back.slots[4] == slot_record(5)
     lines = _strict_json_lines(path)
     assert lines[0] == {"config": config}
     assert [ln["slot"] for ln in lines[1:]] == [1, 2, 3, 4, 5, 6]
@@ -150,7 +126,9 @@ def test_torn_multibyte_character_in_the_last_line_is_dropped(tmp_path: Path) ->
     """A cut inside a UTF-8 sequence (a reason text with a non-ASCII character)."""
     path = tmp_path / "trace.jsonl"
     _write(path, {"M": 3}, range(1, 3))
-    rec = SlotRecord.from_dict(_record(3).to_dict() | {"status": "infeasible", "reason": "d ≥ D_s"})
+    rec = SlotRecord.from_dict(
+        slot_record(3).to_dict() | {"status": "infeasible", "reason": "d ≥ D_s"}
+    )
     line = json.dumps(rec.to_dict(), ensure_ascii=False, separators=(",", ":")).encode()
     cut = line.index("≥".encode()) + 1  # inside the three-byte character
     with path.open("ab") as f:
@@ -170,7 +148,7 @@ def test_resumed_ground_loop_starts_from_the_last_complete_slot(
     path = tmp_path / "trace_proposed.jsonl"
     records = _write(path, paper.trace_config() | {"method": "proposed"}, range(1, 8))
     with path.open("ab") as f:
-        f.write(json.dumps(_record(8).to_dict()).encode()[:200])
+        f.write(json.dumps(slot_record(8).to_dict()).encode()[:200])
     size_torn = path.stat().st_size
     loop = _resumed_loop(paper, path)
     try:
@@ -329,7 +307,9 @@ def test_serve_killed_with_sigkill_resumes_and_completes_the_mission(
     lines = _strict_json_lines(path)
     # ... and the line that says the resumed run ended complete (the killed one wrote none).
     assert lines[-1] == {"end": {"status": "complete", "last_slot": n_slots, "N": n_slots}}
-    assert "config" in lines[0] and [ln["slot"] for ln in lines[1:-1]] == list(range(1, n_slots + 1))
+    assert "config" in lines[0] and [ln["slot"] for ln in lines[1:-1]] == list(
+        range(1, n_slots + 1)
+    )
     for a, b in zip(before.slots, trace.slots, strict=False):
         assert a == b  # the completed slots are untouched
     s_dt, s_kappa = float(trace.config["dt"]), float(trace.config["kappa"])
@@ -363,7 +343,7 @@ def test_resume_of_a_trace_killed_before_its_config_line_starts_afresh(
     path.write_bytes(torn_header)
     loop = _resumed_loop(paper, path)
     assert loop.writer is not None
-    loop.writer.write_slot(_record(1))
+    loop.writer.write_slot(slot_record(1))
     loop.writer.close()
     assert loop.state.slot == 0
     trace = read_trace(path)

@@ -15,9 +15,12 @@ from isac_mission.records.jsonlines import dumps_line
 from isac_mission.records.multi_target import end_line, header_line
 
 
-def slot_record(n: int, m: int) -> SlotRecord:
-    """A plausible single-target slot record n for m UAVs."""
+def slot_record(n: int, m: int = 3) -> SlotRecord:
+    """A plausible single-target slot record n for m UAVs (values change with n, so records
+    differ)."""
     rng = np.random.default_rng(n)
+    a = rng.normal(size=(4, 4))
+    P = a @ a.T + 4 * np.eye(4)
     return SlotRecord(
         slot=n,
         method="proposed",
@@ -31,8 +34,10 @@ def slot_record(n: int, m: int) -> SlotRecord:
         r_diag=rng.uniform(0.1, 2.0, size=2 * m),
         pcrb_trace=float(n),
         solve_ms=12.5,
-        P=np.eye(4),
-        J=np.eye(4),
+        P=P,
+        J=np.linalg.inv(P),
+        plan_xy=rng.uniform(0, 3000, size=(m, 2)),
+        extra={"received": m, "latency_ms": 3.0},
     )
 
 

@@ -71,9 +71,9 @@ def test_the_horizon_names_its_fallback(paper: Scenario) -> None:
     assert plan_slot(slot_input(bad), SolverKit(bad), "horizon").report.fallback == "infeasible"
 
 
-def test_the_ground_loops_plans_name_theirs_and_the_totals_count_them(paper: Scenario) -> None:
-    s = paper
-    job = PlanningJob(
+def planning_job(s: Scenario) -> PlanningJob:
+    """Slot 1's planning job from the start points, every vehicle planned."""
+    return PlanningJob(
         slot=1,
         method="proposed",
         kits=KitCache(SolverKit(s)),
@@ -84,6 +84,10 @@ def test_the_ground_loops_plans_name_theirs_and_the_totals_count_them(paper: Sce
         prediction=Gaussian(s.x0, s.P0),
         J_pred=np.asarray(np.linalg.inv(s.P0), dtype=float),
     )
+
+
+def test_the_ground_loops_plans_name_theirs_and_the_totals_count_them(paper: Scenario) -> None:
+    job = planning_job(paper)
     assert job.hold("timeout: ...", "timeout").report.fallback == "timeout"
     assert job.fallback_after_error("solver error: x", 0.1).report.fallback == "solver error"
     totals = MissionTotals()
@@ -141,16 +145,10 @@ def test_an_operator_hold_of_every_vehicle_is_a_hold_not_a_failure(paper: Scenar
     from isac_mission.wire import PlanMsg, decode_plan, encode_plan
 
     s = paper
-    job = PlanningJob(
+    job = dataclasses.replace(
+        planning_job(s),
         slot=4,
-        method="proposed",
-        kits=KitCache(SolverKit(s)),
-        uav_xy=s.uav_start_xy,
-        uav_v=None,
-        prev_eta=np.full(s.M, 1.0 / s.M),
         prev_assoc=np.arange(s.M, dtype=np.int64) % s.K,
-        prediction=Gaussian(s.x0, s.P0),
-        J_pred=np.asarray(np.linalg.inv(s.P0), dtype=float),
         excluded=tuple(range(s.M)),
         operator_held=tuple(range(s.M)),
     )
