@@ -64,6 +64,15 @@ def test_14c_shares_not_summing_to_one_break_alone() -> None:
     assert got == {("14c", 2, (0, 1))}
 
 
+def test_nobody_served_is_no_14c_but_a_share_left_over_is() -> None:
+    """An operator's hold of the whole fleet: every BS -1 and every share 0 (docs/trace.md,
+    `operator hold`): no bandwidth to share. One vehicle still served keeps 14c."""
+    held = mutate(valid_trace(), 1, assoc=np.array([-1, -1]), bandwidth_share=np.zeros(2))
+    assert flagged(held) == set()
+    half = mutate(valid_trace(), 1, assoc=np.array([0, -1]), bandwidth_share=np.array([0.5, 0.0]))
+    assert ("14c", 2, (0, 1)) in flagged(half)
+
+
 def test_14d_share_outside_unit_interval_breaks_alone() -> None:
     # sum is still 1; the negative share's rate is not checked (reported under 14d instead)
     got = flagged(mutate(valid_trace(), 0, bandwidth_share=np.array([1.25, -0.25])))

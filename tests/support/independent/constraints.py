@@ -192,9 +192,11 @@ def _check_slot(
     if rule is not None and P_prev is not None:
         d_target = rule.clearance_m(lim.d_safe, P_prev)
 
-    # 14c, 14d: shares
+    # 14c, 14d: shares (nobody served, every BS -1 and every share 0: an operator's hold of the
+    # whole fleet, docs/trace.md; there is no bandwidth to share)
     total = float(np.sum(eta))
-    if not abs(total - 1.0) <= share_tol:
+    nobody_served = all(k == -1 for k in assoc) and total == 0.0
+    if not nobody_served and not abs(total - 1.0) <= share_tol:
         flag("14c", tuple(range(n_uav)), total, 1.0, "bandwidth shares do not sum to 1")
     share_ok = [bool(-share_tol <= e <= 1.0 + share_tol) for e in eta]
     for m, e in enumerate(eta):
