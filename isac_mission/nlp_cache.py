@@ -38,7 +38,7 @@ import tempfile
 import threading
 import time
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -66,6 +66,33 @@ M = 12 evaluated slower than the interpreter."""
 
 FORMAT = 2
 """Bumped when what a cache file holds changes (2: Function-valued options compiled too)."""
+
+_EVENT_KINDS = (
+    (": compiled, loaded from the cache", "loaded compiled from the cache"),
+    (": shares the compiled derivatives of ", "sharing another's compiled derivatives"),
+    ("is compiled (shares it)", "sharing a compile under way"),
+    ("is compiled (in the background)", "interpreted while they compile in the background"),
+    (": compiled in ", "compiled while the mission flew"),
+    ("not in the cache)", "interpreted (nothing to compile them with)"),
+)
+"""How `CompiledNlpCache.events` read, by the words that mark each kind, for `events_summary`."""
+
+
+def events_summary(events: Sequence[str]) -> list[str]:
+    """The cache's events in one line of counts by kind ("6 loaded compiled from the cache,
+    3 sharing another's compiled derivatives"), then every event of no usual kind (a file that
+    did not load, a compile that failed) as it was said."""
+    counts: dict[str, int] = {}
+    unusual: list[str] = []
+    for event in events:
+        kind = next((k for marker, k in _EVENT_KINDS if marker in event), None)
+        if kind is None:
+            unusual.append(event)
+        else:
+            counts[kind] = counts.get(kind, 0) + 1
+    line = ", ".join(f"{n} {kind}" for kind, n in counts.items())
+    return [line, *unusual] if line else unusual
+
 
 CompileMode = Literal["never", "background", "now"]
 

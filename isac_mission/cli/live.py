@@ -357,8 +357,10 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
             raise typer.Exit(1) from None
     console.print()
     assert isinstance(result, LiveResult)
+    from isac_mission.nlp_cache import events_summary
+
     ahead = f"built for {s.M} vehicles and, ahead, for {result.sizes_built_ahead}"
-    for line in [ahead, *result.planner_problems]:
+    for line in [ahead, *events_summary(result.planner_problems)]:
         console.print(f"planner problems: {line}", highlight=False)
     _print_verdict(s, opts, result, last_slot[0])
     if s.multi_target:
@@ -370,16 +372,16 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
     table.add_column("value", justify="right")
     for name, value in (
         ("slots completed", f"{summary.slots}/{s.N}"),
-        ("location RMSE", f"{summary.loc_rmse:.3f} m"),
-        ("velocity RMSE", f"{summary.vel_rmse:.4f} m/s"),
-        ("mean tr(PCRB)", f"{summary.pcrb_mean:.4f}"),
+        ("location RMSE", _figure("{:.3f} m", summary.loc_rmse)),
+        ("velocity RMSE", _figure("{:.4f} m/s", summary.vel_rmse)),
+        ("mean tr(PCRB)", _figure("{:.4f}", summary.pcrb_mean)),
         (
             "plan solve time median / p95",
-            f"{summary.solve_median_ms:.1f} / {summary.solve_p95_ms:.1f} ms",
+            _figure("{:.1f} / {:.1f} ms", summary.solve_median_ms, summary.solve_p95_ms),
         ),
         (
             "detection-to-plan median / p99",
-            f"{summary.latency_median_ms:.1f} / {summary.latency_p99_ms:.1f} ms",
+            _figure("{:.1f} / {:.1f} ms", summary.latency_median_ms, summary.latency_p99_ms),
         ),
         ("infeasible slots", str(summary.infeasible)),
         ("fallback slots (method's answer not flown)", str(sum(summary.fallbacks.values()))),
@@ -406,6 +408,13 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
         ]
         console.print("plots: " + ", ".join(str(p) for p in written))
     console.print(f"trace: {result.trace_path}")
+
+
+def _figure(spec: str, *values: float) -> str:
+    """`spec` filled with `values`, or "-" when one is not finite (no slot measured it)."""
+    import math
+
+    return spec.format(*values) if all(math.isfinite(v) for v in values) else "-"
 
 
 def _print_verdict(s: Scenario, opts: LiveOptions, result: LiveResult, last_slot: int) -> None:

@@ -248,6 +248,9 @@ async def fly_mission(
                 "plans applied": c.plans_applied,
                 "plans invalid": c.plans_invalid,
                 "vehicles landed": sum(b.phase == "landed" for b in fleet.bridges),
+                "vehicles never heard": sum(
+                    b.link.status().heartbeat_s is None for b in fleet.bridges
+                ),
                 "link losses": sum(b.counters.link_losses for b in fleet.bridges),
                 "link interruptions": sum(b.counters.link_interruptions for b in fleet.bridges),
                 "offboard re-entries": sum(b.counters.offboard_reentries for b in fleet.bridges),

@@ -122,14 +122,21 @@ def mission_verdict(f: MissionFigures) -> Verdict:
     rejected = sum(n for k, n in f.counters.items() if k.startswith("rejected "))
     if rejected:
         reasons.append(f"{rejected} messages rejected (the counters below name why)")
-    if f.landed < f.vehicles:
+    never = f.counters.get("vehicles never heard", 0)
+    if never:
+        reasons.append(
+            f"{never} of {f.vehicles} vehicles never heard on their links (nothing was "
+            "commanded to them): check the vehicles' links and ports (docs/service.md, 'Ports')"
+        )
+    not_landed = f.vehicles - f.landed - never
+    if not_landed > 0:
         if f.landing_abandoned:
             reasons.append(
-                f"{f.vehicles - f.landed} of {f.vehicles} vehicles not seen landed: the service "
-                "stopped waiting (they were sent LAND)"
+                f"{not_landed} of {f.vehicles} vehicles not seen landed: the service stopped "
+                "waiting (they were sent LAND)"
             )
         else:
-            reasons.append(f"{f.vehicles - f.landed} of {f.vehicles} vehicles did not land")
+            reasons.append(f"{not_landed} of {f.vehicles} vehicles did not land")
             advice.append("check the vehicles with a ground station (docs/service.md)")
     last = f.slots if f.last_slot is None else f.last_slot
     if f.interrupted:

@@ -148,6 +148,21 @@ async def test_two_successive_plans_are_reached_at_their_slot_boundaries(
     assert rate_hz >= MIN_RATE_HZ, f"setpoints at {rate_hz:.1f} Hz of simulation time"
 
 
+async def test_land_of_a_vehicle_never_heard_is_nothing_to_do(hub: ZenohBus) -> None:
+    """No vehicle behind the bridge's port (a `serve` whose world never came): landing is no
+    error, since nothing was ever commanded to it; the bridge stays idle."""
+    from isac_mission.service.bridge.clock_time import ClockSimTime
+    from isac_mission.service.bridge.settings import BridgeSettings
+    from isac_mission.service.bridge.vehicle import VehicleBridge
+    from tests.support.ports import free_udp_ports
+
+    (port,) = free_udp_ports(1)
+    settings = BridgeSettings(index=0, port=port, v_max_mps=V_MAX_MPS)
+    async with VehicleBridge(settings, ClockSimTime(), KEYS, hub) as bridge:
+        await asyncio.wait_for(bridge.land(), TIMEOUT_S)
+        assert bridge.phase == "idle"
+
+
 async def test_land_lands_and_disarms(rig: Callable[..., Rig], hub: ZenohBus) -> None:
     r = rig([(10.0, 10.0)])
     async with r.bridge() as bridge, hub.subscribe(KEYS.telemetry(0)) as sub:

@@ -45,3 +45,24 @@ def test_a_function_among_the_options_enters_the_key_by_what_it_computes() -> No
     assert first == problem_key("horizon", function, with_hessian(2.0))
     assert first != problem_key("horizon", function, with_hessian(3.0))
     assert first != problem_key("horizon", function, OPTIONS)
+
+
+def test_the_cache_s_events_read_as_one_line_of_counts_and_the_unusual_ones_whole() -> None:
+    """What `run` prints of its planner problems: counts by kind, then any event that is
+    news (a file that did not load) as it was said; the wording is the cache's own."""
+    from isac_mission.nlp_cache import events_summary
+
+    events = [
+        "polish-1: compiled, loaded from the cache",
+        "horizon-2: compiled, loaded from the cache",
+        "horizon_warm: shares the compiled derivatives of horizon-2.casadi",
+        "polish: interpreted until polish-3.casadi is compiled (in the background)",
+        "polish: compiled in 4.2 s",
+        "horizon-4.casadi: could not be loaded (bad ELF); removed",
+    ]
+    assert events_summary(events) == [
+        "2 loaded compiled from the cache, 1 sharing another's compiled derivatives, "
+        "1 interpreted while they compile in the background, 1 compiled while the mission flew",
+        "horizon-4.casadi: could not be loaded (bad ELF); removed",
+    ]
+    assert events_summary([]) == []

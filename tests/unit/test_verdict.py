@@ -98,3 +98,18 @@ def test_a_resumed_run_is_judged_by_the_trace_s_last_slot() -> None:
     assert mission_verdict(figures(slots=30, last_slot=60)).word == "nominal"
     v = mission_verdict(figures(slots=5, last_slot=35, interrupted=True))
     assert v.reasons[0] == "stopped at slot 35 of 60"
+
+
+def test_vehicles_never_heard_are_named_as_such_not_as_not_landed() -> None:
+    """A `serve` stopped while it waited for a world that never came: nothing flew."""
+    v = mission_verdict(
+        figures(
+            slots=0,
+            landed=0,
+            interrupted=True,
+            counters={"slots": 0, "vehicles landed": 0, "vehicles never heard": 3},
+        )
+    )
+    assert v.word == "interrupted" and v.reasons[0] == "stopped at slot 0 of 60"
+    assert any(r.startswith("3 of 3 vehicles never heard") for r in v.reasons)
+    assert not any("did not land" in r for r in v.reasons)

@@ -302,13 +302,18 @@ class VehicleBridge:
 
     async def land(self) -> None:
         """Land where the vehicle is (PX4 LAND), wait for touchdown and the disarm (disarming
-        if the vehicle has not after `disarm_wait_s`). Returns at once if landed and disarmed;
-        LinkError when the link is lost (the vehicle then follows its own loss action)."""
+        if the vehicle has not after `disarm_wait_s`). Returns at once if landed and disarmed,
+        or if the vehicle was never heard (nothing was commanded to it: there is nothing to
+        land, and no link to land it with); LinkError when the link to a vehicle heard before
+        is lost (the vehicle then follows its own loss action)."""
         s, vehicle = self.settings, self._vehicle
         if self._keeper.not_ours("land"):
             return
         self._offboard.want = False
         st = self.link.status()
+        if st.heartbeat_s is None:
+            log.info("vehicle %d: never heard on its link: nothing to land", self.index)
+            return
         if st.lost:
             raise LinkError(f"vehicle {self.index}: cannot land: no link to the vehicle")
         if not st.airborne:
