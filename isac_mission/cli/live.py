@@ -276,7 +276,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
     import numpy as np
     from rich.live import Live
 
-    from isac_mission.cli.mission import LiveResult, run_serve
+    from isac_mission.cli.mission import TAKING_OFF, LiveResult, run_serve
     from isac_mission.cli.stopping import StopRequests
     from isac_mission.cli.summary import print_summary
     from isac_mission.errors import IsacError, PortInUseError
@@ -284,6 +284,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
 
     status = {"phase": "starting", "line": ""}
     last_slot = [0]
+    took_off = [False]
 
     def render() -> Table:
         t = Table.grid(padding=(0, 2))
@@ -296,6 +297,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
 
         def on_status(msg: str) -> None:
             status["phase"] = msg
+            took_off[0] = took_off[0] or msg == TAKING_OFF
             live.update(render())
 
         def on_tracks(o: MultiTargetSlot, latency_s: float) -> None:
@@ -329,7 +331,7 @@ def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> Non
             loop = asyncio.get_running_loop()
 
             def on_signal(name: str) -> None:
-                action, line = requests.on_signal(name, last_slot[0], s.N)
+                action, line = requests.on_signal(name, last_slot[0], s.N, took_off[0])
                 live.console.print(line, highlight=False)
                 if action == "stop":
                     stop.set()

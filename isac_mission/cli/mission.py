@@ -50,6 +50,11 @@ from isac_mission.types import FloatArray
 
 log = logging.getLogger(__name__)
 
+WAITING = "waiting for the clock and the vehicles"
+"""fly_mission's status while nothing has been told to take off yet."""
+TAKING_OFF = "arming, taking off and flying to the start points"
+"""fly_mission's status once the fleet has been told to take off."""
+
 
 @dataclass(frozen=True)
 class LiveOptions:
@@ -218,9 +223,9 @@ async def fly_mission(
         mirror = asyncio.create_task(mirror_signing_counters(fleet, ground.report))
         ground_task = asyncio.create_task(ground.run(stop))
         try:
-            say("waiting for the clock and the vehicles")
+            say(WAITING)
             await _until_stopped(time_source.wait_ready(timeout_s=60.0), stop)
-            say("arming, taking off and flying to the start points")
+            say(TAKING_OFF)
             await _until_stopped(fleet.prepare_all(), stop)
             say("mission running")
             result.report = await ground_task

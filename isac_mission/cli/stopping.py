@@ -52,11 +52,20 @@ class StopRequests:
     embedded: bool
     count: int = 0
 
-    def on_signal(self, signal_name: str, slot: int, n_slots: int) -> tuple[Action, str]:
+    def on_signal(
+        self, signal_name: str, slot: int, n_slots: int, flying: bool = True
+    ) -> tuple[Action, str]:
         """The action for one more request (`signal_name`: "SIGINT", "SIGTERM"), at the last
-        traced slot `slot` of `n_slots`, and the line to print."""
+        traced slot `slot` of `n_slots`, and the line to print; flying: the fleet has been
+        told to take off (False while the service still waits for its clock and vehicles:
+        nothing to land)."""
         self.count += 1
         key = "Ctrl-C" if signal_name == "SIGINT" else signal_name
+        if self.count == 1 and not flying:
+            return (
+                "stop",
+                f"{key}: stopping before any vehicle was told to take off: nothing to land",
+            )
         if self.count == 1:
             wall_s = landing_time_s(self.height_m) / max(self.speed, 1e-3)
             where = f"after slot {slot} of {n_slots}" if slot > 0 else "before slot 1"

@@ -113,3 +113,11 @@ def test_vehicles_never_heard_are_named_as_such_not_as_not_landed() -> None:
     assert v.word == "interrupted" and v.reasons[0] == "stopped at slot 0 of 60"
     assert any(r.startswith("3 of 3 vehicles never heard") for r in v.reasons)
     assert not any("did not land" in r for r in v.reasons)
+
+
+def test_ctrl_c_before_the_take_off_says_there_is_nothing_to_land() -> None:
+    """A `serve` still waiting for its world and vehicles: no landing to announce."""
+    r = StopRequests(height_m=100.0, speed=1.0, embedded=False)
+    action, line = r.on_signal("SIGINT", 0, 60, flying=False)
+    assert action == "stop" and line.endswith("nothing to land") and "about" not in line
+    assert r.on_signal("SIGINT", 0, 60, flying=False)[0] == "leave"
