@@ -47,6 +47,14 @@ async def _start_sim(config_path: Path, *args: str) -> asyncio.subprocess.Proces
     )
 
 
+async def _stopped_cleanly(proc: asyncio.subprocess.Process, sig: signal.Signals) -> bytes:
+    """Send `sig`, wait for the exit (bounded), check it is 0; the output."""
+    proc.send_signal(sig)
+    out, _ = await asyncio.wait_for(proc.communicate(), EXIT_TIMEOUT_S)
+    assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+    return out
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
     config_path: Path, sig: signal.Signals
@@ -68,9 +76,7 @@ async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
                 key, data = await sub.get(START_TIMEOUT_S)
                 det = decode_detection(data, n_uavs=scenario.M)
                 assert key == keys.detections(det.uav)
-                proc.send_signal(sig)
-                out, _ = await asyncio.wait_for(proc.communicate(), EXIT_TIMEOUT_S)
-                assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+                out = await _stopped_cleanly(proc, sig)
                 assert b"world stopped" in out
             finally:
                 if proc.returncode is None:
@@ -111,9 +117,7 @@ async def test_sim_with_a_port_offset_meets_the_ground_and_the_gcs_on_the_offset
                     asyncio.get_running_loop().sock_recv(gcs, 65535), START_TIMEOUT_S
                 )
                 assert datagram[:1] == b"\xfd"  # MAVLink 2 from a vehicle's GCS link
-                proc.send_signal(signal.SIGINT)
-                out, _ = await asyncio.wait_for(proc.communicate(), EXIT_TIMEOUT_S)
-                assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+                await _stopped_cleanly(proc, signal.SIGINT)
             finally:
                 if proc.returncode is None:
                     proc.kill()
