@@ -70,11 +70,11 @@ async def _client(url: str, endpoint: str, seconds: float, out: Path) -> None:
     assert bus is not None
 
     async def watch() -> None:
-        from isac_mission.wire import decode_telemetry
+        from isac_mission.wire import TelemetryMsg, decode
 
         async with bus.subscribe("isac/*/telemetry/*", maxsize=8192) as sub:
             async for _key, payload in sub:
-                t = decode_telemetry(payload)
+                t = decode(TelemetryMsg, payload)
                 if t.published_wall_s is not None:
                     published.append((t.uav, t.published_wall_s))
 
@@ -160,7 +160,6 @@ async def _replay_client(url: str, out: Path) -> None:
 async def _mission(slots: int, console: bool, tmp: Path, seconds: float) -> dict[str, Any]:
     from isac_mission.bus import tcp_loopback
     from isac_mission.cli.embedded import run_embedded
-    from isac_mission.cli.mission import LiveOptions
     from isac_mission.config import load_scenario
     from isac_mission.console import (
         BusAccess,
@@ -169,6 +168,7 @@ async def _mission(slots: int, console: bool, tmp: Path, seconds: float) -> dict
         ConsoleService,
         MissionView,
     )
+    from isac_mission.service.assembly import LiveOptions
     from tests.support.ports import sitl_ports
 
     s = load_scenario(ROOT / "config" / "paper.yaml").with_changes(N=slots, H=30.0, dH=15.0)

@@ -9,7 +9,8 @@ repeat, `--repeat` repeats per round; the time per call is the median over repea
 `git archive <commit> | tar -x -C DIR`) and on this tree, interleaved in subprocesses (old, new,
 old, new, ...) so that both see the same machine load, and prints before, after and their ratio
 after / before (docs/performance.md, "Bus message decoding"). A tree's decoders are found by
-looking for the module that defines `decode_detection`, wherever that tree keeps it.
+looking for the module that defines `decode_detection` (older trees) or else `decode_any`
+(`decode(kind, ...)` for every type), wherever that tree keeps it.
 
 Run: python bench/decode.py [--number 2000] [--repeat 7]
      python bench/decode.py --compare-tree DIR [--rounds 3]
@@ -123,19 +124,20 @@ def payloads() -> list[tuple[str, str, str, dict[str, int]]]:
 
 
 TIMING_CODE = """
-import importlib, json, sys, timeit
+import functools, importlib, json, sys, timeit
 from pathlib import Path
 tree, spec_file, number, repeat = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-module = next(
-    ".".join(p.relative_to(tree).with_suffix("").parts)
-    for p in sorted((tree / "isac_mission").rglob("*.py"))
-    if "def decode_detection(" in p.read_text()
+texts = {p: p.read_text() for p in sorted((tree / "isac_mission").rglob("*.py"))}
+path = next((p for p, t in texts.items() if "def decode_detection(" in t), None) or next(
+    p for p, t in texts.items() if "def decode_any(" in t
 )
+module = ".".join(path.relative_to(tree).with_suffix("").parts)
 codec = importlib.import_module(module)
 errors = importlib.import_module("isac_mission.errors")
 out = {}
 for name, kind, text, kw in json.loads(Path(spec_file).read_text()):
-    decode, data = getattr(codec, "decode_" + kind), text.encode()
+    decode = getattr(codec, "decode_" + kind, None) or functools.partial(codec.decode, kind)
+    data = text.encode()
     def call(decode=decode, data=data, kw=kw):
         try:
             decode(data, **kw)

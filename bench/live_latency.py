@@ -21,9 +21,9 @@ import numpy as np
 
 from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
-from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import load_scenario
 from isac_mission.quiet import quiet_highs_banner
+from isac_mission.service.assembly import LiveOptions
 
 
 def _free_tcp_port() -> int:

@@ -33,12 +33,12 @@ sys.path.insert(0, str(ROOT))
 
 from isac_mission.bus import tcp_loopback  # noqa: E402
 from isac_mission.cli.embedded import run_embedded  # noqa: E402
-from isac_mission.cli.mission import LiveOptions  # noqa: E402
 from isac_mission.config import load_scenario  # noqa: E402
 from isac_mission.config.live_settings import LiveSettings  # noqa: E402
 from isac_mission.experiment.trace_figures import trace_figures  # noqa: E402
 from isac_mission.quiet import quiet_highs_banner  # noqa: E402
 from isac_mission.records import read_trace  # noqa: E402
+from isac_mission.service.assembly import LiveOptions  # noqa: E402
 from tests.support.independent.constraints import check_constraints  # noqa: E402
 from tests.support.ports import free_port_block, sitl_ports  # noqa: E402
 

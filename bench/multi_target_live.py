@@ -37,7 +37,6 @@ sys.path.insert(0, str(ROOT))
 
 from isac_mission.bus import tcp_loopback  # noqa: E402
 from isac_mission.cli.embedded import run_embedded  # noqa: E402
-from isac_mission.cli.mission import LiveOptions, planning_scenario  # noqa: E402
 from isac_mission.config import Scenario, load_scenario  # noqa: E402
 from isac_mission.experiment.bootstrap import Interval, paired_bootstrap  # noqa: E402
 from isac_mission.experiment.multi_target_loop import run_multi_target  # noqa: E402
@@ -50,6 +49,7 @@ from isac_mission.model.run_noise import draw_multi_target_noise  # noqa: E402
 from isac_mission.planning.multi_target import multi_target_kit  # noqa: E402
 from isac_mission.quiet import quiet_highs_banner  # noqa: E402
 from isac_mission.records.multi_target import MultiTargetSlot  # noqa: E402
+from isac_mission.service.assembly import LiveOptions, planning_scenario  # noqa: E402
 from tests.support.ports import free_port_block, sitl_ports  # noqa: E402
 
 APPROACH_SLOTS = 10

@@ -189,9 +189,9 @@ def polish_with(solve: Solve, inp: SlotInput, kit: SolverKit) -> tuple[float, fl
     s = kit.scenario
     sca = plan_slot(inp, kit, "proposed-sca")
     cons = SlotConstraints(
-        inp.prev_xy_m, s.bs_xy[sca.bs_of_uav], s.bs_xy, inp.target_state_pred[:2], s
+        inp.prev_xy_m, s.bs_xy[sca.bs_of_uav], s.bs_xy, inp.lead.state_pred[:2], s
     )
-    obj = PlanningObjective(inp.prior_information, inp.target_state_pred, kit.sensing)
+    obj = PlanningObjective(inp.lead.prior_information, inp.lead.state_pred, kit.sensing)
     t0 = time.perf_counter()
     x = solve(sca.uav_xy_m, sca.bandwidth_share, obj, cons)
     dt = time.perf_counter() - t0

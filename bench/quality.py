@@ -146,7 +146,7 @@ def exact_problem(s: Scenario, inp: SlotInput, plan: SlotPlan) -> ExactProblem:
         s,
         np.asarray(inp.prev_xy_m, float),
         s.bs_xy[plan.bs_of_uav],
-        np.asarray(inp.target_state_pred[:2], float),
+        np.asarray(inp.lead.state_pred[:2], float),
         keep_out,
         ballistic,
         radius,
@@ -404,7 +404,9 @@ def multistart(
 ) -> Reference:
     """The SLSQP multistart of one slot (starts seeded by rng_seed, independent of the plan)."""
     p = exact_problem(s, slot.inp, slot.plan)
-    objective = PlanningObjective(slot.inp.prior_information, slot.inp.target_state_pred, sensing)
+    objective = PlanningObjective(
+        slot.inp.lead.prior_information, slot.inp.lead.state_pred, sensing
+    )
     rng = np.random.default_rng(rng_seed)
     found: list[float] = []
     capped = 0

@@ -2,9 +2,9 @@
 tests/reliability/test_wire_fuzz_zenoh.py (the tests check that it is refused, and before it is
 parsed; this bench times it).
 
-1. The size guard against parsing: `decode_detection` of 4 MB of valid JSON (refused as too large
-   by wire.MAX_PAYLOAD_BYTES) against `json.loads` of the same bytes, medians over --repeats and
-   their ratio (target: the refusal under a tenth of the parse).
+1. The size guard against parsing: `decode(DetectionMsg, ...)` of 4 MB of valid JSON (refused as
+   too large by wire.MAX_PAYLOAD_BYTES) against `json.loads` of the same bytes, medians over
+   --repeats and their ratio (target: the refusal under a tenth of the parse).
 2. Publish to counted over real Zenoh: each oversized payload of the bad-payload catalogue
    (tests/support/wire_garbage.py) published to a GroundLoop on its own thread until the loop
    has counted it, --repeats times: median and max per payload (target: max < 2 s).
@@ -30,7 +30,7 @@ from isac_mission import wire  # noqa: E402
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback  # noqa: E402
 from isac_mission.config import load_scenario  # noqa: E402
 from isac_mission.errors import MessageError  # noqa: E402
-from isac_mission.wire import decode_detection  # noqa: E402
+from isac_mission.wire import DetectionMsg, decode  # noqa: E402
 from tests.support.ports import free_tcp_port  # noqa: E402
 from tests.support.sim_harness import wait_until  # noqa: E402
 from tests.support.wire_garbage import GroundThread, bad_payloads, valid_detection  # noqa: E402
@@ -48,7 +48,7 @@ def size_guard(repeats: int) -> tuple[float, float]:
         parse.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         with contextlib.suppress(MessageError):
-            decode_detection(body)
+            decode(DetectionMsg, body)
         refuse.append(time.perf_counter() - t0)
     return float(np.median(parse)), float(np.median(refuse))
 

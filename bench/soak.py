@@ -33,7 +33,6 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from isac_mission.cli.mission import summarize_live  # noqa: E402
 from isac_mission.config import Scenario, load_scenario  # noqa: E402
 from isac_mission.config.live_settings import LiveSettings  # noqa: E402
 from isac_mission.experiment.closed_loop import (  # noqa: E402
@@ -44,6 +43,7 @@ from isac_mission.experiment.closed_loop import (  # noqa: E402
 from isac_mission.planning.registry import live_default_method  # noqa: E402
 from isac_mission.planning.slot import METHODS, SolverKit  # noqa: E402
 from isac_mission.quiet import quiet_highs_banner  # noqa: E402
+from isac_mission.service.mission_result import summarize_live  # noqa: E402
 from sim.target import ScriptedTarget  # noqa: E402
 from tests.support.soak import (  # noqa: E402
     LOOP_SPEED_MPS,

@@ -46,8 +46,7 @@ def first_slot_input(scenario: Scenario) -> SlotInput:
         prev_xy_m=scenario.uav_start_xy.copy(),
         prev_bandwidth_share=np.full(scenario.M, 1.0 / scenario.M),
         prev_bs_of_uav=None,
-        target_state_pred=slot_1.prediction.x,
-        prior_information=slot_1.prior,
+        targets=(slot_1.belief(scenario.motion),),
         prev_velocity_mps=np.zeros((scenario.M, 2)),
     )
 

@@ -25,11 +25,10 @@ from isac_mission.types import Detections, FloatArray
 from isac_mission.wire import (
     Keys,
     PlanMsg,
-    decode_plan,
+    decode,
     detection_messages,
     detection_set_messages,
-    encode_detection,
-    encode_detection_set,
+    encode,
 )
 from sim.multi_target_scene import MultiTargetScene
 from sim.sensing import Sensor, equal_shares
@@ -81,7 +80,7 @@ class SensingEmulator:
     def on_plan_payload(self, payload: bytes) -> PlanMsg | None:
         """Take one plan payload; returns the plan, or None if it was rejected."""
         try:
-            msg = decode_plan(payload, n_uavs=self.n_uavs, n_bs=self.n_bs)
+            msg = decode(PlanMsg, payload, n_uavs=self.n_uavs, n_bs=self.n_bs)
         except MessageError as err:
             self.plans_rejected += 1
             self.last_error = str(err)
@@ -117,7 +116,7 @@ class SensingEmulator:
         eta = self.shares_for(slot)
         det = self._sensor.sense(slot, target_x, uav_xy_m, eta)
         for msg in detection_messages(det, t_s, eta):
-            self._bus.publish(self._keys.detections(msg.uav), encode_detection(msg))
+            self._bus.publish(self._keys.detections(msg.uav), encode(msg))
             self.detections_published += 1
         self._forget_old_plans(slot)
         return det
@@ -141,7 +140,7 @@ class SensingEmulator:
         """One `detection_set` per UAV of `draw_reports`' reports, stamped t_s (s)."""
         msgs = detection_set_messages(slot, t_s, [r.measurements for r in reports], uav_xy_m, eta)
         for msg in msgs:
-            self._bus.publish(self._keys.detections(msg.uav), encode_detection_set(msg))
+            self._bus.publish(self._keys.detections(msg.uav), encode(msg))
             self.detections_published += 1
         self._forget_old_plans(slot)
 

@@ -25,7 +25,7 @@ from typing import Protocol
 
 import numpy as np
 
-from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.model.motion import ConstantVelocity
 from isac_mission.types import FloatArray
 
 
@@ -106,8 +106,9 @@ class CvTarget:
                 raise ValueError(f"bounds_m must be two positive lengths, got {bounds_m!r}")
             if not (0 <= x0[0] <= self._bounds[0] and 0 <= x0[1] <= self._bounds[1]):
                 raise ValueError(f"x0 position {x0[:2].tolist()} is outside the area")
-        self._F = transition_matrix(dt_s)
-        self._W = process_noise(dt_s, kappa)
+        motion = ConstantVelocity(kappa)
+        self._F = motion.transition(dt_s)
+        self._W = motion.process_noise(dt_s)
         # W = kappa * kron(block, I2): factor the 2x2 block once (positive definite for dt > 0).
         block = np.array([[dt_s**3 / 3.0, dt_s**2 / 2.0], [dt_s**2 / 2.0, dt_s]])
         self._L = math.sqrt(kappa) * np.kron(np.linalg.cholesky(block), np.eye(2))

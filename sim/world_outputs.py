@@ -15,15 +15,7 @@ from isac_mission.bus import ZenohBus
 from isac_mission.model.detections import UavReport
 from isac_mission.timebase import UNPACED_SPEED, SlotTimeline, reached
 from isac_mission.types import FloatArray
-from isac_mission.wire import (
-    ClockMsg,
-    Keys,
-    TruthMsg,
-    TruthSetMsg,
-    encode_clock,
-    encode_truth,
-    encode_truth_set,
-)
+from isac_mission.wire import ClockMsg, Keys, TruthMsg, TruthSetMsg, encode
 
 
 class WorldOutputs:
@@ -43,7 +35,7 @@ class WorldOutputs:
 
     def publish_truth(self, n: int, t_s: float, x: FloatArray) -> None:
         """The target's true state x [4] (m, m/s) at slot n, time t_s (s)."""
-        self._bus.publish(self._keys.truth, encode_truth(TruthMsg(slot=n, t_s=t_s, target_x=x)))
+        self._bus.publish(self._keys.truth, encode(TruthMsg(slot=n, t_s=t_s, target_x=x)))
 
     def publish_truth_set(
         self, n: int, t_s: float, states: FloatArray, reports: list[UavReport]
@@ -53,7 +45,7 @@ class WorldOutputs:
         0, which has no reports)."""
         origins = tuple(tuple(int(o) for o in r.origin) for r in reports)
         msg = TruthSetMsg(slot=n, t_s=t_s, states=states, origins=origins)
-        self._bus.publish(self._keys.truth, encode_truth_set(msg))
+        self._bus.publish(self._keys.truth, encode(msg))
 
     def clock_due(self, now_s: float) -> bool:
         """True once the simulation time `now_s` (s) has reached the next periodic clock time."""
@@ -69,6 +61,6 @@ class WorldOutputs:
             speed=self._speed,
             mission_t0_s=mission_t0_s,
         )
-        self._bus.publish(self._keys.clock, encode_clock(msg))
+        self._bus.publish(self._keys.clock, encode(msg))
         grid = self._clock_grid
         self.next_clock_s = grid.slot_end_s(grid.slot_of(now_s) + 1)

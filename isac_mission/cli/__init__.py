@@ -4,7 +4,8 @@
 - `sweep`: `sweep`
 - `embedded`: `sim` (the world alone), and the world of `run` (`run_embedded`): the only module
   importing `sim`, and so the only one importing both `sim` and the service
-- `live`: `run`, `serve` (the service side of a live mission is in `mission`), `compile` (the
+- `live`: `run`, `serve` (their mission on the command line, its progress line and Ctrl-C, is in
+  `mission`; the service side is assembled by isac_mission/service/assembly.py), `compile` (the
   planner's IPOPT problems compiled into the cache, isac_mission/nlp_cache.py)
 - `view`: `view` (the console over traces) and the console of `run` / `serve`
 - `security`: `gen-certs`, `gen-users`

@@ -10,6 +10,7 @@ declares its range: `min=` / `max=` (integers) or a `number_check` callback (flo
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -207,16 +208,26 @@ PublicOpt = Annotated[
 def load_or_exit(path: Path, single_target_only: bool = False) -> Scenario:
     """Load a scenario or print its problem (one line; several problems one per line) and exit
     with status 2; with `single_target_only`, a multi-target scenario is refused too
-    (`single_target_problem`)."""
+    (`single_target_problem`). A deprecated section is one `deprecated:` line on stderr each
+    (the scenario still loads)."""
     from rich.markup import escape
 
-    try:
-        s = load_scenario(path)
-    except ConfigError as err:
-        err_console.print(
-            f"[bold red]invalid configuration:[/] {escape(str(err))}", highlight=False
-        )
-        raise typer.Exit(2) from None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DeprecationWarning)
+        try:
+            s = load_scenario(path)
+        except ConfigError as err:
+            err_console.print(
+                f"[bold red]invalid configuration:[/] {escape(str(err))}", highlight=False
+            )
+            raise typer.Exit(2) from None
+    for w in caught:
+        if issubclass(w.category, DeprecationWarning):
+            err_console.print(
+                f"[bold yellow]deprecated:[/] {escape(str(w.message))}", highlight=False
+            )
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     problem = single_target_problem(s) if single_target_only else None
     if problem is not None:
         err_console.print(

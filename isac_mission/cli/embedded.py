@@ -1,9 +1,10 @@
 """The simulator inside an `isac-mission` process: the only CLI module that imports `sim`.
 
 - `isac-mission sim`: the world alone (simulated vehicles, target, sensing, clock) on the bus;
-- embedded mode (`isac-mission run`, `run_embedded`): the world as a task beside the bridges and
-  the ground loop of `isac_mission.cli.mission`, over loopback UDP MAVLink and a Zenoh session the
-  ground side listens on. This is the only module that imports both `sim` and the service.
+- embedded mode (`isac-mission run`, `embedded_world`): the world beside the bridges and the ground
+  loop that `isac_mission.service.assembly` puts together, over loopback UDP MAVLink and a Zenoh
+  session the ground side listens on. This is the only module that imports both `sim` and the
+  service.
 
 `sim` and the service are imported inside the functions, so registering the commands (every
 `isac-mission` start) loads neither.
@@ -42,10 +43,11 @@ from isac_mission.config import ImpairmentConfig, apply_impairment_flags
 from isac_mission.errors import ConfigError
 
 if TYPE_CHECKING:
-    from isac_mission.cli.mission import LiveOptions, LiveResult
     from isac_mission.config import Scenario
     from isac_mission.records.multi_target import MultiTargetSlot
+    from isac_mission.service.assembly import LiveOptions, WorldBeside
     from isac_mission.service.ground.report import SlotEvent
+    from isac_mission.service.mission_result import LiveResult
 
 
 @app.command("sim")
@@ -200,30 +202,23 @@ def check_link_outages(specs: Sequence[str], n_uavs: int) -> None:
     parse_outages(specs, n_uavs)
 
 
-async def run_embedded(
-    s: Scenario,
-    opts: LiveOptions,
-    stop: asyncio.Event,
-    on_slot: Callable[[SlotEvent], None] | None = None,
-    on_status: Callable[[str], None] | None = None,
-    on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
-    leave: asyncio.Event | None = None,
-) -> LiveResult:
-    """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh
-    (on_tracks, leave: fly_mission's)."""
-    from isac_mission.bus import ZenohBus
+def embedded_world(s: Scenario, opts: LiveOptions) -> WorldBeside:
+    """The simulated world of `run`, beside the service: it connects to the ground's endpoint
+    (logging in as the world role), flies `simulate`'s truth for the seed, and the tracker
+    starts where `simulate`'s does."""
     from isac_mission.bus.security import secured_settings
-    from isac_mission.cli.mission import fly_mission, ground_endpoint
     from isac_mission.model.run_noise import draw_multi_target_noise, draw_run_noise
+    from isac_mission.service.assembly import WorldBeside, ground_endpoint
     from sim.world import run_world
     from sim.world_options import WorldOptions, parse_outages
 
-    world_stop = asyncio.Event()
-    zenoh_cfg, endpoint = s.security.zenoh, ground_endpoint(s, opts)
-    hub = secured_settings(zenoh_cfg, s.mission_id, "ground", listen=(endpoint,))
     # The world logs in as the world role, with its password from the hub's own users file.
     world_bus = secured_settings(
-        zenoh_cfg, s.mission_id, "world", connect=(endpoint,), login_from_users_file=True
+        s.security.zenoh,
+        s.mission_id,
+        "world",
+        connect=(ground_endpoint(s, opts),),
+        login_from_users_file=True,
     )
     # The offline twin: the world's target flies `simulate`'s true path for this seed, and the
     # tracker starts from simulate's estimate x0 + e (sim/world_assembly.make_target).
@@ -246,13 +241,23 @@ async def run_embedded(
         link_outages=parse_outages(opts.link_outages, s.M),
         impairment=world_impairment(s, opts.link_impairment),
     )
-    with ZenohBus.open(hub) as bus:
-        world = asyncio.create_task(run_world(s, world_opts, world_stop))
-        try:
-            return await fly_mission(
-                s, opts, bus, stop, on_slot, on_status, initial_x, on_tracks, initial_errors, leave
-            )
-        finally:
-            world_stop.set()
-            async with asyncio.timeout(30.0):
-                await world
+    return WorldBeside(lambda stop: run_world(s, world_opts, stop), initial_x, initial_errors)
+
+
+async def run_embedded(
+    s: Scenario,
+    opts: LiveOptions,
+    stop: asyncio.Event,
+    on_slot: Callable[[SlotEvent], None] | None = None,
+    on_status: Callable[[str], None] | None = None,
+    on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
+    leave: asyncio.Event | None = None,
+) -> LiveResult:
+    """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh
+    (`run_mission` with `embedded_world`, its ports given as plain events and callbacks, for
+    scripts and tests; `leave` None: the landing is always waited for)."""
+    from isac_mission.service.assembly import Progress, Stopping, run_mission
+
+    stopping = Stopping(stop, leave or asyncio.Event())
+    progress = Progress(on_status, on_slot, on_tracks)
+    return await run_mission(s, opts, stopping, progress, embedded_world(s, opts))

@@ -1,14 +1,15 @@
 """`isac-mission run` (world, bridges and ground loop in one process), `serve` (bridges and
-ground loop only) and `compile`: their options, live progress and Ctrl-C; the end of the
-mission is printed by `cli/summary.py`."""
+ground loop only) and `compile`: their options, checked and resolved into the service's settings
+(`isac_mission.service.assembly.LiveOptions`); the mission, its progress line and Ctrl-C are
+`cli/mission.py`'s, the end of the mission is printed by `cli/summary.py`."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.table import Table
 
 from isac_mission.cli.app import (
     ConfigArg,
@@ -41,9 +42,8 @@ from isac_mission.planning.registry import methods_help
 from isac_mission.quiet import quiet_highs_banner
 
 if TYPE_CHECKING:
-    from isac_mission.cli.mission import LiveOptions
     from isac_mission.config import Scenario
-    from isac_mission.records.multi_target import MultiTargetSlot
+    from isac_mission.service.assembly import LiveOptions
 
 
 def resolved_method(method: str | None, s: Scenario, out_dir: Path, resume: bool) -> str:
@@ -92,64 +92,93 @@ def resume_problem(s: Scenario, trace: Path) -> str | None:
     return None
 
 
-def _live(
-    config: Path,
-    *,
-    serve_only: bool,
-    speed: float,
-    lockstep: bool,
-    method: str | None,
-    seed: int | None,
-    out: Path | None,
-    zenoh_listen: str | None,
-    zenoh_connect: list[str],
-    mavlink_base_port: int | None,
-    mavlink_local_base_port: int | None,
-    gcs_port: int | None,
-    gcs_local_base_port: int | None,
-    resume: bool,
-    plan_budget: float,
-    link_outages: list[str],
-    link_impairment: list[str] | None = None,
-    vehicle_links: list[str] | None = None,
-    serve_console: bool = False,
-    console_address: str | None = None,
-    console_public: bool = False,
-    port_offset: int = 0,
-) -> None:
-    """Shared body of `run` and `serve`: the console (when serve_console: on console_address,
-    default 127.0.0.1:8080 + port_offset), live progress, summary, plots; exit 0 on
-    SIGINT/SIGTERM. Bad input (an option, a port in use, a finished trace to resume) exits 2
-    with one line, before anything is opened."""
+@dataclass(frozen=True)
+class LiveCommand:
+    """What `run` or `serve` was given, before the scenario resolves it (None: the default).
+
+    serve_only: `serve` (the world runs elsewhere) rather than `run`; method: `--method`
+    (`resolved_method`); out: the output folder (default out/run-<mission> or
+    out/serve-<mission>); zenoh_listen, zenoh_connect, the MAVLink and ground-station ports and
+    port_offset: `cli/ports.py`'s `mission_ports`; plan_budget_s: wall seconds a slot's planning
+    may take (<= 0: no limit); link_outages, link_impairment: the embedded world's
+    `--inject-link-loss` and `--impair-link`; vehicle_links: `serve --vehicle-link`;
+    serve_console, console_address, console_public: the live console (default address
+    127.0.0.1:8080 + port_offset)."""
+
+    config: Path
+    serve_only: bool
+    speed: float = 1.0
+    lockstep: bool = False
+    method: str | None = None
+    seed: int | None = None
+    out: Path | None = None
+    zenoh_listen: str | None = None
+    zenoh_connect: tuple[str, ...] = ()
+    mavlink_base_port: int | None = None
+    mavlink_local_base_port: int | None = None
+    gcs_port: int | None = None
+    gcs_local_base_port: int | None = None
+    port_offset: int = 0
+    resume: bool = False
+    plan_budget_s: float = 1.0
+    link_outages: tuple[str, ...] = ()
+    link_impairment: tuple[str, ...] = ()
+    vehicle_links: tuple[str, ...] = ()
+    serve_console: bool = False
+    console_address: str | None = None
+    console_public: bool = False
+
+
+def _live(command: LiveCommand) -> None:
+    """Shared body of `run` and `serve`: the options checked and resolved into the service's
+    settings, then the mission with its console, live progress, summary and plots
+    (`cli/mission.py`); exit 0 on SIGINT/SIGTERM. Bad input (an option, a port in use, a finished
+    trace to resume) exits 2 with one line, before anything is opened."""
+    from isac_mission.cli.mission import fly
+
+    s = load_or_exit(command.config)
+    opts, console_address = _checked_options(command, s)
+    fly(
+        s,
+        opts,
+        embedded=not command.serve_only,
+        console_address=console_address if command.serve_console else None,
+        console_public=command.console_public,
+    )
+
+
+def _checked_options(command: LiveCommand, s: Scenario) -> tuple[LiveOptions, str]:
+    """`command` checked against `s` and resolved into the service's settings, with the live
+    console's address; bad input exits 2 with one line. Sets up logging and quiets the HiGHS
+    banner once the ports are known to be free."""
     import logging
 
     from isac_mission.bus.session import check_listen_endpoints
-    from isac_mission.cli.mission import LiveOptions
     from isac_mission.errors import PortInUseError
     from isac_mission.planning.registry import METHODS
+    from isac_mission.service.assembly import LiveOptions
 
-    s = load_or_exit(config)
     try:
         ports = mission_ports(
             s,
-            port_offset,
-            zenoh=zenoh_listen,
-            console=console_address,
-            mavlink_base_port=mavlink_base_port,
-            mavlink_local_base_port=mavlink_local_base_port,
-            gcs_port=gcs_port,
-            gcs_local_base_port=gcs_local_base_port,
+            command.port_offset,
+            zenoh=command.zenoh_listen,
+            console=command.console_address,
+            mavlink_base_port=command.mavlink_base_port,
+            mavlink_local_base_port=command.mavlink_local_base_port,
+            gcs_port=command.gcs_port,
+            gcs_local_base_port=command.gcs_local_base_port,
         )
     except PortOptionError as err:
         err_console.print(str(err), highlight=False, markup=False)
         raise typer.Exit(2) from None
     out_dir = (
-        out
-        if out is not None
-        else Path("out") / f"{'serve' if serve_only else 'run'}-{s.mission_id}"
+        command.out
+        if command.out is not None
+        else Path("out") / f"{'serve' if command.serve_only else 'run'}-{s.mission_id}"
     )
     try:
-        method = resolved_method(method, s, out_dir, resume)
+        method = resolved_method(command.method, s, out_dir, command.resume)
     except ValueError as err:
         err_console.print(f"--method: {err}", highlight=False)
         raise typer.Exit(2) from None
@@ -165,7 +194,7 @@ def _live(
         except ConfigError as err:
             err_console.print(f"--method: {err}", highlight=False)
             raise typer.Exit(2) from None
-    if resume:
+    if command.resume:
         problem = resume_problem(s, out_dir / f"trace_{method}.jsonl")
         if problem is not None:
             err_console.print(f"--resume: {problem}", highlight=False, markup=False)
@@ -173,195 +202,52 @@ def _live(
     try:
         check_listen_endpoints((ports.zenoh,))
     except PortInUseError as err:
-        hint = ZENOH_PORT_HINT if zenoh_listen is None else ZENOH_LISTEN_HINT
+        hint = ZENOH_PORT_HINT if command.zenoh_listen is None else ZENOH_LISTEN_HINT
         err_console.print(f"{err}; {hint}", highlight=False, markup=False)
         raise typer.Exit(2) from None
     quiet_highs_banner()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    if link_outages:
+    if command.link_outages:
         from isac_mission.cli.embedded import check_link_outages
 
         try:
-            check_link_outages(link_outages, s.M)
+            check_link_outages(command.link_outages, s.M)
         except ValueError as err:
             err_console.print(f"--inject-link-loss: {err}", highlight=False)
             raise typer.Exit(2) from None
-    if link_impairment:
+    if command.link_impairment:
         from isac_mission.cli.embedded import world_impairment
         from isac_mission.errors import ConfigError
 
         try:
-            world_impairment(s, link_impairment)
+            world_impairment(s, command.link_impairment)
         except ConfigError as err:
             err_console.print(f"[bold red]invalid option[/] {err}", highlight=False)
             raise typer.Exit(2) from None
-    if vehicle_links:
+    if command.vehicle_links:
         from isac_mission.mavwire.serial_link import parse_vehicle_links
 
         try:
-            parse_vehicle_links(vehicle_links, s.M)
+            parse_vehicle_links(command.vehicle_links, s.M)
         except ValueError as err:
             err_console.print(f"--vehicle-link: {err}", highlight=False)
             raise typer.Exit(2) from None
     opts = LiveOptions(
-        speed=speed,
-        lockstep=lockstep,
+        speed=command.speed,
+        lockstep=command.lockstep,
         method=method,
-        seed=seed,
+        seed=command.seed,
         out_dir=out_dir,
         zenoh_endpoint=ports.zenoh,
-        zenoh_connect=tuple(zenoh_connect),
+        zenoh_connect=command.zenoh_connect,
         **ports.mavlink,
-        vehicle_links=tuple(vehicle_links or ()),
-        resume=resume,
-        plan_budget_s=plan_budget if plan_budget > 0 else None,
-        link_outages=tuple(link_outages),
-        link_impairment=tuple(link_impairment or ()),
+        vehicle_links=command.vehicle_links,
+        resume=command.resume,
+        plan_budget_s=command.plan_budget_s if command.plan_budget_s > 0 else None,
+        link_outages=command.link_outages,
+        link_impairment=command.link_impairment,
     )
-    console_server = None
-    if serve_console:
-        from isac_mission.cli.mission import ground_endpoint
-        from isac_mission.cli.view import start_live_console
-
-        console_server = start_live_console(
-            s, opts.method, ground_endpoint(s, opts), ports.console, public=console_public
-        )
-    code = 0
-    try:
-        _fly(s, opts, serve_only, out_dir)
-    except typer.Exit as done:
-        code = done.exit_code
-        raise
-    except BaseException:
-        code = 1
-        raise
-    finally:
-        if console_server is not None:
-            console_server.stop()
-        _wait_for_the_planners(code)
-
-
-PLANNER_DRAIN_S = 60.0
-"""How long `run` and `serve` wait at exit for a plan still being solved (wall seconds): a
-timed-out plan's solve ends within IPOPT's iteration cap, seconds even for a large fleet."""
-
-
-def _wait_for_the_planners(code: int) -> None:
-    """No planner thread may be solving when the interpreter shuts down (a daemon thread in IPOPT
-    then aborts the process: service/ground/planner_thread.py). Wait for them, bounded; past the
-    bound, flush and leave at once with `code` (the trace and summary are already written)."""
-    import os
-    import sys
-
-    from isac_mission.service.ground.planner_thread import drain_planner_threads, planner_threads
-
-    if not planner_threads():
-        return
-    err_console.print("waiting for the planner to finish a solve before exiting")
-    if drain_planner_threads(PLANNER_DRAIN_S):
-        return
-    err_console.print(
-        f"a planner thread is still solving after {PLANNER_DRAIN_S:g} s; exiting without it"
-    )
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
-
-
-def _fly(s: Scenario, opts: LiveOptions, serve_only: bool, out_dir: Path) -> None:
-    """The mission with its live progress line, then the summary table and the plots."""
-    import asyncio
-    import signal
-
-    import numpy as np
-    from rich.live import Live
-
-    from isac_mission.cli.mission import TAKING_OFF, LiveResult, run_serve
-    from isac_mission.cli.stopping import StopRequests
-    from isac_mission.cli.summary import print_summary
-    from isac_mission.errors import IsacError, PortInUseError
-    from isac_mission.service.ground.report import SlotEvent
-
-    status = {"phase": "starting", "line": ""}
-    last_slot = [0]
-    took_off = [False]
-
-    def render() -> Table:
-        t = Table.grid(padding=(0, 2))
-        t.add_row(f"[bold]{s.mission_id}[/] {opts.method}", status["phase"])
-        if status["line"]:
-            t.add_row("", status["line"])
-        return t
-
-    with Live(render(), console=console, refresh_per_second=8, transient=False) as live:
-
-        def on_status(msg: str) -> None:
-            status["phase"] = msg
-            took_off[0] = took_off[0] or msg == TAKING_OFF
-            live.update(render())
-
-        def on_tracks(o: MultiTargetSlot, latency_s: float) -> None:
-            last_slot[0] = o.slot
-            confirmed = sum(t.confirmed for t in o.tracks)
-            present = int(np.all(np.isfinite(o.truth), axis=1).sum())
-            status["line"] = (
-                f"slot {o.slot:3d}/{s.N}  targets {present}  tracks {confirmed} confirmed, "
-                f"{len(o.tracks) - confirmed} tentative  planned for {o.planned_for or '-'}  "
-                f"solve {o.plan.report.solve_s * 1e3:6.1f} ms  det->plan {latency_s * 1e3:6.1f} ms"
-                f"  status {o.plan.report.status}"
-            )
-            live.update(render())
-
-        def on_slot(ev: SlotEvent) -> None:
-            r = ev.record
-            last_slot[0] = r.slot
-            err = "-" if ev.position_error_m is None else f"{ev.position_error_m:6.2f} m"
-            links = " ".join(f"{m}:{v}" for m, v in sorted(ev.links.items())) or "-"
-            status["line"] = (
-                f"slot {r.slot:3d}/{s.N}  tr(PCRB) {r.pcrb_trace:8.4f}  position error {err}  "
-                f"solve {r.solve_ms:6.1f} ms  det->plan {ev.latency_s * 1e3:6.1f} ms  "
-                f"status {r.status}  links {links}"
-            )
-            live.update(render())
-
-        requests = StopRequests(s.H, opts.speed, embedded=not serve_only)
-
-        async def main_task() -> object:
-            stop, leave = asyncio.Event(), asyncio.Event()
-            loop = asyncio.get_running_loop()
-
-            def on_signal(name: str) -> None:
-                action, line = requests.on_signal(name, last_slot[0], s.N, took_off[0])
-                live.console.print(line, highlight=False)
-                if action == "stop":
-                    stop.set()
-                elif action == "leave":
-                    leave.set()
-
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                loop.add_signal_handler(sig, on_signal, sig.name)
-            try:
-                if serve_only:
-                    return await run_serve(s, opts, stop, on_slot, on_status, on_tracks, leave)
-                from isac_mission.cli.embedded import run_embedded
-
-                return await run_embedded(s, opts, stop, on_slot, on_status, on_tracks, leave)
-            finally:
-                for sig in (signal.SIGINT, signal.SIGTERM):
-                    loop.remove_signal_handler(sig)
-
-        try:
-            result = asyncio.run(main_task())
-        except PortInUseError as err:  # taken since _live's check: as busy as it was then
-            live.stop()
-            err_console.print(f"{err}; {ZENOH_PORT_HINT}", highlight=False, markup=False)
-            raise typer.Exit(2) from None
-        except IsacError as err:
-            err_console.print(f"[bold red]mission failed:[/] {err}")
-            raise typer.Exit(1) from None
-    console.print()
-    assert isinstance(result, LiveResult)
-    print_summary(s, opts, result, out_dir, last_slot[0])
+    return opts, ports.console
 
 
 MethodOpt = Annotated[
@@ -405,27 +291,27 @@ def run(
     """The live system in one process: simulated vehicles (MAVLink), target and sensing, MAVLink
     bridges and the ground loop, over real loopback UDP and Zenoh."""
     _live(
-        config,
-        serve_only=False,
-        speed=speed,
-        lockstep=lockstep,
-        method=method,
-        seed=seed,
-        out=out,
-        zenoh_listen=zenoh_listen,
-        zenoh_connect=[],
-        mavlink_base_port=mavlink_base_port,
-        mavlink_local_base_port=mavlink_local_base_port,
-        gcs_port=gcs_port,
-        gcs_local_base_port=gcs_local_base_port,
-        resume=False,
-        plan_budget=plan_budget,
-        link_outages=inject_link_loss or [],
-        link_impairment=impair_link or [],
-        serve_console=not no_console,
-        console_address=console_address,
-        console_public=console_public,
-        port_offset=port_offset,
+        LiveCommand(
+            config,
+            serve_only=False,
+            speed=speed,
+            lockstep=lockstep,
+            method=method,
+            seed=seed,
+            out=out,
+            zenoh_listen=zenoh_listen,
+            mavlink_base_port=mavlink_base_port,
+            mavlink_local_base_port=mavlink_local_base_port,
+            gcs_port=gcs_port,
+            gcs_local_base_port=gcs_local_base_port,
+            port_offset=port_offset,
+            plan_budget_s=plan_budget,
+            link_outages=tuple(inject_link_loss or ()),
+            link_impairment=tuple(impair_link or ()),
+            serve_console=not no_console,
+            console_address=console_address,
+            console_public=console_public,
+        )
     )
 
 
@@ -467,27 +353,22 @@ def serve(
     """The ground loop and the MAVLink bridges, for vehicles and sensing that run elsewhere
     (`isac-mission sim`, or real UAVs). The clock comes from the world over Zenoh."""
     _live(
-        config,
-        serve_only=True,
-        speed=1.0,
-        lockstep=False,
-        method=method,
-        seed=None,
-        out=out,
-        zenoh_listen=zenoh_listen,
-        zenoh_connect=zenoh_connect or [],
-        mavlink_base_port=mavlink_base_port,
-        mavlink_local_base_port=None,
-        gcs_port=None,
-        gcs_local_base_port=None,
-        resume=resume,
-        plan_budget=plan_budget,
-        link_outages=[],
-        vehicle_links=vehicle_link,
-        serve_console=not no_console,
-        console_address=console_address,
-        console_public=console_public,
-        port_offset=port_offset,
+        LiveCommand(
+            config,
+            serve_only=True,
+            method=method,
+            out=out,
+            zenoh_listen=zenoh_listen,
+            zenoh_connect=tuple(zenoh_connect or ()),
+            mavlink_base_port=mavlink_base_port,
+            port_offset=port_offset,
+            resume=resume,
+            plan_budget_s=plan_budget,
+            vehicle_links=tuple(vehicle_link or ()),
+            serve_console=not no_console,
+            console_address=console_address,
+            console_public=console_public,
+        )
     )
 
 

@@ -43,23 +43,39 @@ def check_config(config: ConfigArg) -> None:
         ("radar gain c0 (SNR^s = c0/d^4)", f"{s.radar_gain:.3e}", "m^4"),
         ("BS positions", str(s.bs_xy.round(1).tolist()), "m"),
     ]
+    rows += [
+        (
+            f"target {t.name}",
+            f"{t.motion}, slots {t.first_slot}-{t.last_slot}, "
+            f"{'known' if t.prior_known else 'unknown'}",
+            "",
+        )
+        for t in s.targets
+    ]
+    rows += [
+        ("kappa (target_motion)", f"{s.kappa:g}", "m^2/s^3"),
+        ("a_T (target_motion)", f"{s.a_target:g}", "m/s^2"),
+        ("tracker", _tracker_choice(s), ""),
+    ]
     if s.multi_target and s.detection is not None:
         d = s.detection
-        rows += [
-            (
-                f"target {t.name}",
-                f"{t.motion}, slots {t.first_slot}-{t.last_slot}, "
-                f"{'known' if t.prior_known else 'unknown'}",
-                "",
-            )
-            for t in s.targets
-        ]
         rows.append(
             ("detection", f"{d.model}, {d.false_alarms_per_slot:g} false alarms/UAV/slot", "")
         )
     for row in rows:
         table.add_row(*row)
     console.print(table)
+
+
+def _tracker_choice(s: Scenario) -> str:
+    """Which tracker `s` uses and why (tracker.kind; docs/model.md, "Several targets")."""
+    from isac_mission.config import multi_target_reasons
+
+    if not s.multi_target:
+        return f"labelled EKF (kind {s.tracker_kind})"
+    reasons = multi_target_reasons(s)
+    why = f": {', '.join(reasons)}" if s.tracker_kind == "auto" and reasons else ""
+    return f"multi-target {s.multi_tracker.association.upper()} (kind {s.tracker_kind}{why})"
 
 
 @app.command()

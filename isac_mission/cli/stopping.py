@@ -4,13 +4,17 @@ The first request stops the mission after the slot in flight and lands the fleet
 at once with how long the landing takes; the second stops waiting for touchdown (the vehicles
 were sent LAND and finish it on their own: PX4's LAND needs no ground station) and the command
 exits; further ones are refused with a word, not silently. Pure: the CLI's signal handler calls
-`StopRequests.on_signal` and acts on the answer (docs/service.md, "Stopping a mission").
+`StopRequests.on_signal` and acts on the answer through the service's port (`Stopping`, with the
+service's landing budget `land_budget_s`: isac_mission/service/assembly.py; docs/service.md,
+"Stopping a mission").
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Literal
+
+from isac_mission.service.assembly import land_budget_s
 
 LAND_FAST_MPS = 1.5
 """Descent rate of PX4's LAND above `LAND_SLOW_BELOW_M` (MPC_Z_VEL_MAX_DN's default), m/s."""
@@ -28,12 +32,6 @@ def landing_time_s(height_m: float) -> float:
     fast = max(h - LAND_SLOW_BELOW_M, 0.0) / LAND_FAST_MPS
     slow = min(h, LAND_SLOW_BELOW_M) / LAND_SLOW_MPS
     return fast + slow + DISARM_AFTER_LAND_S
-
-
-def land_budget_s(height_m: float, speed: float) -> float:
-    """Wall seconds the service waits for the fleet to land from `height_m` (m) at `speed`
-    (simulation seconds per wall second): about 1 m/s of descent, three times over, plus 60 s."""
-    return 60.0 + 3.0 * height_m / max(speed, 1e-3)
 
 
 Action = Literal["stop", "leave", "refuse"]

@@ -11,8 +11,9 @@ from rich.table import Table
 from isac_mission.cli.app import console
 
 if TYPE_CHECKING:
-    from isac_mission.cli.mission import LiveOptions, LiveResult
     from isac_mission.config import Scenario
+    from isac_mission.service.assembly import LiveOptions
+    from isac_mission.service.mission_result import LiveResult
 
 
 def print_summary(
@@ -20,8 +21,8 @@ def print_summary(
 ) -> None:
     """Everything printed after the mission (see the module doc); last_slot: the last slot
     traced, as the progress line last showed it."""
-    from isac_mission.cli.mission import summarize_live
     from isac_mission.nlp_cache import events_summary
+    from isac_mission.service.mission_result import summarize_live
 
     ahead = f"built for {s.M} vehicles and, ahead, for {result.sizes_built_ahead}"
     for line in [ahead, *events_summary(result.planner_problems)]:

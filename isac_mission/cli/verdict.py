@@ -29,7 +29,7 @@ COUNTER_REASONS = {
     "plans dropped after a stall": "the ground loop's process stalled",
     "plans invalid": "plans the bridges could not apply",
     "link losses": "vehicle links lost",
-    "link interruptions": "gaps in a vehicle's position stream",
+    "link interruptions": "gaps in a vehicle's position stream or in the bridge's setpoints to it",
 }
 """Counters (ground loop's and fleet's) that degrade a mission when non-zero."""
 

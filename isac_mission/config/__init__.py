@@ -5,8 +5,13 @@ shipped scenario: `load_scenario("paper")`) validates once and returns a frozen 
 units (W, Hz, m, s, linear ratios) under the paper's symbols. Every choice the paper leaves open
 is a field whose description points at docs/model.md.
 
-Modules: `units` (dB/dBm), `sections` (timing ... planner), `signing` (MAVLink signing and its
-key), `security` (Zenoh users, roles, TLS), `scenario` (`ScenarioFile`, `Scenario`), `resolve`
+One schema (docs/decisions/0001-one-scenario-schema.md): the targets as a list under `targets:`,
+their motion under `target_motion:`, one `tracker:` section (`kind`, and the multi-target
+tracker under `multi:`); the deprecated `target:` and `multi_target:` are read until 0.2.0.
+
+Modules: `units` (dB/dBm), `sections` (timing ... planner, the tracker and the targets' motion),
+`targets` (`targets:` entries, `detection:`), `signing` (MAVLink signing and its key),
+`security` (Zenoh users, roles, TLS), `scenario` (`ScenarioFile`, `Scenario`), `resolve`
 (derived constants and cross-field checks), `loading` (files, mappings, names).
 """
 
@@ -26,14 +31,22 @@ from isac_mission.config.loading import (
     scenario_path,
 )
 from isac_mission.config.resolve import radar_crb_alphas, random_bs_layout, resolve
-from isac_mission.config.scenario import Scenario, ScenarioFile, single_target_problem
+from isac_mission.config.scenario import (
+    SCHEMA_REMOVAL_VERSION,
+    Scenario,
+    ScenarioFile,
+    multi_target_reasons,
+    single_target_problem,
+)
 from isac_mission.config.sections import (
     AreaConfig,
     BaseStationConfig,
+    MultiTrackerConfig,
     PlannerConfig,
     RadioConfig,
     SensingConfig,
     TargetConfig,
+    TargetMotionConfig,
     TimingConfig,
     TrackerConfig,
     UavConfig,
@@ -53,22 +66,26 @@ from isac_mission.config.signing import (
     MavlinkSigningKey,
     mavlink_signing_key,
 )
+from isac_mission.config.targets import DetectionConfig, TargetEntry
 from isac_mission.config.units import SPEED_OF_LIGHT_MPS, db_to_linear, dbm_to_w
 
 __all__ = [
     "DEFAULT_SIGNING_KEY_ENV",
     "MIN_PASSPHRASE_CHARS",
     "SCENARIOS_DIR",
+    "SCHEMA_REMOVAL_VERSION",
     "SIGNING_KEY_BYTES",
     "SPEED_OF_LIGHT_MPS",
     "AreaConfig",
     "BaseStationConfig",
     "ChannelImpairmentConfig",
+    "DetectionConfig",
     "ImpairmentConfig",
     "LinkImpairmentConfig",
     "LinksConfig",
     "MavlinkSigningConfig",
     "MavlinkSigningKey",
+    "MultiTrackerConfig",
     "PlannerConfig",
     "RadioConfig",
     "Scenario",
@@ -76,6 +93,8 @@ __all__ = [
     "SecurityConfig",
     "SensingConfig",
     "TargetConfig",
+    "TargetEntry",
+    "TargetMotionConfig",
     "TimingConfig",
     "TrackerConfig",
     "UavConfig",
@@ -88,6 +107,7 @@ __all__ = [
     "dbm_to_w",
     "load_scenario",
     "mavlink_signing_key",
+    "multi_target_reasons",
     "parse_scenario",
     "radar_crb_alphas",
     "random_bs_layout",

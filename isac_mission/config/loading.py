@@ -1,8 +1,11 @@
 """Loading: a YAML file, a mapping, or a scenario shipped with the package (by name) to a
-`Scenario`; a `ValidationError` becomes one line per field (`file: radio.bandwidth_hz: ...`)."""
+`Scenario`; a `ValidationError` becomes one line per field (`file: radio.bandwidth_hz: ...`), and
+a deprecated section one DeprecationWarning (`file: target: is deprecated: use targets: ...`)."""
 
 from __future__ import annotations
 
+import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +19,9 @@ from isac_mission.errors import ConfigError
 
 
 def parse_scenario(data: Any, source: str = "<config>") -> Scenario:
-    """Validate a mapping (as read from YAML) and resolve it. Raises ConfigError."""
+    """Validate a mapping (as read from YAML) and resolve it. Raises ConfigError. Warns
+    (DeprecationWarning, attributed to the first caller outside the package) once per deprecated
+    section the mapping uses (`ScenarioFile.deprecations`)."""
     if not isinstance(data, dict):
         raise ConfigError(
             f"{source}: the file must hold a mapping of sections, got {type(data).__name__}"
@@ -25,12 +30,26 @@ def parse_scenario(data: Any, source: str = "<config>") -> Scenario:
         spec = ScenarioFile.model_validate(data)
     except ValidationError as err:
         raise ConfigError(validation_lines(err, source)) from None
+    for message in spec.deprecations():
+        warnings.warn(f"{source}: {message}", DeprecationWarning, stacklevel=_outside_package())
     try:
         return resolve(spec)
     except ConfigError as err:
         raise ConfigError(
             "\n".join(f"{source}: {line}" for line in str(err).splitlines())
         ) from None
+
+
+def _outside_package() -> int:
+    """The stacklevel of `warnings.warn`, called from the function that calls this one, that
+    names the first frame outside isac_mission (the user's script or the test that loaded the
+    scenario: Python shows a DeprecationWarning by default only there)."""
+    level, frame = 2, sys._getframe(2)
+    while frame.f_back is not None and frame.f_globals.get("__name__", "").startswith(
+        "isac_mission."
+    ):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "scenarios"

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from isac_mission.config.scenario import Scenario, ScenarioFile
+from isac_mission.config.scenario import Scenario, ScenarioFile, multi_target_reasons
 from isac_mission.config.signing import mavlink_signing_key
 from isac_mission.config.targets import DetectionSpec, TargetSpec
 from isac_mission.config.units import SPEED_OF_LIGHT_MPS, db_to_linear, dbm_to_w
@@ -37,11 +37,16 @@ def random_bs_layout(count: int, area_m: FloatArray, seed: int) -> FloatArray:
 
 
 def resolve(spec: ScenarioFile) -> Scenario:
-    """Convert a validated file to SI units and derive the paper's constants.
+    """Convert a validated file to SI units and derive the paper's constants. A file with the
+    deprecated sections (`target:`, `multi_target:`) is read in the one schema
+    (`ScenarioFile.in_one_schema`); `parse_scenario` is what warns about them.
 
     Raises ConfigError for cross-field problems (UAVs closer than D_s, out of control range, ...).
     """
-    radio, bs, uav, tgt, sens = spec.radio, spec.base_stations, spec.uavs, spec.target, spec.sensing
+    single_section = spec.target is not None and "targets" not in spec.model_fields_set
+    spec = spec.in_one_schema()
+    radio, bs, uav, sens = spec.radio, spec.base_stations, spec.uavs, spec.sensing
+    motion = spec.target_motion
     wavelength = SPEED_OF_LIGHT_MPS / radio.carrier_hz
     beta0 = (
         db_to_linear(radio.ref_gain_db)
@@ -99,8 +104,8 @@ def resolve(spec: ScenarioFile) -> Scenario:
         d_safe=uav.safe_distance_m,
         a_max=uav.max_accel_mps2,
         x0=np.asarray(targets[0].x0, dtype=float),
-        kappa=tgt.process_noise_intensity,
-        a_target=tgt.max_accel_mps2,
+        kappa=motion.process_noise_intensity,
+        a_target=motion.max_accel_mps2,
         rcs_m2=targets[0].rcs_m2,
         sensing_model=sens.model,
         Ts=sens.cpi_s,
@@ -118,36 +123,22 @@ def resolve(spec: ScenarioFile) -> Scenario:
         links=spec.links,
         targets=targets,
         detection=resolve_detection(spec),
-        multi_tracker=spec.multi_target,
+        multi_tracker=spec.tracker.multi,
+        tracker_kind=spec.tracker.kind,
     )
-    problems = _cross_field_problems(scenario, n_slots)
+    problems = _cross_field_problems(scenario, n_slots, single_section)
     if problems:
         raise ConfigError("\n".join(problems))
     return scenario
 
 
 def resolve_targets(spec: ScenarioFile, n_slots: int) -> tuple[TargetSpec, ...]:
-    """The scenario's targets: the `targets:` list, or the one under `target:` (known, in the
-    scene from slot 0 to N). A target's slots are those from ceil(appears_s / dt) to
-    floor(leaves_s / dt) (N at most)."""
+    """The scenario's targets, `targets:` in order (the deprecated `target:` read as its one
+    entry). A target's slots are those from ceil(appears_s / dt) to floor(leaves_s / dt) (N at
+    most)."""
     dt = spec.timing.slot_s
-    if spec.targets is None:
-        t = spec.target
-        return (
-            TargetSpec(
-                "target-0",
-                t.initial_state,
-                db_to_linear(t.rcs_dbsm),
-                "constant_velocity",
-                0.0,
-                (),
-                0,
-                n_slots,
-                True,
-            ),
-        )
     out = []
-    for i, e in enumerate(spec.targets):
+    for i, e in enumerate(spec.in_one_schema().targets):
         first = math.ceil(e.appears_s / dt - 1e-9)
         last = n_slots if e.leaves_s is None else min(n_slots, math.floor(e.leaves_s / dt + 1e-9))
         out.append(
@@ -181,8 +172,9 @@ def resolve_detection(spec: ScenarioFile) -> DetectionSpec:
     )
 
 
-def _cross_field_problems(s: Scenario, n_slots: float) -> list[str]:
-    """Feasibility checks that involve several sections; one message per problem."""
+def _cross_field_problems(s: Scenario, n_slots: float, single_section: bool = False) -> list[str]:
+    """Feasibility checks that involve several sections; one message per problem. With
+    `single_section` the one target came from the deprecated `target:`, and is named so."""
     out: list[str] = []
     if abs(n_slots - round(n_slots)) > 1e-9:
         out.append(f"timing: duration_s / slot_s must be a whole number of slots (got {n_slots})")
@@ -221,7 +213,7 @@ def _cross_field_problems(s: Scenario, n_slots: float) -> list[str]:
             out.append(f"uavs.battery.capacity_wh_by_uav: no UAV {m} (M = {s.M})")
     many = len(s.targets) > 1 or s.targets[0].first_slot > 0
     for i, t in enumerate(s.targets):
-        where = f"targets[{i}].initial_state" if many else "target.initial_state"
+        where = "target.initial_state" if single_section else f"targets[{i}].initial_state"
         p = np.asarray(t.x0[:2])
         if not (0 <= p[0] <= s.area[0] and 0 <= p[1] <= s.area[1]):
             out.append(f"{where}: position {p.tolist()} is outside the area")
@@ -237,4 +229,11 @@ def _cross_field_problems(s: Scenario, n_slots: float) -> list[str]:
                     f"uavs.start_xy_m[{m}]: {gap:.1f} m from {whose} start, closer than "
                     f"safe_distance_m = {s.d_safe} m"
                 )
+    reasons = multi_target_reasons(s)
+    if s.tracker_kind == "labelled" and reasons:
+        out.append(
+            "tracker.kind: labelled tracks one known constant-velocity target in the scene "
+            "throughout, with the fixed detection model and no false alarms; this scenario has "
+            f"{', '.join(reasons)}: use kind auto or multi"
+        )
     return out

@@ -1,5 +1,12 @@
 """The scenario: `ScenarioFile` (the YAML as written) and `Scenario` (resolved, SI units, named
-after the paper's symbols)."""
+after the paper's symbols).
+
+One schema (docs/decisions/0001-one-scenario-schema.md): the targets under `targets:` (a list),
+how they may move under `target_motion:`, one `tracker:` section (`kind`, the labelled EKF's keys,
+the multi-target tracker's under `multi:`). The sections of before, `target:` and
+`multi_target:`, are still read, each with a DeprecationWarning (`ScenarioFile.deprecations`),
+until 0.2.0.
+"""
 
 from __future__ import annotations
 
@@ -21,8 +28,10 @@ from isac_mission.config.sections import (
     Section,
     SensingConfig,
     TargetConfig,
+    TargetMotionConfig,
     TimingConfig,
     TrackerConfig,
+    TrackerKind,
     UavConfig,
 )
 from isac_mission.config.security import SecurityConfig
@@ -34,7 +43,21 @@ from isac_mission.config.targets import (
     TargetEntry,
     TargetSpec,
 )
+from isac_mission.model.motion import ConstantVelocity, MotionModel
 from isac_mission.types import FloatArray
+
+SCHEMA_REMOVAL_VERSION = "0.2.0"
+"""The release that drops the deprecated sections `target:` and `multi_target:` (the package's
+next minor after 0.1.0)."""
+
+DEFAULT_TARGET_STATE: tuple[float, float, float, float] = (600.0, 1600.0, 30.0, 0.0)
+"""x_0 = [x, y, vx, vy] (m, m/s) of the default target: the paper's."""
+
+TARGET_ENTRY_KEYS = ("initial_state", "rcs_dbsm")
+"""The keys of the deprecated `target:` that are its one entry of `targets:`."""
+
+TARGET_MOTION_KEYS = ("process_noise_intensity", "max_accel_mps2")
+"""The keys of the deprecated `target:` that are `target_motion:`'s."""
 
 
 class ScenarioFile(Section):
@@ -47,32 +70,101 @@ class ScenarioFile(Section):
     radio: RadioConfig = RadioConfig()
     base_stations: BaseStationConfig = BaseStationConfig()
     uavs: UavConfig = UavConfig()
-    target: TargetConfig = TargetConfig()
-    targets: list[TargetEntry] | None = Field(
-        None,
+    targets: list[TargetEntry] = Field(
+        default_factory=lambda: [TargetEntry(initial_state=DEFAULT_TARGET_STATE)],
         min_length=1,
-        description="Several intruders (config/targets.py); null: the one under target:.",
+        description="The intruders (config/targets.py), one entry per target; default: the "
+        "paper's one target.",
     )
+    target_motion: TargetMotionConfig = TargetMotionConfig()
     sensing: SensingConfig = SensingConfig()
     detection: DetectionConfig = DetectionConfig()
     tracker: TrackerConfig = TrackerConfig()
-    multi_target: MultiTrackerConfig = MultiTrackerConfig()
     planner: PlannerConfig = PlannerConfig()
     security: SecurityConfig = SecurityConfig()
     impairment: ImpairmentConfig = ImpairmentConfig()
     links: LinksConfig = LinksConfig()
+    target: TargetConfig | None = Field(
+        None,
+        description=f"Deprecated, removed in {SCHEMA_REMOVAL_VERSION}: one target "
+        "(initial_state, rcs_dbsm: use targets:) and the targets' motion "
+        "(process_noise_intensity, max_accel_mps2: use target_motion:).",
+        json_schema_extra={"deprecated": True},
+    )
+    multi_target: MultiTrackerConfig | None = Field(
+        None,
+        description=f"Deprecated, removed in {SCHEMA_REMOVAL_VERSION}: use tracker.multi: "
+        "(the same keys).",
+        json_schema_extra={"deprecated": True},
+    )
 
     @model_validator(mode="after")
-    def _one_way_to_give_targets(self) -> ScenarioFile:
-        if self.targets is not None:
-            both = {"initial_state", "rcs_dbsm"} & self.target.model_fields_set
-            if both:
+    def _each_setting_given_once(self) -> ScenarioFile:
+        given = self.model_fields_set
+        if self.target is not None:
+            placed = sorted(set(TARGET_ENTRY_KEYS) & self.target.model_fields_set)
+            if placed and "targets" in given:
                 raise ValueError(
-                    f"target.{sorted(both)[0]}: give the targets under targets: (a list) or one "
-                    "under target:, not both (target.process_noise_intensity stays the "
-                    "scenario's process noise)"
+                    f"target.{placed[0]}: give the targets under targets: only (a list; "
+                    "target: is deprecated)"
                 )
+            moved = sorted(set(TARGET_MOTION_KEYS) & self.target.model_fields_set)
+            if moved and "target_motion" in given:
+                raise ValueError(
+                    f"target.{moved[0]}: give it under target_motion: only (target: is deprecated)"
+                )
+        if self.multi_target is not None and "multi" in self.tracker.model_fields_set:
+            raise ValueError(
+                "multi_target: give the multi-target tracker under tracker.multi: only "
+                "(multi_target: is deprecated)"
+            )
         return self
+
+    def deprecations(self) -> list[str]:
+        """One message per deprecated section this file uses (none for the one schema); each
+        reads "<section> is deprecated: use <replacement>" and names the version that removes
+        it."""
+        out = []
+        if self.target is not None:
+            keys = self.target.model_fields_set
+            use = []
+            if not keys or keys & set(TARGET_ENTRY_KEYS):
+                use.append("targets: (a list; one entry with initial_state and rcs_dbsm)")
+            if not keys or keys & set(TARGET_MOTION_KEYS):
+                use.append("target_motion: (process_noise_intensity, max_accel_mps2)")
+            out.append(
+                f"target: is deprecated: use {' and '.join(use)}; target: is removed in "
+                f"{SCHEMA_REMOVAL_VERSION} (docs/decisions/0001-one-scenario-schema.md)"
+            )
+        if self.multi_target is not None:
+            out.append(
+                "multi_target: is deprecated: use tracker.multi: (the same keys); "
+                f"multi_target: is removed in {SCHEMA_REMOVAL_VERSION} "
+                "(docs/decisions/0001-one-scenario-schema.md)"
+            )
+        return out
+
+    def in_one_schema(self) -> ScenarioFile:
+        """This file in the one schema: `target:` read as `targets:` with one entry and
+        `target_motion:`, `multi_target:` as `tracker.multi:`; neither deprecated section left.
+        The same file when it uses neither."""
+        if self.target is None and self.multi_target is None:
+            return self
+        update: dict[str, Any] = {"target": None, "multi_target": None}
+        t = self.target
+        if t is not None:
+            if "targets" not in self.model_fields_set:
+                update["targets"] = [
+                    TargetEntry(initial_state=t.initial_state, rcs_dbsm=t.rcs_dbsm)
+                ]
+            if "target_motion" not in self.model_fields_set:
+                update["target_motion"] = TargetMotionConfig(
+                    process_noise_intensity=t.process_noise_intensity,
+                    max_accel_mps2=t.max_accel_mps2,
+                )
+        if self.multi_target is not None:
+            update["tracker"] = self.tracker.model_copy(update={"multi": self.multi_target})
+        return self.model_copy(update=update)
 
 
 @dataclass(frozen=True)
@@ -113,7 +205,8 @@ class Scenario:
     kappa: float
     rcs_m2: float
     a_target: float
-    """target.max_accel_mps2 (m/s^2): the target's manoeuvre bound (docs/model.md, "Safety")."""
+    """target_motion.max_accel_mps2 (m/s^2): the targets' manoeuvre bound (docs/model.md,
+    "Safety")."""
     sensing_model: str
     Ts: float
     alpha_d: float
@@ -139,16 +232,27 @@ class Scenario:
     detection: DetectionSpec | None = None
     """The detection model (detection:); None on a Scenario built by hand: fixed, no clutter."""
     multi_tracker: MultiTrackerConfig = field(default_factory=MultiTrackerConfig)
-    """The multi-target tracker (multi_target:), read on the multi-target path only."""
+    """The multi-target tracker (tracker.multi:), read on the multi-target path only."""
+    tracker_kind: TrackerKind = "auto"
+    """tracker.kind: auto (the rule of `multi_target`), labelled (resolve refused it for a
+    scenario that needs the multi-target tracker) or multi (the multi-target tracker always)."""
 
     @property
     def multi_target(self) -> bool:
-        """More than one target, a target that turns, flies waypoints, comes, goes or must be
-        found, or detections with false alarms or an SNR model: the multi-target path; False on
-        every single-target scenario as before."""
+        """The multi-target path: tracker.kind multi, or (auto, labelled) more than one target,
+        a target that turns, flies waypoints, comes, goes or must be found, or detections with
+        false alarms or an SNR model (`multi_target_reasons`); False on every single-target
+        scenario as before."""
+        if self.tracker_kind == "multi":
+            return True
         if len(self.targets) > 1 or (self.detection is not None and not self.detection.is_default):
             return True
         return bool(self.targets) and not self.targets[0].is_plain(self.N)
+
+    @property
+    def motion(self) -> MotionModel:
+        """The target's motion model (model/motion.py): constant velocity with kappa."""
+        return ConstantVelocity(self.kappa)
 
     @property
     def radar_gain(self) -> float:
@@ -219,6 +323,32 @@ class Scenario:
         }
 
 
+def multi_target_reasons(s: Scenario) -> list[str]:
+    """Why the labelled single-target tracker cannot track `s` (what makes `tracker.kind: auto`
+    take the multi-target path), in words; [] for one known constant-velocity target in the scene
+    throughout with the fixed detection model and no false alarms (or a Scenario built by hand
+    without targets)."""
+    out = []
+    if len(s.targets) > 1:
+        out.append(f"{len(s.targets)} targets")
+    elif s.targets and not s.targets[0].is_plain(s.N):
+        t = s.targets[0]
+        if t.motion != "constant_velocity":
+            out.append(f"target {t.name} moves by {t.motion}")
+        if not t.prior_known:
+            out.append(f"target {t.name} must be found (prior unknown)")
+        if t.first_slot > 0:
+            out.append(f"target {t.name} appears at slot {t.first_slot}")
+        if t.last_slot < s.N:
+            out.append(f"target {t.name} leaves at slot {t.last_slot}")
+    d = s.detection
+    if d is not None and d.model != "fixed":
+        out.append(f"detection model {d.model}")
+    if d is not None and d.false_alarms_per_slot > 0:
+        out.append("false alarms")
+    return out
+
+
 def single_target_problem(s: Scenario) -> str | None:
     """Why `sweep` and `replay` cannot take `s` yet, or None: the multi-target path (several
     targets, false alarms, an SNR detection model, a target that turns, comes late or must be
@@ -226,8 +356,9 @@ def single_target_problem(s: Scenario) -> str | None:
     `serve`, `sim`), but not yet a sweep or a replay."""
     if not s.multi_target:
         return None
+    why = "targets/detection" if multi_target_reasons(s) else "tracker.kind multi"
     return (
-        "targets/detection: this scenario takes the multi-target path (docs/model.md, "
+        f"{why}: this scenario takes the multi-target path (docs/model.md, "
         "'Several targets'): `simulate`, `run`, `serve` and `sim` fly it; `sweep` and "
         "`replay` take single-target scenarios only, so far"
     )

@@ -1,8 +1,10 @@
-"""The physical sections of a scenario file (timing, area, radio, base stations, UAVs, target,
-sensing, tracker, planner), as written in the YAML: dB and dBm where engineers expect them.
+"""The physical sections of a scenario file (timing, area, radio, base stations, UAVs, the
+targets' motion, sensing, tracker, planner), as written in the YAML: dB and dBm where engineers
+expect them. The targets themselves and the detection model: config/targets.py.
 
 Each section is a frozen pydantic model that forbids unknown keys; every choice the paper leaves
-open is a field whose description points at docs/model.md.
+open is a field whose description points at docs/model.md. `TargetConfig` (`target:`) is the
+deprecated single-target section (docs/decisions/0001-one-scenario-schema.md).
 """
 
 from __future__ import annotations
@@ -132,20 +134,36 @@ class UavConfig(Section):
     battery: BatteryConfig = BatteryConfig()
 
 
+PROCESS_NOISE_DESCRIPTION = (
+    "kappa in W (eq. 4), m^2/s^3: the process noise of every target's constant-velocity or "
+    "coordinated-turn motion, and the single-target tracker's and bound's model (docs/model.md)."
+)
+MAX_ACCEL_DESCRIPTION = (
+    "a_T, how hard a target may manoeuvre off its constant-velocity prediction, m/s^2: the "
+    "safety rule keeps D_s against every such motion over each leg and the evasion guard keeps "
+    "each UAV able to dodge it (docs/model.md, 'Safety'). 0: the constant-velocity model only."
+)
+
+
+class TargetMotionConfig(Section):
+    """`target_motion:`: how every target of `targets:` may move, scenario-wide (docs/model.md,
+    "Several targets"): the process noise kappa (m^2/s^3) and the manoeuvre bound a_T (m/s^2)."""
+
+    process_noise_intensity: float = Field(0.5, ge=0, description=PROCESS_NOISE_DESCRIPTION)
+    max_accel_mps2: float = Field(2.0, ge=0, description=MAX_ACCEL_DESCRIPTION)
+
+
 class TargetConfig(Section):
+    """`target:`, deprecated (removed in 0.2.0): one target and the scenario's target motion in
+    one section. Read as `targets:` with one entry (initial_state, rcs_dbsm) and
+    `target_motion:` (process_noise_intensity, max_accel_mps2); see ScenarioFile."""
+
     initial_state: tuple[float, float, float, float] = Field(
         (600.0, 1600.0, 30.0, 0.0), description="x_0 = [x, y, vx, vy] in m and m/s."
     )
-    process_noise_intensity: float = Field(0.5, ge=0, description="kappa in W (eq. 4), m^2/s^3.")
-    rcs_dbsm: float = Field(-10.0, description="sigma_RCS.")
-    max_accel_mps2: float = Field(
-        2.0,
-        ge=0,
-        description="a_T, how hard the target may manoeuvre off its constant-velocity prediction, "
-        "m/s^2: the safety rule keeps D_s against every such motion over each leg and the "
-        "evasion guard keeps each UAV able to dodge it (docs/model.md, 'Safety'). 0: the "
-        "constant-velocity model only.",
-    )
+    process_noise_intensity: float = Field(0.5, ge=0, description=PROCESS_NOISE_DESCRIPTION)
+    rcs_dbsm: float = Field(-10.0, description="sigma_RCS, dBsm.")
+    max_accel_mps2: float = Field(2.0, ge=0, description=MAX_ACCEL_DESCRIPTION)
 
 
 class SensingConfig(Section):
@@ -172,22 +190,97 @@ class SensingConfig(Section):
         return self
 
 
+class MultiTrackerConfig(Section):
+    """`tracker.multi:`: the multi-target tracker and its metric (docs/model.md, "The
+    multi-target tracker"); read on the multi-target path only. Given as the top-level
+    `multi_target:` section before 0.2.0 (deprecated)."""
+
+    association: Literal["jpda", "gnn"] = Field(
+        "jpda",
+        description="jpda: joint probabilistic data association; gnn: global nearest "
+        "neighbour (docs/model.md, 'The multi-target tracker').",
+    )
+    gate_prob: float = Field(0.99, gt=0, lt=1, description="P_g of the association gate.")
+    process_noise_intensity: float | None = Field(
+        None,
+        ge=0,
+        description="kappa of the tracks' constant-velocity model, m^2/s^3; null: "
+        "target_motion.process_noise_intensity. A turning target needs more (docs/model.md).",
+    )
+    hit_weight: float = Field(
+        2.5,
+        gt=0,
+        description="A slot is a hit for a track when sum_m (1 - beta_m0) >= this (about three "
+        "UAVs' measurements: two coarse ranges fit a ghost, docs/model.md).",
+    )
+    confirm_hits: int = Field(3, ge=1, description="Hits that confirm a tentative track...")
+    confirm_window: int = Field(4, ge=1, description="... within its first this many slots.")
+    delete_after_misses: int = Field(
+        3,
+        ge=1,
+        description="A confirmed track is deleted after this many slots in a row without a hit.",
+    )
+    initiation_gate_prob: float = Field(
+        0.999, gt=0, lt=1, description="Gate and residual test of a new track's measurements."
+    )
+    max_initial_position_std_m: float = Field(
+        150.0, gt=0, description="A new track's largest position std, m."
+    )
+    max_target_speed_mps: float = Field(
+        60.0, gt=0, description="The fastest intruder: a faster new track is clutter, m/s."
+    )
+    gospa_cutoff_m: float = Field(
+        10.0, gt=0, description="GOSPA's cut-off c, m (p = 2, alpha = 2)."
+    )
+
+    @model_validator(mode="after")
+    def _window_holds_the_hits(self) -> MultiTrackerConfig:
+        if self.confirm_hits > self.confirm_window:
+            raise ValueError(
+                f"confirm_hits {self.confirm_hits} cannot happen within confirm_window "
+                f"{self.confirm_window} slots"
+            )
+        return self
+
+
+TrackerKind = Literal["auto", "labelled", "multi"]
+"""Which tracker a scenario uses (`tracker.kind`; docs/model.md, "Several targets")."""
+
+
 class TrackerConfig(Section):
+    """`tracker:`: which tracker the scenario uses (`kind`), the start of every track (P0) and
+    the labelled tracker's settings (flat keys), and the multi-target tracker's (`multi:`)."""
+
+    kind: TrackerKind = Field(
+        "auto",
+        description="auto: the labelled single-target EKF for one known constant-velocity "
+        "target in the scene throughout with no false alarms and the fixed detection model, "
+        "else the multi-target tracker (Scenario.multi_target); labelled: the labelled EKF, "
+        "refused for a scenario that needs the multi-target tracker; multi: the multi-target "
+        "tracker even for one plain target (docs/model.md, 'Several targets').",
+    )
     initial_position_std_m: float = Field(
-        10.0, gt=0, description="Std of the tracker's initial position error (P0)."
+        10.0, gt=0, description="Std of the tracker's initial position error (P0), m."
     )
     initial_velocity_std_mps: float = Field(
-        2.0, gt=0, description="Std of the tracker's initial velocity error (P0)."
+        2.0, gt=0, description="Std of the tracker's initial velocity error (P0), m/s."
     )
     update_iterations: int = Field(
         1,
         ge=1,
         le=50,
-        description="1: the EKF of the paper; > 1: iterated EKF (relinearised updates, docs/model.md).",
+        description="Labelled EKF: 1 is the paper's EKF; > 1 an iterated EKF (relinearised "
+        "updates, docs/model.md).",
     )
     bound_prior: Literal["pcrb", "ekf"] = Field(
         "pcrb",
-        description="Prior information of the planner's bound: its own recursion, or the EKF's P.",
+        description="Labelled EKF: the prior information of the planner's bound: its own "
+        "recursion, or the EKF's P.",
+    )
+    multi: MultiTrackerConfig = Field(
+        default_factory=MultiTrackerConfig,
+        description="The multi-target tracker (association, initiation, confirmation, "
+        "deletion, GOSPA); read on the multi-target path only.",
     )
 
 

@@ -1,10 +1,11 @@
-"""Several intruders: the `targets:` list of a scenario file and the detection model
+"""The intruders: the `targets:` list of a scenario file and the detection model
 (`detection:`), as written (docs/model.md, "Several targets").
 
-A scenario holds either one target under `target:` (every shipped single-target scenario, which
-means exactly what it meant before) or a list under `targets:`; `target.process_noise_intensity`
-is the scenario's process noise either way. Resolved into SI units as `TargetSpec`s on
-`Scenario.targets` (config/resolve.py).
+`targets:` is the one way to give targets: a list, one entry for the paper's single target. How
+every target may move, scenario-wide (the process noise kappa, the manoeuvre bound a_T), is
+`target_motion:` (config/sections.py); the deprecated `target:` section is read as a list of one
+(config/scenario.py). Resolved into SI units as `TargetSpec`s on `Scenario.targets`
+(config/resolve.py).
 """
 
 from __future__ import annotations
@@ -14,7 +15,16 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from isac_mission.config.sections import Section
+from isac_mission.config.sections import MultiTrackerConfig, Section
+
+__all__ = [
+    "DetectionConfig",
+    "DetectionSpec",
+    "MultiTrackerConfig",
+    "TargetEntry",
+    "TargetSpec",
+]
+"""MultiTrackerConfig lives in config/sections.py (`tracker.multi:`); importable here as before."""
 
 
 class TargetEntry(Section):
@@ -24,12 +34,13 @@ class TargetEntry(Section):
         None, max_length=64, description="A label for reports; default target-<index>."
     )
     initial_state: tuple[float, float, float, float] = Field(
-        description="[x, y, vx, vy] (m, m/s) when it appears."
+        description="[x, y, vx, vy] (m, m/s) when it appears (x_0 for the paper's one target)."
     )
-    rcs_dbsm: float = Field(-10.0, description="sigma_RCS of this target.")
+    rcs_dbsm: float = Field(-10.0, description="sigma_RCS of this target, dBsm.")
     motion: Literal["constant_velocity", "coordinated_turn", "waypoints"] = Field(
         "constant_velocity",
-        description="constant_velocity: eq. 3 with the scenario's process noise; "
+        description="constant_velocity: eq. 3 with the scenario's process noise "
+        "(target_motion.process_noise_intensity); "
         "coordinated_turn: turning at turn_rate_radps, with the same noise; waypoints: "
         "straight legs through waypoints_xy_m at the initial speed, no noise.",
     )
@@ -98,58 +109,6 @@ class DetectionConfig(Section):
                 raise ValueError(f"{name}: [low, high] with low < high (got {list(window)})")
         if self.range_window_m is not None and self.range_window_m[0] < 0:
             raise ValueError("range_window_m: ranges are >= 0")
-        return self
-
-
-class MultiTrackerConfig(Section):
-    """`multi_target:`: the multi-target tracker and its metric (docs/model.md, "The
-    multi-target tracker"); read on the multi-target path only."""
-
-    association: Literal["jpda", "gnn"] = Field(
-        "jpda",
-        description="jpda: joint probabilistic data association; gnn: global nearest "
-        "neighbour (docs/model.md, 'The multi-target tracker').",
-    )
-    gate_prob: float = Field(0.99, gt=0, lt=1, description="P_g of the association gate.")
-    process_noise_intensity: float | None = Field(
-        None,
-        ge=0,
-        description="kappa of the tracks' constant-velocity model, m^2/s^3; null: "
-        "target.process_noise_intensity. A turning target needs more (docs/model.md).",
-    )
-    hit_weight: float = Field(
-        2.5,
-        gt=0,
-        description="A slot is a hit for a track when sum_m (1 - beta_m0) >= this (about three "
-        "UAVs' measurements: two coarse ranges fit a ghost, docs/model.md).",
-    )
-    confirm_hits: int = Field(3, ge=1, description="Hits that confirm a tentative track...")
-    confirm_window: int = Field(4, ge=1, description="... within its first this many slots.")
-    delete_after_misses: int = Field(
-        3,
-        ge=1,
-        description="A confirmed track is deleted after this many slots in a row without a hit.",
-    )
-    initiation_gate_prob: float = Field(
-        0.999, gt=0, lt=1, description="Gate and residual test of a new track's measurements."
-    )
-    max_initial_position_std_m: float = Field(
-        150.0, gt=0, description="A new track's largest position std, m."
-    )
-    max_target_speed_mps: float = Field(
-        60.0, gt=0, description="The fastest intruder: a faster new track is clutter, m/s."
-    )
-    gospa_cutoff_m: float = Field(
-        10.0, gt=0, description="GOSPA's cut-off c, m (p = 2, alpha = 2)."
-    )
-
-    @model_validator(mode="after")
-    def _window_holds_the_hits(self) -> MultiTrackerConfig:
-        if self.confirm_hits > self.confirm_window:
-            raise ValueError(
-                f"confirm_hits {self.confirm_hits} cannot happen within confirm_window "
-                f"{self.confirm_window} slots"
-            )
         return self
 
 

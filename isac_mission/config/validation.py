@@ -1,9 +1,10 @@
 """Pydantic's validation errors in the project's words, and the base of the runtime settings.
 
 `validation_lines` turns a `ValidationError` into one `source: field.path: reason (got value)`
-line per problem (security values and whole sections never echoed). `Settings` is the base of
-the settings classes the bridge, the ground loop and the simulated autopilot take: frozen, no
-unknown keys, and every problem raised as one `ConfigError` (never pydantic's own error).
+line per problem (`source: reason` for a model's own check, whose reason names its fields;
+security values and whole sections never echoed). `Settings` is the base of the settings
+classes the bridge, the ground loop and the simulated autopilot take: frozen, no unknown keys,
+and every problem raised as one `ConfigError` (never pydantic's own error).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ def validation_lines(err: ValidationError, source: str) -> str:
     """One `source: field.path: reason (got value)` line per error in `err`."""
     lines = []
     for e in err.errors():
-        where = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        where = ".".join(str(p) for p in e["loc"])
         msg = e["msg"]
         if e["type"] == "extra_forbidden":
             msg = "unknown key"
@@ -28,7 +29,8 @@ def validation_lines(err: ValidationError, source: str) -> str:
         got = e.get("input")
         secret = e["loc"][:1] == ("security",)  # never echo what might be a key or password
         got_txt = "" if isinstance(got, dict) or secret else f" (got {got!r})"
-        lines.append(f"{source}: {where}: {msg}{got_txt}")
+        # A model's own check (no location) names its fields in its message.
+        lines.append(f"{source}: {where}: {msg}{got_txt}" if where else f"{source}: {msg}{got_txt}")
     return "\n".join(lines)
 
 

@@ -1,10 +1,13 @@
-"""The offline closed loop of Section II-C: predict, plan, fly, measure, update, for N slots.
+"""The offline closed loop of Section II-C, for any number of targets: predict, plan, fly,
+measure, update, for N slots.
 
-Every method of one Monte Carlo run sees the same random numbers (`RunNoise`): the same target path,
-the same initial estimate error and the same standard-normal measurement draws, scaled by each
-method's own noise standard deviations. The planner is the same `plan_slot` the live service calls, and the slot recursion the same
-`tracking/cycle.py` (predict -> plan -> update -> bound); the noisy detections are
-`model/detections.py`'s, as in `sim/sensing.py`.
+Every method of one Monte Carlo run flies the same scene (`model/scene.py`: the targets' truth
+and the run's random numbers: the initial estimate errors, the process noise and the
+measurement draws, scaled by each method's own noise standard deviations). The tracker and the
+scene come from `tracking/factory.py`: the paper's labelled target (the EKF and PCRB of
+`tracking/cycle.py`) or several targets' unlabelled reports (`tracking/multi_target.py`). The
+planner is the one the live service calls (`planning/multi_target.plan_tracks` over
+`plan_slot`).
 """
 
 from __future__ import annotations
@@ -16,46 +19,78 @@ import numpy as np
 
 from isac_mission.config import Scenario, single_target_problem
 from isac_mission.errors import ConfigError
-from isac_mission.model.detections import noisy_detections
-from isac_mission.model.kinematics import transition_matrix
+from isac_mission.model.detections import UavReport
 from isac_mission.model.run_noise import RunNoise
 from isac_mission.model.run_noise import draw_run_noise as draw_run_noise
-from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
-from isac_mission.tracking.cycle import CycleModel, TrackState, predict, update
+from isac_mission.model.scene import Scene
+from isac_mission.model.scene import true_trajectory as true_trajectory
+from isac_mission.planning.multi_target import plan_tracks
+from isac_mission.planning.slot import Method, SlotInput, SolverKit
+from isac_mission.tracking.factory import keep_out_tracks, scene_for, tracker_for
 from isac_mission.tracking.pcrb import Bound
-from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan
-
-
-def true_trajectory(s: Scenario, noise: RunNoise) -> FloatArray:
-    """[N + 1, 4] target states x_0..x_N of the constant-velocity model (eq. 3)."""
-    F = transition_matrix(s.dt)
-    xs = np.empty((s.N + 1, 4))
-    xs[0] = s.x0
-    for n in range(1, s.N + 1):
-        xs[n] = F @ xs[n - 1] + noise.process[n - 1]
-    return xs
+from isac_mission.tracking.tracker import SlotTracking, Tracker, TrackEstimate, TrackPrediction
+from isac_mission.types import FloatArray, IntArray, SlotPlan
 
 
 @dataclass(frozen=True)
 class SlotOutcome:
-    """Everything one slot produced (the trace's contract fields, docs/trace.md).
+    """Everything one slot produced.
 
-    slot_input: what the planner was given; uav_xy [M, 2] where measurements were taken; r_diag
-    [2M] variances used (NaN = missing);
-    target_* [4]; P, J [4, 4].
+    slot_input: what the planner was given (None: the fleet held, no confirmed track); plan: the
+    plan flown; uav_xy [M, 2], eta [M]: where and with which shares the reports were taken;
+    truth [T, 4]: every target's true state (NaN rows: not in the scene); reports [M]: each
+    UAV's report (with its true origins, for metrics); predictions: the tracks' predictions the
+    plan was made from; tracking: the tracks after the update; planned_for: the ID of the track
+    the plan's safety rule followed (0: none).
+
+    The labelled target's trace fields (docs/trace.md) read its one track: target_true,
+    target_pred, target_est [4]; r_diag [2M] (the variances used, NaN = missing); P [4, 4];
+    bound.
     """
 
     slot: int
     method: str
-    slot_input: SlotInput
+    slot_input: SlotInput | None
     plan: SlotPlan
     uav_xy: FloatArray
-    target_true: FloatArray
-    target_pred: FloatArray
-    target_est: FloatArray
-    r_diag: FloatArray
-    P: FloatArray
-    bound: Bound
+    eta: FloatArray
+    truth: FloatArray
+    reports: tuple[UavReport, ...]
+    predictions: tuple[TrackPrediction, ...]
+    tracking: SlotTracking
+    planned_for: int
+
+    @property
+    def _track(self) -> TrackEstimate:
+        (track,) = self.tracking.tracks
+        return track
+
+    @property
+    def target_true(self) -> FloatArray:
+        return np.asarray(self.truth[0])
+
+    @property
+    def target_pred(self) -> FloatArray:
+        (prediction,) = self.predictions
+        return prediction.prediction.x
+
+    @property
+    def target_est(self) -> FloatArray:
+        return self._track.belief.x
+
+    @property
+    def r_diag(self) -> FloatArray:
+        variances = self._track.variances
+        assert variances is not None  # the labelled tracker's
+        return variances
+
+    @property
+    def P(self) -> FloatArray:  # noqa: N802 (the trace's name)
+        return self._track.belief.P
+
+    @property
+    def bound(self) -> Bound:
+        return self._track.bound
 
 
 @dataclass(frozen=True)
@@ -79,6 +114,64 @@ class RunResult:
     fallback: list[str] = field(default_factory=list)
 
 
+def fly_offline(
+    s: Scenario,
+    method: Method,
+    scene: Scene,
+    tracker: Tracker,
+    kit: SolverKit,
+    on_slot: Callable[[SlotOutcome], None] | None = None,
+) -> tuple[SlotOutcome, ...]:
+    """Fly one mission of N slots of `scene` with the given planning method and tracker (both
+    from `tracking/factory.py`); `kit` built with `keep_out_tracks(s)` keep-out points."""
+    uav_xy, eta = s.uav_start_xy.copy(), np.full(s.M, 1.0 / s.M)
+    assoc: IntArray | None = None
+    velocity = np.zeros((s.M, 2))
+    plan: SlotPlan | None = None
+    out = []
+    for n in range(1, s.N + 1):
+        for prior in scene.priors(n - 1):
+            tracker.add_confirmed(prior)
+        predictions = tracker.predict()
+        planned = plan_tracks(
+            s,
+            method,
+            kit,
+            predictions,
+            uav_xy,
+            eta,
+            assoc,
+            velocity,
+            plan,
+            keep_out_tracks=keep_out_tracks(s),
+        )
+        plan = planned.plan
+        if plan.uav_velocity_mps is not None:
+            velocity = plan.uav_velocity_mps  # the vehicle model's planned end velocity
+        else:
+            velocity = (plan.uav_xy_m - uav_xy) / s.dt  # each leg flown at constant velocity
+        uav_xy, eta, assoc = plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav
+        reports = scene.reports(n, uav_xy, eta, kit.sensing)
+        tracking = tracker.update([r.measurements for r in reports], uav_xy, eta, kit.sensing)
+        outcome = SlotOutcome(
+            slot=n,
+            method=method,
+            slot_input=planned.slot_input,
+            plan=plan,
+            uav_xy=uav_xy,
+            eta=eta,
+            truth=scene.truth(n),
+            reports=reports,
+            predictions=predictions,
+            tracking=tracking,
+            planned_for=planned.planned_for,
+        )
+        out.append(outcome)
+        if on_slot is not None:
+            on_slot(outcome)
+    return tuple(out)
+
+
 def run_closed_loop(
     s: Scenario,
     method: Method,
@@ -87,90 +180,28 @@ def run_closed_loop(
     on_slot: Callable[[SlotOutcome], None] | None = None,
     truth: FloatArray | None = None,
 ) -> RunResult:
-    """Fly one mission of N slots with the given planning method; returns per-slot results.
-    truth [N + 1, 4]: the target's true states x_0..x_N (a scripted target); None: the
-    constant-velocity model driven by the run's process noise (`true_trajectory`). A scenario of
-    the multi-target path raises ConfigError (config.single_target_problem)."""
+    """Fly one mission of N slots of the scenario's labelled target with the given planning
+    method (`fly_offline`); returns per-slot results. truth [N + 1, 4]: the target's true states
+    x_0..x_N (a scripted target); None: the motion model driven by the run's process noise
+    (`true_trajectory`). A scenario of several targets raises ConfigError
+    (config.single_target_problem)."""
     problem = single_target_problem(s)
     if problem is not None:
         raise ConfigError(f"{s.mission_id}: {problem}")
-    model = CycleModel.from_scenario(s)
-    truth = true_trajectory(s, noise) if truth is None else np.asarray(truth, dtype=float)
-    state = TrackState(
-        belief=Gaussian(x=s.x0 + noise.initial_error, P=s.P0.copy()),
-        bound=Bound.from_covariance(s.P0.copy()),
-    )
-    uav_xy, eta, assoc = s.uav_start_xy.copy(), np.full(s.M, 1.0 / s.M), None
-    velocity = np.zeros((s.M, 2))
-    plan: SlotPlan | None = None
-    rows: dict[str, list[object]] = {
-        k: [] for k in ("est", "pcrb", "solve_s", "status", "fallback", "uav_xy", "eta", "assoc")
-    }
-    for n in range(1, s.N + 1):
-        predicted = predict(model, state)
-        pred = predicted.prediction
-        slot_input = SlotInput(
-            uav_xy, eta, assoc, pred.x, predicted.prior, velocity, None, pred.P, plan
-        )
-        plan = plan_slot(slot_input, kit, method)
-        if plan.uav_velocity_mps is not None:
-            velocity = plan.uav_velocity_mps  # the vehicle model's planned end velocity
-        else:
-            velocity = (plan.uav_xy_m - uav_xy) / s.dt  # each leg flown at constant velocity
-        uav_xy, eta, assoc = plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav
-        # Measurements at the planned positions: noise from the true geometry; the filter and the
-        # bound use the variances at the predicted state (the target's truth is not theirs).
-        z = noisy_detections(
-            truth[n],
-            uav_xy,
-            eta,
-            kit.sensing,
-            noise.measurement[n - 1],
-            noise.miss_draw[n - 1],
-            s.missed_detection_prob,
-        )
-        updated = update(model, state, predicted, kit.sensing, z, uav_xy, eta)
-        state, r_used = updated.state, updated.r_used
-        belief, bound = state.belief, state.bound
-        for key, value in (
-            ("est", belief.x),
-            ("pcrb", bound.C),
-            ("solve_s", plan.report.solve_s),
-            ("status", plan.report.status),
-            ("fallback", plan.report.fallback),
-            ("uav_xy", uav_xy),
-            ("eta", eta),
-            ("assoc", assoc),
-        ):
-            rows[key].append(value)
-        if on_slot is not None:
-            on_slot(
-                SlotOutcome(
-                    slot=n,
-                    method=method,
-                    slot_input=slot_input,
-                    plan=plan,
-                    uav_xy=uav_xy,
-                    target_true=truth[n],
-                    target_pred=pred.x,
-                    target_est=belief.x,
-                    r_diag=r_used,
-                    P=belief.P,
-                    bound=bound,
-                )
-            )
+    scene = scene_for(s, noise, truth)
+    slots = fly_offline(s, method, scene, tracker_for(s), kit, on_slot)
     return RunResult(
         method=method,
         seed=noise.seed,
-        est=np.array(rows["est"]),
-        true=truth[1:],
-        pcrb=np.array(rows["pcrb"]),
-        solve_s=np.array(rows["solve_s"], dtype=float),
-        status=[str(v) for v in rows["status"]],
-        fallback=[str(v) for v in rows["fallback"]],
-        uav_xy=np.array(rows["uav_xy"]),
-        eta=np.array(rows["eta"]),
-        assoc=np.array(rows["assoc"], dtype=np.int64),
+        est=np.array([o.target_est for o in slots]),
+        true=np.array([o.target_true for o in slots]),
+        pcrb=np.array([o.bound.C for o in slots]),
+        solve_s=np.array([o.plan.report.solve_s for o in slots], dtype=float),
+        status=[o.plan.report.status for o in slots],
+        fallback=[o.plan.report.fallback for o in slots],
+        uav_xy=np.array([o.uav_xy for o in slots]),
+        eta=np.array([o.eta for o in slots]),
+        assoc=np.array([o.plan.bs_of_uav for o in slots], dtype=np.int64),
     )
 
 
@@ -179,5 +210,10 @@ def record_slot_inputs(
 ) -> tuple[RunResult, list[SlotInput]]:
     """One run, and the planner's input of every slot (to replay or time the planner alone)."""
     inputs: list[SlotInput] = []
-    result = run_closed_loop(s, method, noise, kit, lambda o: inputs.append(o.slot_input))
+
+    def keep(o: SlotOutcome) -> None:
+        assert o.slot_input is not None  # the labelled target is always planned for
+        inputs.append(o.slot_input)
+
+    result = run_closed_loop(s, method, noise, kit, keep)
     return result, inputs

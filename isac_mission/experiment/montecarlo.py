@@ -113,8 +113,10 @@ def reduction_pct(proposed: float, benchmark: float) -> float:
 
 
 def outcome_record(o: SlotOutcome) -> SlotRecord:
-    """The trace line of one slot (docs/trace.md)."""
+    """The trace line of one slot of the labelled target (docs/trace.md)."""
     rep = o.plan.report
+    inp = o.slot_input
+    assert inp is not None  # the labelled target is planned for in every slot
     return SlotRecord(
         slot=o.slot,
         method=o.method,
@@ -135,8 +137,8 @@ def outcome_record(o: SlotOutcome) -> SlotRecord:
         plan_velocity=o.plan.uav_velocity_mps,
         reason=rep.reason,
         fallback=rep.fallback or None,
-        plan_start_xy=o.slot_input.prev_xy_m,
-        plan_start_velocity=o.slot_input.prev_velocity_mps,
+        plan_start_xy=inp.prev_xy_m,
+        plan_start_velocity=inp.prev_velocity_mps,
         extra={
             "pcrb_pos": o.bound.position_trace,
             "pcrb_vel": o.bound.velocity_trace,

@@ -1,28 +1,21 @@
-"""The offline closed loop of the multi-target path (docs/model.md, "Several targets"): predict
-every track, plan, fly, take each UAV's unlabelled report, update the tracks, for N slots.
-
-The planner is `planning.multi_target.plan_for_tracks` (the single-target methods given the
-confirmed tracks, as the live ground loop plans). The truth, the detections and their random numbers are model/targets.py's,
-model/detections.py's and `draw_multi_target_noise`'s, common to every method of a run.
-"""
+"""A multi-target scenario's run of the one offline loop (`closed_loop.fly_offline`; docs/model.md,
+"Several targets"), its slots as the multi-target trace records them."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import numpy as np
-
 from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
-from isac_mission.model.detections import unlabelled_detections
+from isac_mission.experiment.closed_loop import SlotOutcome, fly_offline
 from isac_mission.model.run_noise import MultiTargetNoise
-from isac_mission.model.targets import TargetPaths, target_paths, target_radar_gains
-from isac_mission.planning.multi_target import check_multi_target_method, plan_for_tracks
+from isac_mission.model.scene import UnlabelledScene
+from isac_mission.model.targets import TargetPaths
+from isac_mission.planning.multi_target import check_multi_target_method
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records.multi_target import MultiTargetSlot
-from isac_mission.tracking.multi_target import MultiTargetTracker, TrackerSettings
-from isac_mission.types import Gaussian, IntArray, SlotPlan
+from isac_mission.tracking.factory import scene_for, tracker_for
 
 __all__ = ["MultiTargetRun", "MultiTargetSlot", "run_multi_target"]
 
@@ -44,49 +37,33 @@ def run_multi_target(
     kit: SolverKit,
     on_slot: Callable[[MultiTargetSlot], None] | None = None,
 ) -> MultiTargetRun:
-    """Fly one mission of N slots of a multi-target scenario with the given method; `kit` from
-    `multi_target_kit`."""
+    """Fly one mission of N slots of a multi-target scenario with the given method
+    (`closed_loop.fly_offline`); `kit` from `multi_target_kit`."""
     check_multi_target_method(method)
     if s.detection is None:
         raise ConfigError(f"{s.mission_id}: the multi-target loop needs a detection model")
-    paths = target_paths(s.targets, s.dt, s.kappa, s.N, noise.target_normals)
-    gains = target_radar_gains(s)
-    tracker = MultiTargetTracker(TrackerSettings.from_scenario(s))
-    uav_xy, eta = s.uav_start_xy.copy(), np.full(s.M, 1.0 / s.M)
-    assoc: IntArray | None = None
-    velocity = np.zeros((s.M, 2))
-    plan: SlotPlan | None = None
-    slots = []
-    for n in range(1, s.N + 1):
-        for t, spec in enumerate(s.targets):
-            if spec.prior_known and spec.first_slot == n - 1:
-                x = paths.states[n - 1, t] + noise.initial_errors[t]
-                tracker.add_confirmed(Gaussian(x=x, P=s.P0.copy()))
-        predictions = tracker.predict()
-        planned_for, plan = plan_for_tracks(
-            s, method, kit, predictions, uav_xy, eta, assoc, velocity, plan
-        )
-        if plan.uav_velocity_mps is not None:
-            velocity = plan.uav_velocity_mps
-        else:
-            velocity = (plan.uav_xy_m - uav_xy) / s.dt
-        uav_xy, eta, assoc = plan.uav_xy_m, plan.bandwidth_share, plan.bs_of_uav
-        reports = unlabelled_detections(
-            paths.states[n], gains, uav_xy, eta, kit.sensing, s.detection, noise.slots[n - 1]
-        )
-        update = tracker.update([r.measurements for r in reports], uav_xy, eta, kit.sensing)
-        slot = MultiTargetSlot(
-            n,
-            method,
-            plan,
-            uav_xy,
-            eta,
-            paths.states[n],
-            tuple(reports),
-            update.tracks,
-            planned_for,
-        )
-        slots.append(slot)
+    scene = scene_for(s, noise)
+    assert isinstance(scene, UnlabelledScene)
+
+    def each(o: SlotOutcome) -> None:
         if on_slot is not None:
-            on_slot(slot)
-    return MultiTargetRun(method, noise.seed, paths, tuple(slots))
+            on_slot(multi_target_slot(o))
+
+    outcomes = fly_offline(s, method, scene, tracker_for(s), kit, each)
+    slots = tuple(multi_target_slot(o) for o in outcomes)
+    return MultiTargetRun(method, noise.seed, scene.paths, slots)
+
+
+def multi_target_slot(o: SlotOutcome) -> MultiTargetSlot:
+    """A slot of the one loop as the multi-target trace records it."""
+    return MultiTargetSlot(
+        o.slot,
+        o.method,
+        o.plan,
+        o.uav_xy,
+        o.eta,
+        o.truth,
+        o.reports,
+        o.tracking.tracks,
+        o.planned_for,
+    )

@@ -26,7 +26,7 @@ from isac_mission.experiment.multi_target_loop import MultiTargetRun
 from isac_mission.model.targets import TargetPaths
 from isac_mission.records.multi_target import MultiTargetSlot
 from isac_mission.tracking.gospa import UNASSIGNED, gospa
-from isac_mission.tracking.multi_target import TrackEstimate
+from isac_mission.tracking.tracker import TrackEstimate
 from isac_mission.types import FloatArray, IntArray
 
 IDENTITY_CUTOFF_M = 100.0

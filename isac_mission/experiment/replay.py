@@ -145,7 +145,7 @@ def replay_trace(
             continue
         start_xy, start_v = _offline_start(prev, s)
         offline = replace(job, uav_xy=start_xy, uav_v=start_v).run()
-        x_pred = job.prediction.x
+        x_pred = job.targets[0].state_pred
         start_v_live = (
             np.zeros((s.M, 2)) if rec.plan_start_velocity is None else rec.plan_start_velocity
         )
@@ -208,8 +208,7 @@ def _live_job(
         uav_v=None if rec.plan_start_velocity is None else np.asarray(rec.plan_start_velocity),
         prev_eta=eta,
         prev_assoc=assoc,
-        prediction=predicted.prediction,
-        J_pred=predicted.prior,
+        targets=(predicted.belief(model.motion),),
         excluded=excluded,
         prev_plan=prev_plan,
     )

@@ -13,7 +13,6 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.model.detections import SlotDraws
-from isac_mission.model.kinematics import process_noise
 from isac_mission.types import FloatArray
 
 
@@ -35,7 +34,7 @@ class RunNoise:
 def draw_run_noise(s: Scenario, seed: int) -> RunNoise:
     """Draw one run's random numbers from a seeded generator."""
     rng = np.random.default_rng(seed)
-    W = process_noise(s.dt, s.kappa)
+    W = s.motion.process_noise(s.dt)
     return RunNoise(
         seed=seed,
         process=rng.multivariate_normal(np.zeros(4), W, size=s.N),

@@ -37,8 +37,13 @@ from isac_mission.planning.evasion import (
 )
 from isac_mission.planning.feasibility import operating_area
 from isac_mission.planning.margins import SafetyMargins, manoeuvre_margin_m
-from isac_mission.planning.problem import SlotInput, SlotProblem, slot_clearance_m
-from isac_mission.tracking.pcrb import PlanningObjective
+from isac_mission.planning.problem import (
+    SlotInput,
+    SlotProblem,
+    slot_clearance_m,
+    targets_objective,
+)
+from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.types import BoolArray, FloatArray, IntArray, SlotPlan, SolveReport
 
 OPERATOR_HOLD = "operator hold"
@@ -87,7 +92,7 @@ def best_effort(problem: SlotProblem, reason: str) -> SlotPlan:
         plan = problem.plan(np.clip(xy, *cons.area_bounds()), comm.eta, report)
         return replace(plan, uav_velocity_mps=velocity)
     xy = evade_target(
-        best, inp.prev_xy_m, inp.target_state_pred[:2], cons.clearance_m, problem.max_step_m
+        best, inp.prev_xy_m, inp.lead.state_pred[:2], cons.clearance_m, problem.max_step_m
     )
     xy = np.clip(xy, *cons.area_bounds())  # the vehicles' geofence would clamp it anyway
     return problem.plan(xy, comm.eta, report)
@@ -95,16 +100,16 @@ def best_effort(problem: SlotProblem, reason: str) -> SlotPlan:
 
 def slot_parties(inp: SlotInput, s: Scenario) -> Parties:
     """The slot's parties (planning/evasion.py) at its start: the UAVs at prev_velocity_mps
-    (D_s plus the margins apart), the target a slot before its prediction at its predicted
-    velocity (the slot's 14j clearance), the keep-out points."""
+    (D_s plus the margins apart), the lead target a slot before its prediction at its
+    predicted velocity (the slot's 14j clearance), the keep-out points."""
     assert inp.prev_velocity_mps is not None
-    target = np.asarray(inp.target_state_pred, dtype=float)
+    lead = inp.lead
     return Parties.of(
         inp.prev_xy_m,
         inp.prev_velocity_mps,
         SafetyMargins.of(s).separation_m,
-        target[:2] - s.dt * target[2:4],
-        target[2:4],
+        np.asarray(lead.position_at(-s.dt), dtype=float),
+        np.asarray(lead.state_pred[2:4], dtype=float),
         slot_clearance_m(inp, s),
         inp.keep_out_xy_m,
     )
@@ -134,7 +139,7 @@ def kept_viable(plan: SlotPlan, inp: SlotInput, s: Scenario, sensing: SensingPar
             break
         threat = more
     xy = np.clip(xy, *operating_area(s))
-    objective = PlanningObjective(inp.prior_information, inp.target_state_pred, sensing)
+    objective = targets_objective(inp.targets, sensing)
     uavs = ", ".join(str(m) for m in np.flatnonzero(evading))
     dodging = threat[evading, s.M].any()
     why = f"evasive legs for UAVs {uavs}: their planned end states could not " + (
@@ -208,14 +213,14 @@ def hold_plan(
     prev_bandwidth_share: FloatArray,
     prev_bs_of_uav: IntArray | None,
     excluded: tuple[int, ...],
-    prior_information: FloatArray,
-    target_state_pred: FloatArray,
+    targets: tuple[TargetBelief, ...],
     reason: str,
     status: str,
     solve_s: float = 0.0,
 ) -> SlotPlan:
     """Every vehicle holds where it is (uav_xy_m [M, 2]), with last slot's shares and association
-    (a plan that needs no solver; its bound is evaluated for the record). Without a last
+    (a plan that needs no solver; its bound, the methods' objective over `targets`, is
+    evaluated for the record). Without a last
     association (a hold at the first slot) each vehicle gets the communication-optimal BS for
     where it is (the exact assignment, no LP). A vehicle outside the plan (`excluded`) gets no
     BS and share 0, as in every widened plan; when every vehicle is outside it, nobody is
@@ -235,7 +240,7 @@ def hold_plan(
         costs = association_costs(uav_xy_m, s.bs_xy, dH=s.dH, rho0=s.rho0, B=s.B)
         assoc = optimal_assignment(costs, s.n_a)
     assoc[out] = NO_BS
-    objective = PlanningObjective(prior_information, target_state_pred, sensing)
+    objective = targets_objective(targets, sensing)
     with np.errstate(divide="ignore"):
         pcrb = float(objective.value(uav_xy_m, np.maximum(eta, 1e-12)))
     return SlotPlan(

@@ -23,7 +23,8 @@ from isac_mission.config import Scenario
 from isac_mission.planning.fallback import NO_BS, OPERATOR_HOLD, hold_plan
 from isac_mission.planning.registry import planner
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
-from isac_mission.types import FloatArray, Gaussian, HorizonPlan, IntArray, SlotPlan
+from isac_mission.tracking.beliefs import TargetBelief
+from isac_mission.types import FloatArray, HorizonPlan, IntArray, SlotPlan
 
 Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
 
@@ -109,8 +110,8 @@ class PlanningJob:
     """Everything needed to plan slot `slot` (arrays over all M vehicles).
 
     uav_xy [M, 2], uav_v [M, 2]: positions and velocities now (m, m/s); prev_eta [M];
-    prev_assoc [M] or None; prediction: the predicted target for the slot (its P is the
-    planner's target_cov_pred); J_pred [4, 4]: the bound's prior information; excluded: vehicles
+    prev_assoc [M] or None; targets: the tracker's beliefs of the targets at the slot's end
+    (tracking/beliefs.py; at least one); excluded: vehicles
     outside the plan (sorted); operator_held: those of them an operator's `hold` or `land` took
     out; prev_plan: last slot's plan of the same active vehicles, over those vehicles only
     (`active_part`), None when there is none or the active set changed.
@@ -123,8 +124,7 @@ class PlanningJob:
     uav_v: FloatArray | None
     prev_eta: FloatArray
     prev_assoc: IntArray | None
-    prediction: Gaussian
-    J_pred: FloatArray
+    targets: tuple[TargetBelief, ...]
     excluded: tuple[int, ...] = ()
     prev_plan: SlotPlan | None = None
     operator_held: tuple[int, ...] = ()
@@ -152,11 +152,9 @@ class PlanningJob:
             prev_xy_m=self.uav_xy[idx],
             prev_bandwidth_share=eta,
             prev_bs_of_uav=assoc,
-            target_state_pred=self.prediction.x,
-            prior_information=self.J_pred,
+            targets=self.targets,
             prev_velocity_mps=None if self.uav_v is None else self.uav_v[idx],
             keep_out_xy_m=self.uav_xy[list(self.excluded)] if self.excluded else None,
-            target_cov_pred=self.prediction.P,
             prev_plan=self.prev_plan,
         )
         plan = planner(inp, kit, self.method)
@@ -173,8 +171,7 @@ class PlanningJob:
             self.prev_eta,
             self.prev_assoc,
             self.excluded,
-            self.J_pred,
-            self.prediction.x,
+            self.targets,
             reason,
             status,
             solve_s,

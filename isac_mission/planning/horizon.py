@@ -26,7 +26,6 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.model.channel import min_share
-from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, velocity_control_points
 from isac_mission.planning.fallback import per_slot_instead
 from isac_mission.planning.feasibility import SlotConstraints, operating_area
@@ -57,10 +56,8 @@ from isac_mission.planning.problem import (
     with_end_velocity,
 )
 from isac_mission.tracking.pcrb import (
-    Bound,
     SensingParams,
-    measurement_information,
-    predict_information,
+    bound_along,
     scaled_inverse,
 )
 from isac_mission.types import (
@@ -85,28 +82,14 @@ def horizon_bound_traces(
     sensing: SensingParams,
 ) -> FloatArray:
     """tr(PCRB) [L] along a horizon plan xy [L, M, 2], eta [L, M] by the bound's recursion
-    (tracking/pcrb.py): J_1 = J_pred + J_M,1; J_pred,l+1 = (F C_l F^T + W)^-1, every J_M at
-    the constant-velocity predicted state of its slot."""
-    F = transition_matrix(s.dt)
-    W = process_noise(s.dt, s.kappa)
-    x = np.asarray(x_pred, dtype=float)
-    prior = np.asarray(J_pred, dtype=float)
-    out = []
-    for h in range(len(xy)):
-        d = np.linalg.norm(x[None, :2] - xy[h], axis=1)
-        info = prior + measurement_information(x, xy[h], sensing.variances(d, eta[h]))
-        bound = Bound.from_information(0.5 * (info + info.T))
-        out.append(bound.trace)
-        prior = predict_information(bound, F, W)
-        x = F @ x
-    return np.asarray(out)
+    (tracking/pcrb.bound_along), every J_M at the predicted state of its slot."""
+    return bound_along(s.motion, s.dt, x_pred, J_pred, xy, eta, sensing).traces
 
 
 def predicted_clearances(s: Scenario, target_cov_pred: FloatArray, length: int) -> FloatArray:
     """clearance_m [L]: target_clearance_m for the covariance predicted l slots further (no
     measurement in between: the largest the tracker's uncertainty can be there)."""
-    F = transition_matrix(s.dt)
-    W = process_noise(s.dt, s.kappa)
+    F, W = s.motion.transition(s.dt), s.motion.process_noise(s.dt)
     P = np.asarray(target_cov_pred, dtype=float)
     out = []
     for _ in range(length):
@@ -184,7 +167,7 @@ def horizon_slot_data(
     (14b), the clearances along the horizon; start_velocity_mps [M, 2]: what the first legs
     start with (`planned_start_velocity`)."""
     nearest = np.argmin(np.linalg.norm(waypoints_xy_m[:, None, :] - s.bs_xy[None], axis=-1), axis=1)
-    keep_out, x_pred = inp.keep_out_xy_m, inp.target_state_pred
+    keep_out, x_pred = inp.keep_out_xy_m, inp.lead.state_pred
     return HorizonSlotData(
         rate_min_bps=s.r_th,
         prev_xy=np.asarray(inp.prev_xy_m, dtype=float),
@@ -195,7 +178,7 @@ def horizon_slot_data(
         control_xy=s.bs_xy[nearest],
         keep_out_xy=np.zeros((0, 2)) if keep_out is None else np.asarray(keep_out),
         x_pred=np.asarray(x_pred, dtype=float),
-        J_pred=np.asarray(inp.prior_information, dtype=float),
+        J_pred=np.asarray(inp.lead.prior_information, dtype=float),
         clearance_m=sample_clearances(s, predicted_clearances(s, target_cov_pred, length), x_pred),
     )
 
@@ -331,8 +314,8 @@ def plan_horizon(
     fallback (docs/model.md, "Receding horizon", "Start points"); started_s: the perf_counter
     time the slot's planning started (for solve_s)."""
     sensing = kit.sensing
-    x_pred, J_pred, prev_plan = inp.target_state_pred, inp.prior_information, inp.prev_plan
-    cov = inp.target_cov_pred
+    lead, prev_plan = inp.lead, inp.prev_plan
+    x_pred, J_pred, cov = lead.state_pred, lead.prior_information, lead.cov_pred
     target_cov_pred = scaled_inverse(J_pred) if cov is None else cov
     s = kit.scenario
     M, L, dt = s.M, s.planner.horizon.length, s.dt

@@ -43,7 +43,6 @@ import casadi as ca
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
 from isac_mission.planning.horizon_hessian import LiftedSlot, horizon_hess_lag, vech
 from isac_mission.planning.legs import chord_point_clearance_m
@@ -62,11 +61,13 @@ from isac_mission.planning.nlp_model import (
     information_terms,
     lower_at_rate,
     plain_ipopt,
-    predicted_target_point,
     scaled_inverse_sx,
     straight_leg_point,
 )
-from isac_mission.tracking.pcrb import SensingParams, measurement_information, scaled_inverse
+from isac_mission.tracking.pcrb import (
+    SensingParams,
+    bound_along,
+)
 from isac_mission.types import FloatArray, HorizonDuals, IntArray
 
 IPOPT_OPTIONS: dict[str, Any] = {
@@ -231,8 +232,9 @@ class HorizonNLP:
         self.margins = margins
         self._sensing = SensingParams.from_scenario(s)
         dt = s.dt
-        F = transition_matrix(dt)
-        W = process_noise(dt, s.kappa)
+        motion = s.motion
+        F = motion.transition(dt)
+        W = motion.process_noise(dt)
 
         z = ca.SX.sym("z", L * M * 2)
         u = ca.SX.sym("u", L * M * 2) if self.vehicle_model else ca.SX.sym("u", 0)
@@ -333,7 +335,7 @@ class HorizonNLP:
                 bs = slice(2 * m, 2 * m + 2)
                 add_uav_rows(rows, s, qm, em, serving[bs], control[bs], step2, e, S, limits)
                 for frac in fracs:
-                    p = predicted_target_point(x_pred, (h - 1 + frac) * dt)
+                    p = motion.position_after(x_pred, (h - 1 + frac) * dt)
                     add_clearance_row(rows, along(h, m, frac) - p, (clearance[h] / S) ** 2, S)
                     for k in range(n_keep_out):
                         gap = along(h, m, frac) - keep_out[2 * k : 2 * k + 2]
@@ -368,7 +370,7 @@ class HorizonNLP:
         # clearance, and the shifted starts of the soak's tracking phase missed their rows.
         self.n_terminal = 0
         if self.vehicle_model and cfg.terminal_braking:
-            target_end = predicted_target_point(x_pred, (L - 1) * dt)
+            target_end = motion.position_after(x_pred, (L - 1) * dt)
             brake = s.a_max * dt**2 / S  # in units of S per slot squared
             for m in range(M):
                 offset = (q(L - 1, m) - target_end) / S
@@ -475,27 +477,29 @@ class HorizonNLP:
         given ones; lift the lifted variables there in those scales, E_l P_l+1 E_l
         (l < L - 1), each column-major."""
         s = self.scenario
-        F = transition_matrix(s.dt)
-        W = process_noise(s.dt, s.kappa)
-        x = np.asarray(data.x_pred, dtype=float)
-        prior = np.asarray(data.J_pred, dtype=float)
+        along = bound_along(
+            s.motion,
+            s.dt,
+            np.asarray(data.x_pred, dtype=float),
+            np.asarray(data.J_pred, dtype=float),
+            xy,
+            eta,
+            self._sensing,
+        )
         L = self.length
         scale_j, scale_p = np.ones((L, 4)), np.ones((L, 4))
         if scales is not None:
             scale_j, scale_p = scales[0].reshape(L, 4), scales[1].reshape(L, 4)
         predicted = []
         for h in range(L):
-            d = np.linalg.norm(x[None, :2] - xy[h], axis=1)
-            J = prior + measurement_information(x, xy[h], self._sensing.variances(d, eta[h]))
+            J = along.information[h]
             if scales is None:
                 scale_j[h] = 1.0 / np.sqrt(np.maximum(np.diag(J), 1e-300))
             if h + 1 < L:
-                P = F @ scaled_inverse(0.5 * (J + J.T)) @ F.T + W
+                P = along.next_covariance[h]
                 if scales is None:
                     scale_p[h] = 1.0 / np.sqrt(np.diag(P))
                 predicted.append(scale_p[h][:, None] * P * scale_p[h][None])
-                prior = scaled_inverse(0.5 * (P + P.T))
-            x = F @ x
         lift = np.concatenate([m.reshape(-1, order="F") for m in predicted])
         return scale_j.reshape(-1), scale_p.reshape(-1), lift
 

@@ -11,8 +11,8 @@ keeps:
   planning/legs.py: the target's possible motion within the slot; the true target is within
   k sigma_max of its prediction along any direction with probability Phi(k) or more) and
   e = planner.tracking_margin_m, plus a_T dt^2 / 2 for a target that manoeuvres at up to
-  a_T = target.max_accel_mps2 off its prediction within the slot; kept along the legs, not only
-  at their ends;
+  a_T = target_motion.max_accel_mps2 off its prediction within the slot; kept along the legs,
+  not only at their ends;
 - 14i: D_s + 2 e between planned UAVs (and D_s + 2 e from keep-out points);
 - 14a and 14b: the rate and the control range at a distance e farther from the BS.
 
@@ -35,7 +35,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.legs import leg_fractions
 from isac_mission.types import FloatArray
 
@@ -104,7 +103,7 @@ def slot_sigma_max_m(s: Scenario, target_cov_pred: FloatArray) -> float:
     direction, over the leg's sampled instants tau_i dt (planning/legs.py) of the slot whose
     predicted covariance at its end is target_cov_pred [4, 4] ([2, 2]: that instant only).
 
-    The covariance at tau dt is the constant-velocity prediction from the slot's start,
+    The covariance at tau dt is the motion model's prediction from the slot's start,
     F(tau dt) P_0 F(tau dt)^T + W(tau dt), with P_0 = F(dt)^-1 (P_pred - W(dt)) F(dt)^-T the
     start's covariance recovered from the end's (clipped to be positive semidefinite)."""
     P = np.asarray(target_cov_pred, dtype=float)
@@ -114,20 +113,12 @@ def slot_sigma_max_m(s: Scenario, target_cov_pred: FloatArray) -> float:
     var = _largest_eigenvalue(P[None, :2, :2])
     fractions = leg_fractions(leg_samples(s))[:-1]
     if len(fractions):
-        back = transition_matrix(-s.dt)  # F(dt)^-1
-        P0 = back @ (P - process_noise(s.dt, s.kappa)) @ back.T
+        back = s.motion.transition(-s.dt)  # F(dt)^-1
+        P0 = back @ (P - s.motion.process_noise(s.dt)) @ back.T
         w, V = np.linalg.eigh(0.5 * (P0 + P0.T))
         P0 = (V * np.maximum(w, 0.0)) @ V.T
-        t = fractions * s.dt
-        pp, pv, vv = P0[:2, :2], P0[:2, 2:], P0[2:, 2:]
-        # F(t) P0 F(t)^T + W(t), position block: pp + t (pv + pv^T) + t^2 vv + kappa t^3 / 3.
-        Pt = (
-            pp[None]
-            + t[:, None, None] * (pv + pv.T)[None]
-            + (t**2)[:, None, None] * vv[None]
-            + (s.kappa * t**3 / 3)[:, None, None] * np.eye(2)[None]
-        )
-        var = np.concatenate([var, _largest_eigenvalue(Pt)])
+        path = s.motion.predicted_path(np.zeros(4), P0, fractions * s.dt)
+        var = np.concatenate([var, _largest_eigenvalue(path.covariances[:, :2, :2])])
     return float(np.sqrt(max(float(np.max(var)), 0.0)))
 
 

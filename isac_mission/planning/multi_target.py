@@ -2,7 +2,7 @@
 several targets"): the offline multi-target loop and the live ground loop plan through here.
 
 Every per-slot method plans for the sum of the confirmed tracks' tr(PCRB)
-(`SlotInput.other_targets`); the confirmed track nearest to the fleet is the target the plan's
+(`SlotInput.targets`, the first the primary); the confirmed track nearest to the fleet is the target the plan's
 safety rule follows along each leg, and every other track, confirmed or tentative, is a keep-out
 point at its predicted position that every UAV keeps D_s from (the nearest
 `KEEP_OUT_CAPACITY`). With no confirmed track the fleet holds where it is.
@@ -10,24 +10,25 @@ point at its predicted position that every UAV keeps D_s from (the nearest
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.planning.association import association_costs, optimal_assignment
+from isac_mission.planning.registry import METHODS, max_targets
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
-from isac_mission.tracking.multi_target import TrackPrediction
+from isac_mission.tracking.factory import KEEP_OUT_TRACKS
+from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 
-KEEP_OUT_CAPACITY = 8
+KEEP_OUT_CAPACITY = KEEP_OUT_TRACKS
 """How many tracks besides the planned-around one every UAV keeps D_s from (the nearest to the
 fleet); the kit's problems are built for this many keep-out points."""
 
 FAR_AWAY_M = -1e6
 """Where the unused keep-out points are (no UAV comes near)."""
-
-SINGLE_TARGET_METHODS = ("horizon",)
-"""Methods that plan for one target only (their NLPs are one target's): refused on this path."""
 
 
 def multi_target_kit(s: Scenario) -> SolverKit:
@@ -36,15 +37,28 @@ def multi_target_kit(s: Scenario) -> SolverKit:
 
 
 def check_multi_target_method(method: str) -> None:
-    """Raise ConfigError for a method that cannot plan for several targets."""
-    if method in SINGLE_TARGET_METHODS:
+    """Raise ConfigError for a method that cannot plan for several targets (the registry's
+    max_targets)."""
+    if max_targets(method) == 1:
+        several = ", ".join(m for m in METHODS if max_targets(m) != 1)
         raise ConfigError(
             f"method {method!r} plans for one target (its NLP is one target's bound); on the "
-            "multi-target path plan with proposed, proposed-sca, sd, aba, crb or comm"
+            f"multi-target path plan with {several}"
         )
 
 
-def plan_for_tracks(
+@dataclass(frozen=True)
+class TracksPlan:
+    """A slot planned for the tracks: planned_for, the ID of the track the plan's safety rule
+    follows (0 when the fleet holds); slot_input, what the planner was given (None when it was
+    not asked: no confirmed track); plan."""
+
+    planned_for: int
+    slot_input: SlotInput | None
+    plan: SlotPlan
+
+
+def plan_tracks(
     s: Scenario,
     method: Method,
     kit: SolverKit,
@@ -55,45 +69,45 @@ def plan_for_tracks(
     velocity: FloatArray | None,
     prev_plan: SlotPlan | None,
     extra_keep_out_xy: FloatArray | None = None,
-) -> tuple[int, SlotPlan]:
-    """(the ID of the track planned around, 0 when the fleet holds; the slot's plan) for the
-    tracks' predictions, from the UAVs at uav_xy [M, 2] (m) with velocities [M, 2] (m/s),
-    last slot's shares eta [M] and BSs assoc [M] (None: none yet). extra_keep_out_xy [E, 2]:
-    more points every UAV keeps D_s from (the vehicles outside the plan). `kit` from
-    `multi_target_kit` (E = 0), or built with KEEP_OUT_CAPACITY + E keep-out points."""
+    keep_out_tracks: int = KEEP_OUT_CAPACITY,
+) -> TracksPlan:
+    """The slot's plan for the tracks' predictions, from the UAVs at uav_xy [M, 2] (m) with
+    velocities [M, 2] (m/s), last slot's shares eta [M] and BSs assoc [M] (None: none yet).
+    extra_keep_out_xy [E, 2]: more points every UAV keeps D_s from (the vehicles outside the
+    plan); keep_out_tracks: how many other tracks the kit keeps D_s from (0: a tracker of one
+    target); `kit` built with keep_out_tracks + E keep-out points."""
     extra = np.zeros((0, 2)) if extra_keep_out_xy is None else np.asarray(extra_keep_out_xy)
-    if kit.n_keep_out != KEEP_OUT_CAPACITY + len(extra):
-        raise ValueError(
-            f"the kit must be built with n_keep_out={KEEP_OUT_CAPACITY} + {len(extra)}"
-        )
+    if kit.n_keep_out != keep_out_tracks + len(extra):
+        raise ValueError(f"the kit must be built with n_keep_out={keep_out_tracks} + {len(extra)}")
     confirmed = [p for p in predictions if p.confirmed]
     if not confirmed:
-        return 0, hold_without_track(s, uav_xy, eta, assoc)
+        return TracksPlan(0, None, hold_without_track(s, uav_xy, eta, assoc))
 
     def fleet_distance(p: TrackPrediction) -> float:
         return float(np.min(np.linalg.norm(uav_xy - p.prediction.x[:2], axis=1)))
 
     primary = min(confirmed, key=fleet_distance)
     others = sorted((p for p in predictions if p is not primary), key=fleet_distance)
-    keep_out = np.full((KEEP_OUT_CAPACITY + len(extra), 2), FAR_AWAY_M)
-    for i, p in enumerate(others[:KEEP_OUT_CAPACITY]):
-        keep_out[i] = p.prediction.x[:2]
-    keep_out[KEEP_OUT_CAPACITY:] = extra
+    if others and keep_out_tracks == 0:
+        raise ValueError("several tracks, but the kit keeps no track apart")
+    keep_out: FloatArray | None = None
+    if kit.n_keep_out:
+        keep_out = np.full((keep_out_tracks + len(extra), 2), FAR_AWAY_M)
+        for i, p in enumerate(others[:keep_out_tracks]):
+            keep_out[i] = p.prediction.x[:2]
+        keep_out[keep_out_tracks:] = extra
     inp = SlotInput(
         prev_xy_m=uav_xy,
         prev_bandwidth_share=eta,
         prev_bs_of_uav=assoc,
-        target_state_pred=primary.prediction.x,
-        prior_information=primary.prior_information,
+        targets=tuple(
+            p.belief(s.motion) for p in (primary, *(p for p in confirmed if p is not primary))
+        ),
         prev_velocity_mps=velocity,
         keep_out_xy_m=keep_out,
-        target_cov_pred=primary.prediction.P,
         prev_plan=prev_plan,
-        other_targets=tuple(
-            (p.prediction.x, p.prior_information) for p in confirmed if p is not primary
-        ),
     )
-    return primary.track_id, plan_slot(inp, kit, method)
+    return TracksPlan(primary.track_id, inp, plan_slot(inp, kit, method))
 
 
 def hold_without_track(

@@ -176,12 +176,6 @@ def straight_leg_point(q0: ca.SX, q1: ca.SX, tau: float) -> ca.SX:
     return point
 
 
-def predicted_target_point(x_pred: ca.SX, t_s: float) -> ca.SX:
-    """The constant-velocity target [2] t_s after the instant of its predicted state x_pred [4]."""
-    point: ca.SX = x_pred[:2] + t_s * x_pred[2:]
-    return point
-
-
 def add_uav_rows(
     rows: NlpRows,
     s: Scenario,

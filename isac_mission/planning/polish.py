@@ -58,7 +58,6 @@ from isac_mission.planning.nlp_model import (
     information_terms,
     lower_at_rate,
     plain_ipopt,
-    predicted_target_point,
     straight_leg_point,
 )
 from isac_mission.tracking.pcrb import PlanningObjective
@@ -230,7 +229,7 @@ class PolishNLP:
             step2 = ca.sumsqr(z[m, :])
             add_uav_rows(rows, s, qm, eta[m], serving[m, :], control[m, :], step2, e, L, (), reach)
             for f, tau in enumerate(fractions):
-                target = predicted_target_point(x_pred, (tau - 1.0) * s.dt).T
+                target = s.motion.position_after(x_pred, (tau - 1.0) * s.dt).T
                 add_clearance_row(rows, at(m, tau) - target, bound(f, m), L)
                 for k in range(K):
                     add_clearance_row(rows, at(m, tau) - keep_out[k, :], bound(f, M + m * K + k), L)

@@ -24,7 +24,8 @@ from isac_mission.planning.association import associate
 from isac_mission.planning.communication import CommunicationPlan, communication_optimal
 from isac_mission.planning.feasibility import SlotConstraints, operating_area
 from isac_mission.planning.margins import target_clearance_m
-from isac_mission.tracking.pcrb import Objective, PlanningObjective, SumObjective
+from isac_mission.tracking.beliefs import TargetBelief
+from isac_mission.tracking.pcrb import Objective, PlanningObjective, SensingParams, SumObjective
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 
 if TYPE_CHECKING:
@@ -35,8 +36,6 @@ if TYPE_CHECKING:
     prev_xy="prev_xy_m",
     prev_eta="prev_bandwidth_share",
     prev_assoc="prev_bs_of_uav",
-    x_pred="target_state_pred",
-    J_pred="prior_information",
     prev_velocity="prev_velocity_mps",
     keep_out_xy="keep_out_xy_m",
 )
@@ -45,35 +44,36 @@ class SlotInput:
     """What the planner knows at the start of slot n (positions in the scenario's planar frame).
 
     prev_xy_m [M, 2]: where the UAVs are (q_{n-1}), m; prev_bandwidth_share [M]: last slot's
-    shares; prev_bs_of_uav [M] or None: last slot's BS per UAV; target_state_pred [4]: the
-    predicted target state (x_m, y_m, vx_mps, vy_mps); prior_information [4, 4]: the bound's
-    prior information at this slot (J_pred, in the units of the state's inverse squared);
-    prev_velocity_mps [M, 2] or None: the vehicles' velocities now (used when
-    planner.accel_limit_mps2 or planner.vehicle_model is set); keep_out_xy_m [L, 2] or None:
-    vehicles outside this plan that every planned UAV keeps D_s from (the kit must be built with
-    n_keep_out = L); target_cov_pred [4, 4] or None: the tracker's predicted covariance of the
-    target (the safety rule; None: prior_information^-1); prev_plan: last slot's plan (the
-    horizon's warm start), None at the first slot; other_targets: further targets the plan is
-    for, each (state_pred [4], prior_information [4, 4]) as target_state_pred and
-    prior_information are (the multi-target path: the objective is the sum of every target's
-    tr(PCRB); the polish and the horizon plan for the first target only, so the loops that
-    give other targets fly neither; docs/model.md, "Several targets").
+    shares; prev_bs_of_uav [M] or None: last slot's BS per UAV; targets: the targets the plan is
+    for (tracking/beliefs.py), at least one: the objective is the sum of their weighted
+    tr(PCRB), and the first, `lead`, is the one the slot's 14j clearance and the horizon's NLP
+    follow (docs/model.md, "Several targets"); prev_velocity_mps [M, 2] or None: the vehicles'
+    velocities now (used when planner.accel_limit_mps2 or planner.vehicle_model is set);
+    keep_out_xy_m [L, 2] or None: points every planned UAV keeps D_s from (vehicles outside this
+    plan, other tracks; the kit must be built with n_keep_out = L); prev_plan: last slot's plan
+    (the horizon's warm start), None at the first slot.
 
-    The names before units were added (prev_xy, prev_eta, prev_assoc, x_pred, J_pred,
-    prev_velocity, keep_out_xy) are accepted as keywords and readable as attributes, with a
-    DeprecationWarning; they go in the next release.
+    The names before units were added (prev_xy, prev_eta, prev_assoc, prev_velocity,
+    keep_out_xy) are accepted as keywords and readable as attributes, with a DeprecationWarning;
+    they go in the next release.
     """
 
     prev_xy_m: FloatArray
     prev_bandwidth_share: FloatArray
     prev_bs_of_uav: IntArray | None
-    target_state_pred: FloatArray
-    prior_information: FloatArray
+    targets: tuple[TargetBelief, ...]
     prev_velocity_mps: FloatArray | None = None
     keep_out_xy_m: FloatArray | None = None
-    target_cov_pred: FloatArray | None = None
     prev_plan: SlotPlan | None = None
-    other_targets: tuple[tuple[FloatArray, FloatArray], ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.targets:
+            raise ValueError("a slot input needs at least one target belief")
+
+    @property
+    def lead(self) -> TargetBelief:
+        """The target the slot's 14j clearance follows: the first of `targets`."""
+        return self.targets[0]
 
 
 @dataclass(frozen=True)
@@ -85,8 +85,8 @@ class SlotProblem:
     (inside the 14h disk and the operating area) when a dynamics limit is set; constraints: the
     exact 14a-14j set with the slot's clearance; max_step_m: V_max dt, or 0 for a method that does
     not move the UAVs; communication: the communication-optimal plan at that step;
-    objective: tr(PCRB) at the predicted state (measurement_only for the CRB-criterion), summed
-    over the input's targets when it has other_targets;
+    objective: tr(PCRB) at the predicted state (measurement_only for the CRB-criterion), the
+    weighted sum over the input's targets when it has several (`targets_objective`);
     started_s: the perf_counter time planning began (for SolveReport.solve_s).
     """
 
@@ -163,7 +163,7 @@ def build_slot_problem(
         coast = coast * np.minimum(1.0, s.v_max * s.dt * (1 - 1e-9) / np.maximum(norm, 1e-12))
         # ... and inside the operating area: a vehicle heading out at the edge must stop too.
         ballistic = np.clip(inp.prev_xy_m + coast, *operating_area(s))
-    x_pred = inp.target_state_pred
+    x_pred = inp.lead.state_pred
     cons = SlotConstraints(
         inp.prev_xy_m,
         serving,
@@ -181,11 +181,7 @@ def build_slot_problem(
     comm = communication_optimal(
         inp.prev_xy_m, serving, max_step_m=step, dH=s.dH, rho0=s.rho0, B=s.B
     )
-    parts = tuple(
-        PlanningObjective(J, x, kit.sensing, measurement_only=measurement_only)
-        for x, J in ((x_pred, inp.prior_information), *inp.other_targets)
-    )
-    objective: Objective = parts[0] if len(parts) == 1 else SumObjective(parts)
+    objective = targets_objective(inp.targets, kit.sensing, measurement_only=measurement_only)
     return SlotProblem(
         inp=inp,
         scenario=s,
@@ -199,6 +195,22 @@ def build_slot_problem(
     )
 
 
+def targets_objective(
+    targets: tuple[TargetBelief, ...], sensing: SensingParams, *, measurement_only: bool = False
+) -> Objective:
+    """What every method plans and the fallback policy judges a plan by: tr(PCRB) of the one
+    target, or the sum over the targets of weight tr(PCRB) (measurement_only: tr(J_M^-1), the
+    CRB-criterion's), each at its predicted state."""
+    parts = tuple(
+        PlanningObjective(b.prior_information, b.state_pred, sensing, measurement_only)
+        for b in targets
+    )
+    weights = tuple(b.weight for b in targets)
+    if len(parts) == 1 and weights[0] == 1.0:
+        return parts[0]
+    return SumObjective(parts, weights)
+
+
 def with_end_velocity(plan: SlotPlan, inp: SlotInput, s: Scenario) -> SlotPlan:
     """The plan with, under planner.vehicle_model, the mean-velocity leg's end velocity
     (q_n - q_{n-1}) / dt as uav_velocity_mps [M, 2] when the method gave none (docs/model.md,
@@ -210,11 +222,12 @@ def with_end_velocity(plan: SlotPlan, inp: SlotInput, s: Scenario) -> SlotPlan:
 
 
 def slot_clearance_m(inp: SlotInput, s: Scenario) -> float:
-    """The slot's 14j clearance (planning/margins.py) from the tracker's predicted covariance,
-    or prior_information^-1 when the input has none."""
-    cov = inp.target_cov_pred
+    """The slot's 14j clearance (planning/margins.py) from the lead target's predicted
+    covariance (prior_information^-1 when its belief has none)."""
+    lead = inp.lead
+    cov = lead.cov_pred
     if cov is None and s.planner.safety_margin != "none":
-        cov = np.asarray(np.linalg.inv(inp.prior_information), dtype=float)
+        cov = lead.covariance()
     return target_clearance_m(s, cov)
 
 
@@ -226,8 +239,7 @@ def warm_up_input(kit: SolverKit) -> SlotInput:
         prev_xy_m=s.uav_start_xy,
         prev_bandwidth_share=np.full(s.M, 1.0 / s.M),
         prev_bs_of_uav=None,
-        target_state_pred=s.x0,
-        prior_information=np.asarray(np.linalg.inv(s.P0), dtype=float),
+        targets=(TargetBelief(s.x0, np.asarray(np.linalg.inv(s.P0), dtype=float), s.motion),),
         keep_out_xy_m=np.full((kit.n_keep_out, 2), -1e6) if kit.n_keep_out else None,
     )
 

@@ -37,13 +37,15 @@ class SlotPlanner(Protocol):
 
 @dataclass(frozen=True)
 class Registered:
-    """One method: name (configs, the CLI, traces), label (reports), summary (help), and where
-    its SlotPlanner class is ("module:Class")."""
+    """One method: name (configs, the CLI, traces), label (reports), summary (help), where its
+    SlotPlanner class is ("module:Class"), and how many targets it plans for at most
+    (max_targets; None: any number: the weighted sum of their bounds)."""
 
     name: str
     label: str
     summary: str
     where: str
+    max_targets: int | None = None
 
 
 REGISTRY: tuple[Registered, ...] = (
@@ -88,6 +90,7 @@ REGISTRY: tuple[Registered, ...] = (
         "Horizon",
         "receding horizon: L slots planned together on the bound, the first flown",
         "isac_mission.planning.horizon:Horizon",
+        max_targets=1,
     ),
 )
 """Every method, in the order reports list them."""
@@ -114,6 +117,11 @@ def live_default_method(multi_target: bool) -> str:
     """The method `run` and `serve` fly when none is given: the receding horizon, or on a
     multi-target scenario the paper's per-slot method."""
     return LIVE_DEFAULT_MULTI_TARGET_METHOD if multi_target else LIVE_DEFAULT_METHOD
+
+
+def max_targets(name: str) -> int | None:
+    """How many targets method `name` plans for at most (None: any number)."""
+    return REGISTRY[METHODS.index(check_method(name))].max_targets
 
 
 def check_method(name: str) -> str:

@@ -14,7 +14,7 @@ import numpy as np
 from isac_mission.model.detections import UavReport
 from isac_mission.records.jsonlines import dumps_line, to_jsonable
 from isac_mission.records.slot import MissionEnd
-from isac_mission.tracking.multi_target import TrackEstimate
+from isac_mission.tracking.tracker import TrackEstimate
 from isac_mission.types import FloatArray, SlotPlan
 
 TRACE_FORMAT = "isac-mission multi-target trace 1"

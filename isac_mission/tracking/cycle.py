@@ -23,7 +23,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.model.motion import MotionModel
+from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.ekf import ekf_predict, ekf_update
 from isac_mission.tracking.pcrb import (
     Bound,
@@ -40,22 +41,25 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class CycleModel:
-    """The recursion's constants: F, W [4, 4] of eq. 3 (dt in s, kappa in m^2/s^3), the
-    planner's prior ("pcrb" or "ekf") and the iterated EKF's number of iterations."""
+    """The recursion's constants: F, W [4, 4] of the target's motion model over one slot, the
+    planner's prior ("pcrb" or "ekf"), the iterated EKF's number of iterations and the motion
+    model itself (what the planner predicts the target with between slot instants)."""
 
     F: FloatArray
     W: FloatArray
     bound_prior: str
     ekf_iterations: int
+    motion: MotionModel
 
     @classmethod
     def from_scenario(cls, s: Scenario) -> CycleModel:
         """The constants a scenario resolves to."""
         return cls(
-            F=transition_matrix(s.dt),
-            W=process_noise(s.dt, s.kappa),
+            F=s.motion.transition(s.dt),
+            W=s.motion.process_noise(s.dt),
             bound_prior=s.bound_prior,
             ekf_iterations=s.ekf_iterations,
+            motion=s.motion,
         )
 
 
@@ -74,6 +78,10 @@ class SlotPrediction:
 
     prediction: Gaussian
     prior: FloatArray
+
+    def belief(self, motion: MotionModel) -> TargetBelief:
+        """The prediction as the planner takes it (tracking/beliefs.py), predicted by `motion`."""
+        return TargetBelief(self.prediction.x, self.prior, motion, self.prediction.P)
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,7 @@ import numpy as np
 
 from isac_mission.config.targets import DetectionSpec
 from isac_mission.model.detections import detection_probability
-from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.model.motion import ConstantVelocity
 from isac_mission.model.radar import SensingParams, measure, measurement_jacobian
 from isac_mission.tracking.association import (
     MISSED,
@@ -62,6 +62,7 @@ from isac_mission.tracking.origin_uncertainty import (
     uav_reduction_factors,
 )
 from isac_mission.tracking.pcrb import Bound, predict_information
+from isac_mission.tracking.tracker import SlotTracking, TrackEstimate, TrackPrediction
 from isac_mission.types import BoolArray, FloatArray, Gaussian
 
 if TYPE_CHECKING:
@@ -112,16 +113,16 @@ class TrackerSettings:
 
     @classmethod
     def from_scenario(cls, s: Scenario) -> TrackerSettings:
-        """The settings of a scenario's `multi_target:` and `detection:` sections."""
+        """The settings of a scenario's `tracker.multi:` and `detection:` sections."""
         c = s.multi_tracker
         kappa = s.kappa if c.process_noise_intensity is None else c.process_noise_intensity
         detection = s.detection
         if detection is None:
             raise ValueError("the multi-target tracker needs the scenario's detection model")
         return cls(
-            F=transition_matrix(s.dt),
-            W=process_noise(s.dt, kappa),
-            bound_W=process_noise(s.dt, s.kappa),
+            F=s.motion.transition(s.dt),
+            W=ConstantVelocity(kappa).process_noise(s.dt),
+            bound_W=s.motion.process_noise(s.dt),
             detection=detection,
             clutter_density=detection.clutter_density,
             association=c.association,
@@ -140,30 +141,6 @@ class TrackerSettings:
         )
 
 
-@dataclass(frozen=True)
-class TrackEstimate:
-    """One track after a slot: track_id (stable, never reused), confirmed, belief (x [4] in m
-    and m/s, P [4, 4]), bound: its PCRB with origin uncertainty (tracking/origin_uncertainty.py),
-    weight: its association weight this slot (sum over UAVs of 1 - beta_0)."""
-
-    track_id: int
-    confirmed: bool
-    belief: Gaussian
-    bound: Bound
-    weight: float
-
-
-@dataclass(frozen=True)
-class TrackPrediction:
-    """One track before a slot's reports: track_id, confirmed, prediction (x [4], P [4, 4]) and
-    prior_information J_pred [4, 4] = (F C F^T + W)^-1 of its bound (what planning sees)."""
-
-    track_id: int
-    confirmed: bool
-    prediction: Gaussian
-    prior_information: FloatArray
-
-
 @dataclass
 class _Track:
     track_id: int
@@ -178,20 +155,6 @@ class _Track:
     suspects: list[tuple[int, FloatArray]] = field(default_factory=list)
     refuted: Gaussian | None = None
     refuted_now: bool = False
-
-
-@dataclass(frozen=True)
-class SlotTracking:
-    """What one slot's update did: tracks [T] after it (confirmed and tentative), started and
-    deleted: the IDs started and deleted this slot."""
-
-    tracks: tuple[TrackEstimate, ...]
-    started: tuple[int, ...]
-    deleted: tuple[int, ...]
-
-    @property
-    def confirmed(self) -> tuple[TrackEstimate, ...]:
-        return tuple(t for t in self.tracks if t.confirmed)
 
 
 class MultiTargetTracker:

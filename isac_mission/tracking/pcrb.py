@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from isac_mission.model.motion import MotionModel
 from isac_mission.model.radar import SensingParams, measurement_directions
 from isac_mission.types import FloatArray
 
@@ -108,6 +109,55 @@ def bound_step(
     """One step of the recursion: J_n = J_pred + H^T R^-1 H at the predicted state x_pred [4]."""
     J = predict_information(prev, F, W) + measurement_information(x_pred, uav_xy, r_diag)
     return Bound.from_information(0.5 * (J + J.T))
+
+
+@dataclass(frozen=True)
+class BoundAlong:
+    """The bound's recursion along a plan of L slots (the receding horizon's objective):
+    states [L, 4] (the predicted target at each slot), information [L, 4, 4] (J_l, symmetrised)
+    and next_covariance [L, 4, 4] (P_l+1 = F J_l^-1 F^T + W, the next slot's predicted
+    covariance with no measurement in between)."""
+
+    states: FloatArray
+    information: FloatArray
+    next_covariance: FloatArray
+
+    @property
+    def traces(self) -> FloatArray:
+        """tr(PCRB) [L]: tr(J_l^-1) at each slot."""
+        return np.array([Bound.from_information(J).trace for J in self.information])
+
+
+def bound_along(
+    motion: MotionModel,
+    dt_s: float,
+    x_pred: FloatArray,
+    J_pred: FloatArray,
+    xy: FloatArray,
+    eta: FloatArray,
+    sensing: SensingParams,
+) -> BoundAlong:
+    """The recursion J_1 = J_pred + J_M,1, J_pred,l+1 = (F J_l^-1 F^T + W)^-1 along a plan xy
+    [L, M, 2] (m), eta [L, M], every J_M at the target state the motion model predicts for its
+    slot (x_1 = x_pred [4], x_l+1 = F x_l, steps of dt_s)."""
+    F, W = motion.transition(dt_s), motion.process_noise(dt_s)
+    x = np.asarray(x_pred, dtype=float)
+    prior = np.asarray(J_pred, dtype=float)
+    L = len(xy)
+    states, information, next_covariance = (
+        np.empty((L, 4)),
+        np.empty((L, 4, 4)),
+        np.empty((L, 4, 4)),
+    )
+    for h in range(L):
+        d = np.linalg.norm(x[None, :2] - xy[h], axis=1)
+        J = prior + measurement_information(x, xy[h], sensing.variances(d, eta[h]))
+        J = 0.5 * (J + J.T)
+        P = F @ scaled_inverse(J) @ F.T + W
+        states[h], information[h], next_covariance[h] = x, J, P
+        prior = scaled_inverse(0.5 * (P + P.T))
+        x = F @ x
+    return BoundAlong(states, information, next_covariance)
 
 
 @dataclass(frozen=True)
@@ -238,32 +288,44 @@ class PlanningObjective:
 
 @dataclass(frozen=True)
 class SumObjective:
-    """f(Q, eta) = sum_i tr((J_pred,i + J_M,i(Q, eta))^-1): several targets' bounds summed, each
-    part a `PlanningObjective` at its own predicted state (docs/model.md, "Several targets":
-    every method plans for the sum of the confirmed tracks' tr(PCRB)). The same methods as
-    `PlanningObjective`, each the sum of its parts' (the information of one target does not
-    depend on another's, so the gradients add too)."""
+    """f(Q, eta) = sum_i w_i tr((J_pred,i + J_M,i(Q, eta))^-1): several targets' bounds, each
+    weighted, each part a `PlanningObjective` at its own predicted state (docs/model.md,
+    "Several targets"). weights: one per part (empty: all 1). The same methods as
+    `PlanningObjective`, each the weighted sum of its parts' (the information of one target does
+    not depend on another's, so the gradients add too)."""
 
     parts: tuple[PlanningObjective, ...]
+    weights: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.weights and len(self.weights) != len(self.parts):
+            raise ValueError(f"{len(self.weights)} weights for {len(self.parts)} targets")
+
+    def _weighted(self) -> tuple[tuple[float, PlanningObjective], ...]:
+        weights = self.weights or (1.0,) * len(self.parts)
+        return tuple(zip(weights, self.parts, strict=True))
 
     def with_prior(self) -> SumObjective:
         """Every part with its prior information (`PlanningObjective.with_prior`)."""
-        return SumObjective(tuple(p.with_prior() for p in self.parts))
+        return SumObjective(tuple(p.with_prior() for p in self.parts), self.weights)
 
     def value(self, uav_xy: FloatArray, eta: FloatArray) -> float:
         """f for positions [M, 2] and shares [M]."""
-        return float(sum(p.value(uav_xy, eta) for p in self.parts))
+        return float(sum(w * p.value(uav_xy, eta) for w, p in self._weighted()))
 
     def values(self, uav_xy: FloatArray, eta: FloatArray) -> FloatArray:
         """f [L] for positions [L, M, 2] and shares [L, M] (or [M])."""
-        return np.asarray(sum(p.values(uav_xy, eta) for p in self.parts), dtype=float)
+        return np.asarray(sum(w * p.values(uav_xy, eta) for w, p in self._weighted()), dtype=float)
 
     def values_moving_one(
         self, current_xy: FloatArray, eta: FloatArray, m: int, candidates_m: FloatArray
     ) -> FloatArray:
         """f [L] with UAV m moved to candidates_m [L, 2] (`PlanningObjective.values_moving_one`)."""
         return np.asarray(
-            sum(p.values_moving_one(current_xy, eta, m, candidates_m) for p in self.parts),
+            sum(
+                w * p.values_moving_one(current_xy, eta, m, candidates_m)
+                for w, p in self._weighted()
+            ),
             dtype=float,
         )
 
@@ -272,9 +334,9 @@ class SumObjective:
     ) -> tuple[float, FloatArray, FloatArray]:
         """(f, df/dQ [M, 2], df/deta [M])."""
         f, grad_q, grad_eta = 0.0, np.zeros_like(uav_xy, dtype=float), np.zeros(len(eta))
-        for p in self.parts:
+        for w, p in self._weighted():
             fi, gq, ge = p.value_and_gradients(uav_xy, eta)
-            f, grad_q, grad_eta = f + fi, grad_q + gq, grad_eta + ge
+            f, grad_q, grad_eta = f + w * fi, grad_q + w * gq, grad_eta + w * ge
         return f, grad_q, grad_eta
 
 

@@ -2,52 +2,39 @@
 strict JSON, and the JSON Schema of every message (docs/bus.md). Imports neither the service nor
 `sim`, and no network library.
 
-- `envelope`: limits, the size guard, strict parsing, the common fields, `rejection_reason`;
-- `models`: the pydantic model of each payload type and the union `WireMessage`;
-- `messages`: the domain dataclasses (numpy arrays, NaN for missing);
-- `codec`: bytes <-> domain messages (`encode_*`, `decode_*`, `decode_any`); `control_models`
-  and `control_codec`: the operator's requests, their replies and the fleet commands;
+- `envelope`: limits, the size guard, strict parsing, the base of every message,
+  `rejection_reason`;
+- `fields`: the field types messages are made of (JSON shape and bounds, how code holds them);
+- `models` and `control_models`: one pydantic model per payload type, at once its schema and
+  the message the code uses (`DetectionMsg`, ..., `ControlMsg`, `FleetMsg`), the union
+  `WireMessage`;
+- `codec`: bytes <-> messages for every type (`encode`, `decode`, `decode_any`, and
+  `read_request` for the operator's requests); `refusal`: a validation error in the project's
+  words;
 - `keys`: `Keys(mission)`, the key expressions; `schema`: JSON Schema export;
 - `strict_json`: strict JSON shared with `records/`.
 """
 
 from isac_mission.wire.codec import (
+    RequestRead,
     collect_detections,
+    decode,
     decode_any,
-    decode_clock,
-    decode_detection,
-    decode_detection_set,
-    decode_health,
-    decode_plan,
-    decode_telemetry,
-    decode_track,
-    decode_track_set,
-    decode_truth,
-    decode_truth_set,
+    decode_control_reply,
     detection_messages,
     detection_set_messages,
-    encode_clock,
-    encode_detection,
-    encode_detection_set,
-    encode_health,
-    encode_plan,
-    encode_telemetry,
-    encode_track,
-    encode_track_set,
-    encode_truth,
-    encode_truth_set,
-)
-from isac_mission.wire.control_codec import (
-    RequestRead,
-    decode_control,
-    decode_control_reply,
-    decode_fleet,
+    encode,
     encode_control,
-    encode_control_reply,
-    encode_fleet,
     read_request,
 )
-from isac_mission.wire.control_models import CONTROL_COMMANDS, FLEET_COMMANDS, MAX_ID_CHARS
+from isac_mission.wire.control_models import (
+    CONTROL_COMMANDS,
+    FLEET_COMMANDS,
+    MAX_ID_CHARS,
+    ControlMsg,
+    ControlReplyMsg,
+    FleetMsg,
+)
 from isac_mission.wire.envelope import (
     MAX_ABS,
     MAX_ABS_COVARIANCE,
@@ -58,29 +45,13 @@ from isac_mission.wire.envelope import (
     MAX_UAVS,
     SCHEMA,
     SHARE_SUM_TOL,
+    Message,
     dumps,
     envelope,
     loads,
     rejection_reason,
 )
 from isac_mission.wire.keys import Keys, uav_index
-from isac_mission.wire.messages import (
-    AnyMsg,
-    ClockMsg,
-    ControlMsg,
-    ControlReplyMsg,
-    DetectionMsg,
-    DetectionSetMsg,
-    FleetMsg,
-    HealthMsg,
-    PlanMsg,
-    TelemetryMsg,
-    TrackEntry,
-    TrackMsg,
-    TrackSetMsg,
-    TruthMsg,
-    TruthSetMsg,
-)
 from isac_mission.wire.models import (
     CONTROL_PARAMS,
     LINK_STATES,
@@ -89,6 +60,18 @@ from isac_mission.wire.models import (
     MAX_TARGETS,
     MAX_TRACKS,
     TELEMETRY_MODES,
+    AnyMsg,
+    ClockMsg,
+    DetectionMsg,
+    DetectionSetMsg,
+    HealthMsg,
+    PlanMsg,
+    TelemetryMsg,
+    TrackEntry,
+    TrackMsg,
+    TrackSetMsg,
+    TruthMsg,
+    TruthSetMsg,
     WireMessage,
 )
 
@@ -121,6 +104,7 @@ __all__ = [
     "FleetMsg",
     "HealthMsg",
     "Keys",
+    "Message",
     "PlanMsg",
     "RequestRead",
     "TelemetryMsg",
@@ -131,36 +115,14 @@ __all__ = [
     "TruthSetMsg",
     "WireMessage",
     "collect_detections",
+    "decode",
     "decode_any",
-    "decode_clock",
-    "decode_control",
     "decode_control_reply",
-    "decode_detection",
-    "decode_detection_set",
-    "decode_fleet",
-    "decode_health",
-    "decode_plan",
-    "decode_telemetry",
-    "decode_track",
-    "decode_track_set",
-    "decode_truth",
-    "decode_truth_set",
     "detection_messages",
     "detection_set_messages",
     "dumps",
-    "encode_clock",
+    "encode",
     "encode_control",
-    "encode_control_reply",
-    "encode_detection",
-    "encode_detection_set",
-    "encode_fleet",
-    "encode_health",
-    "encode_plan",
-    "encode_telemetry",
-    "encode_track",
-    "encode_track_set",
-    "encode_truth",
-    "encode_truth_set",
     "envelope",
     "loads",
     "read_request",

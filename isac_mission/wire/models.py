@@ -1,12 +1,17 @@
-"""The bus messages as pydantic models: the JSON shape of each payload type (docs/bus.md).
+"""The bus messages (docs/bus.md): one pydantic model per payload type, which is at once its JSON
+shape, what a receiver validates, its JSON Schema, and the message the code builds and reads.
 
-Strict (no coercion: a string is not a number, 1.0 is not an integer, true is not a number), no
-NaN or infinities, every number bounded (|x| <= MAX_ABS, covariances MAX_ABS_COVARIANCE), array
-lengths fixed where the physics fixes them, unknown extra fields ignored. `WireMessage` is the
-discriminated union on `type`. A receiver that knows the mission's sizes passes them as
-validation context: ``{"n_uavs": M, "n_bs": K}`` bounds UAV and BS indices and the plan's length.
-Errors are worded by `wire.refusal` (the field first); `wire.codec` turns a model into the domain
-types (numpy arrays, NaN for a missing number).
+On the wire, strict (no coercion: a string is not a number, 1.0 is not an integer, true is not a
+number), no NaN or infinities, every number bounded (|x| <= MAX_ABS, covariances
+MAX_ABS_COVARIANCE), array lengths fixed where the physics fixes them, unknown extra fields
+ignored. `WireMessage` is the discriminated union on `type`. A receiver that knows the mission's
+sizes passes them as validation context: ``{"n_uavs": M, "n_bs": K}`` bounds UAV and BS indices
+and the plan's length. Errors are worded by `wire.refusal` (the field first).
+
+In code, a message holds numpy float64 arrays (`assoc` int64), NaN for a number sent as null,
+tuples for lists, and the domain names where they differ from the wire's (`t_s` is `t`); built
+in code it is not checked (`wire.envelope.WireModel`), `wire.codec.encode` checks it. Each
+class's first docstring paragraph is its description in the JSON Schema.
 
 Slot convention of a plan (docs/bus.md): plan n carries the waypoints q_n that the vehicles fly to
 during (n-1, n] and the bandwidth shares eta_n used for slot n's detections; the ground publishes
@@ -15,11 +20,12 @@ plan n+1 after it has processed the detections of slot n.
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Any, Final, Literal, get_args
 
 import numpy as np
 from pydantic import (
-    BaseModel,
+    AfterValidator,
     BeforeValidator,
     Field,
     ValidationError,
@@ -27,52 +33,58 @@ from pydantic import (
     field_validator,
 )
 
+from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 from isac_mission.wire.control_models import (
     CONTROL_PARAMS as CONTROL_PARAMS,
 )
 from isac_mission.wire.control_models import (
-    ControlReplyWire,
-    ControlWire,
-    FleetWire,
+    ControlMsg,
+    ControlReplyMsg,
+    FleetMsg,
 )
 from isac_mission.wire.envelope import (
     MAX_ABS,
-    MAX_ABS_COVARIANCE,
     MAX_REASON_CHARS,
     MAX_SLOT,
     MAX_STATUS_CHARS,
     MAX_UAVS,
     SHARE_SUM_TOL,
-    WIRE_CONFIG,
-    Envelope,
+    Message,
+    WireModel,
+    carried,
+)
+from isac_mission.wire.fields import (
+    AS_FLOAT,
+    AS_INT,
+    Flag,
+    Held,
+    Matrix4,
+    NonNegative,
+    Number,
+    PlaneXY,
+    Positive,
+    Share,
+    SlotOrBefore,
+    State4,
+    Status,
+    UavIndex,
+    cut,
+    int_vector,
+    length_of,
+    matrix,
+    nan_for_null,
+    rows,
+    vector,
 )
 from isac_mission.wire.refusal import (
     CHOICES,
+    check_uav,
     int_problem,
-    length_of,
     message_error,
     number_problem,
+    receiver_size,
     refuse,
 )
-
-Number = Annotated[float, Field(ge=-MAX_ABS, le=MAX_ABS)]
-NonNegative = Annotated[float, Field(ge=0.0, le=MAX_ABS)]
-Positive = Annotated[float, Field(ge=1e-6, le=MAX_ABS)]
-Share = Annotated[float, Field(ge=0.0, le=1.0)]
-CovarianceEntry = Annotated[float, Field(ge=-MAX_ABS_COVARIANCE, le=MAX_ABS_COVARIANCE)]
-PlaneXY = Annotated[list[Number], Field(min_length=2, max_length=2), BeforeValidator(length_of(2))]
-"""[x, y] in the scenario plane (m): x east, y north."""
-State4 = Annotated[list[Number], Field(min_length=4, max_length=4), BeforeValidator(length_of(4))]
-"""[x, y, vx, vy] (m, m/s)."""
-Row4 = Annotated[
-    list[CovarianceEntry], Field(min_length=4, max_length=4), BeforeValidator(length_of(4))
-]
-Matrix4 = Annotated[list[Row4], Field(min_length=4, max_length=4), BeforeValidator(length_of(4))]
-"""A 4 x 4 matrix, row-major, over [x, y, vx, vy]."""
-SlotOrBefore = Annotated[int, Field(ge=-1, le=MAX_SLOT)]
-"""A slot index, or -1 before the mission has started."""
-UavIndex = Annotated[int, Field(ge=0, le=MAX_UAVS - 1)]
-Status = Annotated[str, Field(max_length=MAX_STATUS_CHARS)]
 
 TelemetryMode = Literal[
     "unknown", "manual", "takeoff", "hold", "offboard", "land", "mission", "rtl", "other"
@@ -92,26 +104,20 @@ MAX_TRACK_ID: Final = MAX_SLOT
 """Largest track id (ids start at 1)."""
 MAX_WALL_S: Final = 1.0e11
 """Largest wall-clock stamp accepted (Unix time, s): the year 5138."""
+
+
 PublishedWall = Annotated[
-    float | None,
+    Annotated[float, Field(ge=0.0, le=MAX_WALL_S), AS_FLOAT] | None,
     Field(
-        default=None,
-        ge=0.0,
-        le=MAX_WALL_S,
-        description="Wall clock (Unix time, s) at which the publisher put the message; optional.",
+        description="Wall clock (Unix time, s) at which the publisher put the message; optional."
     ),
 ]
+"""Wall clock (Unix time, s) at which the message was put, None when not stamped (not sent)."""
 
 CHOICES.update(
     mode=("{value!r} is not one of {allowed}", TELEMETRY_MODES),
     link=("{value!r} is not one of {allowed}", LINK_STATES),
 )
-
-
-def _context(info: ValidationInfo, name: str) -> int | None:
-    ctx = info.context
-    value = ctx.get(name) if isinstance(ctx, dict) else None
-    return value if isinstance(value, int) else None
 
 
 def _at_most(where: str, value: Any, most: int) -> Any:
@@ -122,34 +128,36 @@ def _at_most(where: str, value: Any, most: int) -> Any:
     return value
 
 
-def _uav_in_mission(kind: str, uav: Any, info: ValidationInfo) -> Any:
-    """An integer UAV index must lie in [0, n_uavs) (n_uavs from the context, else MAX_UAVS);
-    anything else is left to the model's type check."""
-    if isinstance(uav, int) and not isinstance(uav, bool):
-        n_uavs = _context(info, "n_uavs")
-        problem = int_problem(uav, 0, (n_uavs if n_uavs is not None else MAX_UAVS) - 1)
-        if problem:
-            raise refuse(f"{kind}.uav: {problem}")
-    return uav
-
-
-class DetectionWire(Envelope):
+class DetectionMsg(Message):
     """One UAV's detection of one slot (`isac/<mission>/detections/<m>`); a miss has null range
-    and radial velocity, so the receiver knows at once that nothing more will come."""
+    and radial velocity, so the receiver knows at once that nothing more will come.
 
-    type: Literal["detection"]
+    range_m (m) and radial_velocity_mps (m/s) are NaN when missed; uav_xy_m [2] is the horizontal
+    position (scenario plane, m) at which it was taken; bandwidth_share is the eta in use.
+    """
+
+    type: Literal["detection"] = carried()
     uav: UavIndex = Field(description="0-based UAV index (< n_uavs when the receiver knows M).")
-    range_m: NonNegative | None = Field(description="Measured range (m); null when missed.")
-    radial_velocity_mps: Number | None = Field(
+    range_m: Annotated[float, nan_for_null(NonNegative | None)] = Field(
+        description="Measured range (m); null when missed."
+    )
+    radial_velocity_mps: Annotated[float, nan_for_null(Number | None)] = Field(
         description="Measured radial velocity (m/s); null when missed."
     )
-    uav_xy_m: PlaneXY = Field(description="Where the UAV was when it measured (m).")
+    uav_xy_m: Annotated[FloatArray, vector(PlaneXY)] = Field(
+        description="Where the UAV was when it measured (m)."
+    )
     bandwidth_share: Share = Field(description="The bandwidth share eta in use.")
 
     @field_validator("uav", mode="before")
     @classmethod
     def _uav_known(cls, uav: Any, info: ValidationInfo) -> Any:
-        return _uav_in_mission("detection", uav, info)
+        return check_uav("detection.uav", uav, info)
+
+    @property
+    def detected(self) -> bool:
+        """True when both the range and the radial velocity are present."""
+        return math.isfinite(self.range_m) and math.isfinite(self.radial_velocity_mps)
 
 
 Measurement = Annotated[
@@ -169,24 +177,29 @@ Measurement = Annotated[
 """[range m >= 0, radial velocity m/s]."""
 
 
-class DetectionSetWire(Envelope):
+class DetectionSetMsg(Message):
     """One UAV's unlabelled report of one slot on a multi-target mission
     (`isac/<mission>/detections/<m>`): every echo it detected, targets and false alarms alike, in
-    no particular order; an empty list when it detected nothing (still sent)."""
+    no particular order; an empty list when it detected nothing (still sent).
 
-    type: Literal["detection_set"]
+    measurements [k, 2]: (range m, radial velocity m/s) per echo (k = 0: shape (0, 2));
+    uav_xy_m [2]: where it measured (scenario plane, m); bandwidth_share: the eta in use.
+    """
+
+    type: Literal["detection_set"] = carried()
     uav: UavIndex = Field(description="0-based UAV index (< n_uavs when the receiver knows M).")
-    measurements: list[Measurement] = Field(
-        max_length=MAX_MEASUREMENTS,
-        description="[range m >= 0, radial velocity m/s] per echo; may be empty.",
+    measurements: Annotated[
+        FloatArray, rows(Annotated[list[Measurement], Field(max_length=MAX_MEASUREMENTS)], 2)
+    ] = Field(description="[range m >= 0, radial velocity m/s] per echo; may be empty.")
+    uav_xy_m: Annotated[FloatArray, vector(PlaneXY)] = Field(
+        description="Where the UAV was when it measured (m)."
     )
-    uav_xy_m: PlaneXY = Field(description="Where the UAV was when it measured (m).")
     bandwidth_share: Share = Field(description="The bandwidth share eta in use.")
 
     @field_validator("uav", mode="before")
     @classmethod
     def _uav_known(cls, uav: Any, info: ValidationInfo) -> Any:
-        return _uav_in_mission("detection_set", uav, info)
+        return check_uav("detection_set.uav", uav, info)
 
     @field_validator("measurements", mode="before")
     @classmethod
@@ -195,7 +208,7 @@ class DetectionSetWire(Envelope):
 
     @field_validator("measurements")
     @classmethod
-    def _ranges_non_negative(cls, measurements: list[list[float]]) -> list[list[float]]:
+    def _ranges_non_negative(cls, measurements: FloatArray) -> FloatArray:
         for i, (range_m, _) in enumerate(measurements):
             if range_m < 0.0:
                 problem = number_problem(range_m, lo=0.0)
@@ -203,23 +216,31 @@ class DetectionSetWire(Envelope):
         return measurements
 
 
-class ClockWire(Envelope):
-    """Simulation time (`isac/<mission>/clock`): slot n means t >= mission_t0 + n slot_s."""
+class ClockMsg(Message):
+    """Simulation time (`isac/<mission>/clock`): slot n means t >= mission_t0 + n slot_s.
 
-    type: Literal["clock"]
+    slot: current slot n, -1 before the mission has started; t_s: the world's simulation time
+    (s); slot_s: slot length (s); speed: simulation seconds per wall second; mission_t0_s:
+    simulation time (s) at which slot 0 began (None before it has).
+    """
+
+    type: Literal["clock"] = carried()
     slot: SlotOrBefore
-    mission_t0: NonNegative | None = Field(
-        description="Simulation time (s) at which slot 0 began; null before it has."
-    )
     slot_s: Positive = Field(description="Slot length (s).")
     speed: Positive = Field(description="Simulation seconds per wall second.")
+    mission_t0_s: Annotated[NonNegative | None, Field(alias="mission_t0")] = Field(
+        description="Simulation time (s) at which slot 0 began; null before it has."
+    )
 
 
-class TruthWire(Envelope):
-    """The target's true state at a slot (`isac/<mission>/truth`), from the simulated world."""
+class TruthMsg(Message):
+    """The target's true state at a slot (`isac/<mission>/truth`), from the simulated world.
 
-    type: Literal["truth"]
-    target_x: State4 = Field(description="[x, y, vx, vy] (m, m/s).")
+    target_x [4]: [x, y, vx, vy] (m, m/s) at the end of `slot`.
+    """
+
+    type: Literal["truth"] = carried()
+    target_x: Annotated[FloatArray, vector(State4)] = Field(description="[x, y, vx, vy] (m, m/s).")
 
 
 OriginIndex = Annotated[int, Field(ge=-1, le=MAX_TARGETS - 1)]
@@ -228,23 +249,50 @@ OriginsOfUav = Annotated[list[OriginIndex], Field(max_length=MAX_MEASUREMENTS)]
 """One UAV's origins, one per measurement of its `detection_set`, in the same order."""
 
 
-class TruthSetWire(Envelope):
-    """Every target's true state at a slot on a multi-target mission (`isac/<mission>/truth`),
-    from the simulated world; evaluation only."""
+def _states(targets: list[list[float] | None]) -> FloatArray:
+    states = np.full((len(targets), 4), np.nan)
+    for i, x in enumerate(targets):
+        if x is not None:
+            states[i] = x
+    return states
 
-    type: Literal["truth_set"]
-    targets: list[State4 | None] = Field(
-        max_length=MAX_TARGETS,
-        description="[x, y, vx, vy] (m, m/s) of target t = 0..T-1; null: not in the scene.",
-    )
-    origins: list[OriginsOfUav] = Field(
-        default_factory=list,
-        max_length=MAX_UAVS,
+
+def _targets(states: Any) -> list[list[float] | None]:
+    a = np.asarray(states, dtype=float)
+    a = a.reshape(len(a), -1) if a.size else np.zeros((0, 4))
+    return [None if np.isnan(row).all() else row.tolist() for row in a]
+
+
+class TruthSetMsg(Message):
+    """Every target's true state at a slot on a multi-target mission (`isac/<mission>/truth`),
+    from the simulated world; evaluation only.
+
+    states [T, 4]: [x, y, vx, vy] (m, m/s) of target t = 0..T-1 (`targets` on the wire), a NaN
+    row for a target not in the scene (null); origins: per UAV the target index of each
+    measurement of its `detection_set` of the slot, in the same order (-1: a false alarm); ()
+    when not given.
+    """
+
+    type: Literal["truth_set"] = carried()
+    states: Annotated[
+        FloatArray,
+        Held(Annotated[list[State4 | None], Field(max_length=MAX_TARGETS)], _states, _targets),
+        Field(alias="targets"),
+    ] = Field(description="[x, y, vx, vy] (m, m/s) of target t = 0..T-1; null: not in the scene.")
+    origins: Annotated[
+        tuple[tuple[int, ...], ...],
+        Held(
+            Annotated[list[OriginsOfUav], Field(max_length=MAX_UAVS)],
+            lambda origins: tuple(tuple(of_uav) for of_uav in origins),
+            lambda held: [[int(k) for k in of_uav] for of_uav in held],
+        ),
+    ] = Field(
+        default_factory=tuple,
         description="Per UAV, the target index of each measurement of its detection_set of the "
         "slot, in order (-1: a false alarm); [] when not given.",
     )
 
-    @field_validator("targets", mode="before")
+    @field_validator("states", mode="before")
     @classmethod
     def _few_targets(cls, value: Any) -> Any:
         return _at_most("truth_set.targets", value, MAX_TARGETS)
@@ -259,46 +307,84 @@ class TruthSetWire(Envelope):
         return value
 
 
-class PlanWire(Envelope):
-    """A slot plan (`isac/<mission>/plan`) for M UAVs: all three arrays have length M."""
+def _assoc_fits(assoc: list[int], info: ValidationInfo) -> list[int]:
+    """Each BS index lies in [-1, n_bs) (the receiver's n_bs, else 10 MAX_UAVS)."""
+    n_bs = receiver_size(info, "n_bs")
+    hi = (n_bs if n_bs is not None else 10 * MAX_UAVS) - 1
+    if min(assoc) < -1 or max(assoc) > hi:
+        i = next(i for i, k in enumerate(assoc) if not -1 <= k <= hi)
+        raise refuse(f"plan.assoc[{i}]: {int_problem(assoc[i], -1, hi)}")
+    return assoc
 
-    type: Literal["plan"]
-    assoc: list[int] = Field(
-        description="BS index per UAV, or -1 for a vehicle outside the plan (share 0)."
+
+class PlanMsg(Message):
+    """A slot plan (`isac/<mission>/plan`) for M UAVs: all three arrays have length M.
+
+    assoc [M] int64: BS index per UAV, -1 outside the plan; bandwidth_share [M]: eta;
+    waypoints_xy_m [M, 2] (m); objective: tr(PCRB), NaN if unknown; status, reason, solve_s
+    (s): the planner's report; end_velocity_mps [M, 2] (m/s) or None: not planned. `plan` is the
+    same as a `SlotPlan`, `from_plan` makes one of a `SlotPlan`. slot: the slot the plan is for.
+    """
+
+    type: Literal["plan"] = carried()
+    assoc: Annotated[IntArray, int_vector(Annotated[list[int], AfterValidator(_assoc_fits)])] = (
+        Field(description="BS index per UAV, or -1 for a vehicle outside the plan (share 0).")
     )
-    bandwidth_share: list[Share] = Field(
+    bandwidth_share: Annotated[FloatArray, vector(list[Share])] = Field(
         description="eta per UAV; sums to 1, or every share is 0 when no UAV has a BS."
     )
-    waypoints_xy_m: list[PlaneXY] = Field(description="Next waypoint per UAV (m).")
-    end_velocity_mps: list[PlaneXY] | None = Field(
+    waypoints_xy_m: Annotated[FloatArray, rows(list[PlaneXY], 2)] = Field(
+        description="Next waypoint per UAV (m)."
+    )
+    objective: Annotated[float, nan_for_null(NonNegative | None)] = Field(
+        description="tr(PCRB) of the plan; null if unknown."
+    )
+    status: Status = Field(min_length=1, description="Solver status: ok, infeasible, ...")
+    reason: str = Field(default="", max_length=MAX_REASON_CHARS, description="Why, if not ok.")
+    solve_s: NonNegative = Field(description="Planner wall time (s).")
+    end_velocity_mps: Annotated[FloatArray, rows(list[PlaneXY], 2)] | None = Field(
         default=None,
         description="Planned velocity per UAV at its waypoint (m/s, planner.vehicle_model); "
         "absent or null: not planned (the bridge ends the leg at its mean velocity).",
     )
-    objective: NonNegative | None = Field(description="tr(PCRB) of the plan; null if unknown.")
-    status: Status = Field(min_length=1, description="Solver status: ok, infeasible, ...")
-    reason: str = Field(default="", max_length=MAX_REASON_CHARS, description="Why, if not ok.")
-    solve_s: NonNegative = Field(description="Planner wall time (s).")
+
+    @classmethod
+    def from_plan(cls, slot: int, t_s: float, plan: SlotPlan) -> PlanMsg:
+        """The message of `plan` for slot `slot`, made at simulation time t_s (s)."""
+        return cls(
+            slot=slot,
+            t_s=t_s,
+            assoc=plan.bs_of_uav,
+            bandwidth_share=plan.bandwidth_share,
+            waypoints_xy_m=plan.uav_xy_m,
+            objective=plan.pcrb_trace,
+            status=plan.report.status,
+            reason=plan.report.reason,
+            solve_s=plan.report.solve_s,
+            end_velocity_mps=plan.uav_velocity_mps,
+        )
+
+    @property
+    def plan(self) -> SlotPlan:
+        """The plan as the planner's `SlotPlan` (report: status, reason, solve_s)."""
+        return SlotPlan(
+            uav_xy_m=self.waypoints_xy_m,
+            bs_of_uav=self.assoc,
+            bandwidth_share=self.bandwidth_share,
+            pcrb_trace=self.objective,
+            report=SolveReport(status=self.status, reason=self.reason, solve_s=self.solve_s),
+            uav_velocity_mps=self.end_velocity_mps,
+        )
 
     @field_validator("assoc", mode="before")
     @classmethod
     def _assoc_size(cls, assoc: Any, info: ValidationInfo) -> Any:
         if isinstance(assoc, list):
-            m, n_uavs = len(assoc), _context(info, "n_uavs")
+            m, n_uavs = len(assoc), receiver_size(info, "n_uavs")
             if n_uavs is not None and m != n_uavs:
                 raise refuse(f"plan.assoc: {m} values, expected {n_uavs}")
             if not 1 <= m <= MAX_UAVS:
                 raise refuse(f"plan.assoc: {m} values, expected 1 to {MAX_UAVS}")
-        return assoc
-
-    @field_validator("assoc")
-    @classmethod
-    def _assoc_fits(cls, assoc: list[int], info: ValidationInfo) -> list[int]:
-        n_bs = _context(info, "n_bs")
-        hi = (n_bs if n_bs is not None else 10 * MAX_UAVS) - 1
-        if min(assoc) < -1 or max(assoc) > hi:
-            i = next(i for i, k in enumerate(assoc) if not -1 <= k <= hi)
-            raise refuse(f"plan.assoc[{i}]: {int_problem(assoc[i], -1, hi)}")
         return assoc
 
     @field_validator("bandwidth_share", "waypoints_xy_m", "end_velocity_mps", mode="before")
@@ -311,14 +397,14 @@ class PlanWire(Envelope):
 
     @field_validator("bandwidth_share")
     @classmethod
-    def _shares_fit(cls, shares: list[float], info: ValidationInfo) -> list[float]:
+    def _shares_fit(cls, shares: FloatArray, info: ValidationInfo) -> FloatArray:
         assoc = info.data.get("assoc")
         if assoc is not None and min(assoc) < 0:
             for i, (k, eta) in enumerate(zip(assoc, shares, strict=True)):
                 if k < 0 and eta > 0:
                     raise refuse(f"plan.assoc[{i}]: -1 (no BS) with a share > 0")
         # numpy's sum (pairwise from 8 terms on); below 8 terms it adds in order, as sum() does.
-        total = float(sum(shares)) if len(shares) < 8 else float(np.asarray(shares).sum())
+        total = float(sum(shares.tolist())) if len(shares) < 8 else float(shares.sum())
         if assoc is not None and max(assoc) < 0 and total == 0.0:
             return shares  # nobody served (every vehicle held): every share 0
         if abs(total - 1.0) > SHARE_SUM_TOL:
@@ -326,67 +412,101 @@ class PlanWire(Envelope):
         return shares
 
 
-class TelemetryWire(Envelope):
-    """One vehicle's state as its MAVLink bridge saw it (`isac/<mission>/telemetry/<m>`)."""
+class TelemetryMsg(Message):
+    """One vehicle's state as its MAVLink bridge saw it (`isac/<mission>/telemetry/<m>`).
 
-    type: Literal["telemetry"]
+    position_xy_m [2] (m) and velocity_xy_mps [2] (m/s) in the scenario plane (x east, y north);
+    altitude_m above the scenario ground; mode: a flight-mode name (TELEMETRY_MODES); link: "ok"
+    or "lost"; slot: the last slot the bridge knows of (-1 before the mission); override: why the
+    service does not fly the vehicle ("operator: HOLD", "RTL: low battery", ...), "" while it does.
+    """
+
+    type: Literal["telemetry"] = carried()
     slot: SlotOrBefore
     uav: UavIndex = Field(description="0-based UAV index.")
-    position_xy_m: PlaneXY = Field(description="Position in the scenario plane (m).")
-    altitude_m: float = Field(ge=-1000.0, le=100_000.0, description="Above scenario ground (m).")
+    position_xy_m: Annotated[FloatArray, vector(PlaneXY)] = Field(
+        description="Position in the scenario plane (m)."
+    )
+    altitude_m: Annotated[float, AS_FLOAT] = Field(
+        ge=-1000.0, le=100_000.0, description="Above scenario ground (m)."
+    )
     velocity_xy_mps: Annotated[
-        list[Annotated[float, Field(ge=-1000.0, le=1000.0)]],
-        Field(min_length=2, max_length=2),
-        BeforeValidator(length_of(2)),
+        FloatArray,
+        vector(
+            Annotated[
+                list[Annotated[float, Field(ge=-1000.0, le=1000.0)]],
+                Field(min_length=2, max_length=2),
+                BeforeValidator(length_of(2)),
+            ]
+        ),
     ] = Field(description="Horizontal velocity [east, north] (m/s).")
     mode: TelemetryMode = Field(description="Flight mode.")
-    armed: bool
-    landed: bool
+    armed: Flag
+    landed: Flag
     link: LinkState = Field(description="The MAVLink link: ok or lost.")
-    published_wall_s: PublishedWall = None
-    override: Status = Field(
+    override: Annotated[Status, cut(MAX_STATUS_CHARS)] = Field(
         default="",
         description="Why the service does not fly the vehicle ('operator: HOLD', 'RTL: low "
         "battery', 'landed', ...); '' while it does (docs/service.md, 'Operator override').",
     )
+    published_wall_s: PublishedWall = None
 
     @field_validator("uav", mode="before")
     @classmethod
     def _uav_known(cls, uav: Any, info: ValidationInfo) -> Any:
-        return _uav_in_mission("telemetry", uav, info)
+        return check_uav("telemetry.uav", uav, info)
 
 
-class TrackWire(Envelope):
-    """The ground's estimate after slot `slot` (`isac/<mission>/track`)."""
+class TrackMsg(Message):
+    """The ground's estimate after slot `slot` (`isac/<mission>/track`).
 
-    type: Literal["track"]
-    x: State4 = Field(description="EKF state [x, y, vx, vy] (m, m/s).")
-    P: Matrix4 = Field(description="EKF covariance.")
-    J: Matrix4 = Field(description="PCRB information.")
+    x [4]: EKF state [x, y, vx, vy] (m, m/s); P [4, 4]: its covariance; J [4, 4]: the PCRB
+    information; pcrb_trace = tr(J^-1).
+    """
+
+    type: Literal["track"] = carried()
+    x: Annotated[FloatArray, vector(State4)] = Field(
+        description="EKF state [x, y, vx, vy] (m, m/s)."
+    )
+    P: Annotated[FloatArray, matrix(Matrix4)] = Field(description="EKF covariance.")
+    J: Annotated[FloatArray, matrix(Matrix4)] = Field(description="PCRB information.")
     pcrb_trace: NonNegative = Field(description="tr(J^-1) (m^2 + m^2/s^2).")
     published_wall_s: PublishedWall = None
 
 
-class TrackEntryWire(BaseModel):
-    """One track of a `track_set`."""
+class TrackEntry(WireModel):
+    """One track of a `track_set`.
 
-    model_config = WIRE_CONFIG
+    track_id (`id` on the wire): stable, >= 1, never reused; x [4]: state (m, m/s); P [4, 4]:
+    its covariance; pcrb_position_trace: tr of the position block of its bound with origin
+    uncertainty (m^2).
+    """
 
-    id: int = Field(ge=1, le=MAX_TRACK_ID, description="Track id: stable, never reused.")
-    confirmed: bool = Field(description="Confirmed (true) or tentative (false).")
-    x: State4 = Field(description="Track state [x, y, vx, vy] (m, m/s).")
-    P: Matrix4 = Field(description="Its covariance.")
+    track_id: Annotated[int, Field(alias="id"), AS_INT] = Field(
+        ge=1, le=MAX_TRACK_ID, description="Track id: stable, never reused."
+    )
+    confirmed: Flag = Field(description="Confirmed (true) or tentative (false).")
+    x: Annotated[FloatArray, vector(State4)] = Field(
+        description="Track state [x, y, vx, vy] (m, m/s)."
+    )
+    P: Annotated[FloatArray, matrix(Matrix4)] = Field(description="Its covariance.")
     pcrb_position_trace: NonNegative = Field(
         description="Trace of the position block of its bound with origin uncertainty (m^2)."
     )
 
 
-class TrackSetWire(Envelope):
+class TrackSetMsg(Message):
     """The ground's tracks after slot `slot` on a multi-target mission (`isac/<mission>/track`):
-    tentative and confirmed, each id at most once."""
+    tentative and confirmed, each id at most once.
 
-    type: Literal["track_set"]
-    tracks: list[TrackEntryWire] = Field(max_length=MAX_TRACKS, description="The tracks.")
+    tracks: the tracks, as a tuple.
+    """
+
+    type: Literal["track_set"] = carried()
+    tracks: Annotated[
+        tuple[TrackEntry, ...],
+        Held(Annotated[list[TrackEntry], Field(max_length=MAX_TRACKS)], tuple, list),
+    ] = Field(description="The tracks.")
     published_wall_s: PublishedWall = None
 
     @field_validator("tracks", mode="before")
@@ -400,36 +520,52 @@ class TrackSetWire(Envelope):
         entries = []
         for i, entry in enumerate(value):
             try:
-                entries.append(TrackEntryWire.model_validate(entry, strict=True))
+                entries.append(TrackEntry.model_validate(entry, strict=True))
             except ValidationError as err:
                 where = f"track_set.tracks[{i}]"
-                raise refuse(str(message_error(err, where, TrackEntryWire))) from None
+                raise refuse(str(message_error(err, where, TrackEntry))) from None
         return entries
 
     @field_validator("tracks")
     @classmethod
-    def _distinct_ids(cls, tracks: list[TrackEntryWire]) -> list[TrackEntryWire]:
+    def _distinct_ids(cls, tracks: tuple[TrackEntry, ...]) -> tuple[TrackEntry, ...]:
         first: dict[int, int] = {}
         for i, track in enumerate(tracks):
-            j = first.setdefault(track.id, i)
+            j = first.setdefault(track.track_id, i)
             if j != i:
-                raise refuse(f"track_set.tracks[{i}].id: {track.id} repeats tracks[{j}].id")
+                raise refuse(f"track_set.tracks[{i}].id: {track.track_id} repeats tracks[{j}].id")
         return tracks
 
 
-class HealthWire(Envelope):
-    """Service status (`isac/<mission>/health`): counters by name, vehicle states, last error."""
+class HealthMsg(Message):
+    """Service status (`isac/<mission>/health`): counters by name, vehicle states, last error.
 
-    type: Literal["health"]
+    counters: name (cut to 64 characters) -> count; vehicles: vehicle index -> "active" or
+    "excluded: <why>" (cut to 64 characters).
+    """
+
+    type: Literal["health"] = carried()
     slot: SlotOrBefore
-    counters: dict[str, Annotated[int, Field(ge=0, le=MAX_SLOT)]] = Field(
-        description=f"Counter name -> count (at most {MAX_COUNTERS} counters)."
-    )
-    vehicles: dict[str, str] = Field(
-        default_factory=dict, description='Vehicle index -> "active" or "excluded: <why>".'
-    )
     status: Status = Field(description="Status word.")
-    last_error: str = Field(max_length=MAX_REASON_CHARS, description="The last error, or ''.")
+    counters: Annotated[
+        dict[str, int],
+        Held(
+            dict[str, Annotated[int, Field(ge=0, le=MAX_SLOT)]],
+            lambda counters: {k[:MAX_STATUS_CHARS]: v for k, v in counters.items()},
+            lambda held: {str(k): int(v) for k, v in held.items()},
+        ),
+    ] = Field(description=f"Counter name -> count (at most {MAX_COUNTERS} counters).")
+    last_error: Annotated[str, cut(MAX_REASON_CHARS)] = Field(
+        max_length=MAX_REASON_CHARS, description="The last error, or ''."
+    )
+    vehicles: Annotated[
+        dict[int, str],
+        Held(
+            dict[str, str],
+            lambda states: {int(k): v[:MAX_STATUS_CHARS] for k, v in states.items()},
+            lambda held: {str(m): v[:MAX_STATUS_CHARS] for m, v in held.items()},
+        ),
+    ] = Field(default_factory=dict, description='Vehicle index -> "active" or "excluded: <why>".')
 
     @field_validator("counters", mode="before")
     @classmethod
@@ -450,36 +586,56 @@ class HealthWire(Envelope):
 
 
 WireMessage = Annotated[
-    DetectionWire
-    | DetectionSetWire
-    | ClockWire
-    | TruthWire
-    | TruthSetWire
-    | PlanWire
-    | TelemetryWire
-    | TrackWire
-    | TrackSetWire
-    | HealthWire
-    | ControlWire
-    | ControlReplyWire
-    | FleetWire,
+    DetectionMsg
+    | DetectionSetMsg
+    | ClockMsg
+    | TruthMsg
+    | TruthSetMsg
+    | PlanMsg
+    | TelemetryMsg
+    | TrackMsg
+    | TrackSetMsg
+    | HealthMsg
+    | ControlMsg
+    | ControlReplyMsg
+    | FleetMsg,
     Field(discriminator="type"),
 ]
 """Any bus payload, told apart by its `type`."""
 
-MODELS: Final[dict[str, type[Envelope]]] = {
-    "detection": DetectionWire,
-    "detection_set": DetectionSetWire,
-    "clock": ClockWire,
-    "truth": TruthWire,
-    "truth_set": TruthSetWire,
-    "plan": PlanWire,
-    "telemetry": TelemetryWire,
-    "track": TrackWire,
-    "track_set": TrackSetWire,
-    "health": HealthWire,
-    "control": ControlWire,
-    "control_reply": ControlReplyWire,
-    "fleet": FleetWire,
+AnyMsg = (
+    DetectionMsg
+    | DetectionSetMsg
+    | TruthSetMsg
+    | TrackSetMsg
+    | ClockMsg
+    | TruthMsg
+    | PlanMsg
+    | TelemetryMsg
+    | TrackMsg
+    | HealthMsg
+    | ControlMsg
+    | ControlReplyMsg
+    | FleetMsg
+)
+"""Any message (`wire.codec.decode_any`)."""
+
+MODELS: Final[dict[str, type[Message]]] = {
+    model.kind(): model
+    for model in (
+        DetectionMsg,
+        DetectionSetMsg,
+        ClockMsg,
+        TruthMsg,
+        TruthSetMsg,
+        PlanMsg,
+        TelemetryMsg,
+        TrackMsg,
+        TrackSetMsg,
+        HealthMsg,
+        ControlMsg,
+        ControlReplyMsg,
+        FleetMsg,
+    )
 }
 """Message type -> its model."""

@@ -12,16 +12,23 @@ from __future__ import annotations
 import math
 import types
 import typing
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any, Final, Union
 
 import annotated_types
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, ValidationError, ValidationInfo
 from pydantic.fields import FieldInfo
 from pydantic_core import ErrorDetails, PydanticCustomError
 
 from isac_mission.errors import MessageError
-from isac_mission.wire.envelope import MAX_ABS, MAX_ABS_COVARIANCE, MAX_STATUS_CHARS, SCHEMA
+from isac_mission.wire.envelope import (
+    MAX_ABS,
+    MAX_ABS_COVARIANCE,
+    MAX_STATUS_CHARS,
+    MAX_UAVS,
+    SCHEMA,
+)
+from isac_mission.wire.fields import WIRE_LENGTH, Held
 
 WIRE_ERROR: Final = "isac_wire"
 """The pydantic error type of a check written in this package (its context holds the text)."""
@@ -29,24 +36,6 @@ WIRE_ERROR: Final = "isac_wire"
 CHOICES: Final[dict[str, tuple[str, frozenset[str]]]] = {}
 """Field name -> (how a wrong value is worded, the allowed values) of the string choices
 (filled by wire.models: telemetry mode and link, control command)."""
-
-
-WIRE_LENGTH: Final = "isac_wire_length"
-"""The pydantic error type of an array of the wrong length (checked before its items)."""
-
-
-def length_of(n: int) -> Callable[[Any], Any]:
-    """A before-validator: an array (a list) must hold exactly n items; checked before the
-    items are, so that a short array is refused as such whatever it holds."""
-
-    def check(value: Any) -> Any:
-        if isinstance(value, list) and len(value) != n:
-            raise PydanticCustomError(
-                WIRE_LENGTH, "{got} values, expected {want}", {"got": len(value), "want": n}
-            )
-        return value
-
-    return check
 
 
 def refuse(text: str) -> PydanticCustomError:
@@ -84,9 +73,33 @@ def int_problem(value: int, lo: int, hi: int) -> str | None:
     return f"{shown} is outside [{lo}, {hi}]"
 
 
+def receiver_size(info: ValidationInfo, name: str) -> int | None:
+    """A size the receiver passed as validation context ("n_uavs", "n_bs"), or None."""
+    ctx = info.context
+    value = ctx.get(name) if isinstance(ctx, dict) else None
+    return value if isinstance(value, int) else None
+
+
+def check_uav(where: str, uav: Any, info: ValidationInfo) -> Any:
+    """A before-check: an integer UAV index lies in [0, n_uavs) (the receiver's n_uavs, else
+    MAX_UAVS); anything else is left to the model's type check."""
+    if isinstance(uav, int) and not isinstance(uav, bool):
+        n_uavs = receiver_size(info, "n_uavs")
+        problem = int_problem(uav, 0, (n_uavs if n_uavs is not None else MAX_UAVS) - 1)
+        if problem:
+            raise refuse(f"{where}: {problem}")
+    return uav
+
+
 def _unwrap(tp: Any, metadata: list[Any]) -> tuple[Any, list[Any]]:
-    """Strip Annotated (collecting its constraints) and Optional from a field's type."""
+    """Strip Annotated (collecting its constraints), Optional, and a `Held` field's holding
+    (down to its JSON shape) from a field's type."""
     while True:
+        held = next((m for m in metadata if isinstance(m, Held)), None)
+        if held is not None:
+            metadata = [m for m in metadata if m is not held]
+            tp = held.json
+            continue
         origin = typing.get_origin(tp)
         if origin is typing.Annotated:
             base, *extra = typing.get_args(tp)
@@ -100,8 +113,9 @@ def _unwrap(tp: Any, metadata: list[Any]) -> tuple[Any, list[Any]]:
 
 
 def _leaf(model: type[BaseModel], loc: Sequence[int | str]) -> tuple[Any, list[Any]]:
-    """The type and the constraints of the value at `loc` in `model` (list items, dict values)."""
-    info = model.model_fields.get(str(loc[0]))
+    """The type and the constraints of the value at `loc` in `model` (list items, dict values);
+    loc[0] is the field's name on the wire."""
+    info = next((f for name, f in model.model_fields.items() if (f.alias or name) == loc[0]), None)
     if info is None:
         return None, []
     tp, meta = _unwrap(info.annotation, list(info.metadata))

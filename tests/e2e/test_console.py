@@ -33,7 +33,7 @@ from isac_mission.bus.certs import generate_users_file
 from isac_mission.bus.security import read_users_file, secured_settings
 from isac_mission.config import ZenohSecurityConfig
 from isac_mission.records import read_trace
-from isac_mission.wire import Keys, decode_control, decode_plan, decode_telemetry
+from isac_mission.wire import ControlMsg, Keys, PlanMsg, TelemetryMsg, decode
 from tests.support.browser import (
     browser,
     churn_websockets,
@@ -86,14 +86,14 @@ async def observe(settings: BusSettings) -> AsyncIterator[Observer]:
         async with bus.subscribe(KEYS.everything, maxsize=8192) as sub:
             async for key, payload in sub:
                 if key.startswith(KEYS.prefix + "/telemetry/"):
-                    t = decode_telemetry(payload)
+                    t = decode(TelemetryMsg, payload)
                     assert t.published_wall_s is not None
                     obs.telemetry[t.uav].append((t.published_wall_s, list(t.position_xy_m)))
                 elif key == KEYS.plan:
-                    obs.plans.append((time.monotonic(), decode_plan(payload).slot))
+                    obs.plans.append((time.monotonic(), decode(PlanMsg, payload).slot))
                 elif key == KEYS.control:
                     obs.controls.append(json.loads(payload))
-                    decode_control(payload)
+                    decode(ControlMsg, payload)
 
     task = asyncio.create_task(pump())
     try:

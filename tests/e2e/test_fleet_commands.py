@@ -20,8 +20,8 @@ import numpy as np
 
 from isac_mission.bus import ZenohBus, tcp_loopback
 from isac_mission.cli.embedded import run_embedded
-from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
+from isac_mission.service.assembly import LiveOptions
 from isac_mission.wire import Keys, PlanMsg
 from tests.support.mavproxy import MavlinkListener, MavProxy
 from tests.support.mission_watch import MissionWatch, open_client

@@ -14,9 +14,10 @@ from pathlib import Path
 
 from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
-from isac_mission.cli.mission import LiveOptions, LiveResult
 from isac_mission.config import Scenario
 from isac_mission.mavwire.modes import FlightMode
+from isac_mission.service.assembly import LiveOptions
+from isac_mission.service.mission_result import LiveResult
 from isac_mission.wire import Keys, PlanMsg
 from tests.support.mavproxy import MavlinkListener, MavProxy
 from tests.support.mission_watch import MissionWatch, open_client

@@ -22,12 +22,13 @@ from scipy import stats
 
 from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
-from isac_mission.cli.mission import LiveOptions, planning_scenario, summarize_live
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo
 from isac_mission.experiment.replay import replay_trace, summarize_replay
 from isac_mission.planning.slot import METHODS
 from isac_mission.records import Trace, read_trace
+from isac_mission.service.assembly import LiveOptions, planning_scenario
+from isac_mission.service.mission_result import summarize_live
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import compare_pcrb
 from tests.support.live_cli import (

@@ -16,7 +16,7 @@ import pytest
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.cli.ports import mission_ports
 from isac_mission.config import load_scenario
-from isac_mission.wire import Keys, decode_detection
+from isac_mission.wire import DetectionMsg, Keys, decode
 from tests.support.ports import LOOPBACK, free_port_offsets, free_tcp_port, udp_sinks
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -74,7 +74,7 @@ async def test_sim_publishes_detections_and_exits_cleanly_on_signal(
             )
             try:
                 key, data = await sub.get(START_TIMEOUT_S)
-                det = decode_detection(data, n_uavs=scenario.M)
+                det = decode(DetectionMsg, data, n_uavs=scenario.M)
                 assert key == keys.detections(det.uav)
                 out = await _stopped_cleanly(proc, sig)
                 assert b"world stopped" in out
@@ -110,7 +110,7 @@ async def test_sim_with_a_port_offset_meets_the_ground_and_the_gcs_on_the_offset
             proc = await _start_sim(config_path, "--port-offset", str(offset))
             try:
                 key, data = await sub.get(START_TIMEOUT_S)
-                assert key == keys.detections(decode_detection(data, n_uavs=scenario.M).uav)
+                assert key == keys.detections(decode(DetectionMsg, data, n_uavs=scenario.M).uav)
                 gcs = sinks[-1]
                 gcs.setblocking(False)
                 datagram = await asyncio.wait_for(

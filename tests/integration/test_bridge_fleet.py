@@ -17,7 +17,7 @@ from isac_mission.mavwire.modes import FlightMode
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.types import SlotPlan, SolveReport
-from isac_mission.wire import PlanMsg, decode_detection, encode_plan
+from isac_mission.wire import DetectionMsg, PlanMsg, decode, encode
 from sim.world import World
 from sim.world_options import WorldOptions
 from tests.support.bridge_rig import (
@@ -42,7 +42,7 @@ def plan_msg(slot: int, waypoints: np.ndarray) -> PlanMsg:
         pcrb_trace=1.0,
         report=SolveReport(status="ok"),
     )
-    return PlanMsg(slot=slot, t_s=0.0, plan=plan)
+    return PlanMsg.from_plan(slot, 0.0, plan)
 
 
 async def test_fleet_prepares_follows_plans_and_lands_three_vehicles_of_the_world(
@@ -79,11 +79,11 @@ async def test_fleet_prepares_follows_plans_and_lands_three_vehicles_of_the_worl
             async def ground() -> None:
                 while len(seen.get(2, {})) < n_uavs:
                     _, payload = await detections.get(TIMEOUT_S)
-                    det = decode_detection(payload, n_uavs=n_uavs)
+                    det = decode(DetectionMsg, payload, n_uavs=n_uavs)
                     seen.setdefault(det.slot, {})[det.uav] = det.uav_xy_m
                     if len(seen[det.slot]) == n_uavs and det.slot + 1 in plans:
                         plan = plan_msg(det.slot + 1, plans[det.slot + 1])
-                        hub.publish(KEYS.plan, encode_plan(plan))
+                        hub.publish(KEYS.plan, encode(plan))
 
             ground_task = asyncio.create_task(ground())
             await asyncio.wait_for(fleet.prepare_all(), TIMEOUT_S)

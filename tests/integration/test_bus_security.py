@@ -22,9 +22,10 @@ from isac_mission.bus import BusSettings, Subscription, ZenohBus, tcp_loopback
 from isac_mission.bus.certs import CertFiles, generate_certs, generate_users_file
 from isac_mission.bus.security import read_users_file, secured_settings
 from isac_mission.cli.embedded import run_embedded
-from isac_mission.cli.mission import LiveOptions, summarize_live
 from isac_mission.config import Scenario, SecurityConfig, ZenohSecurityConfig, ZenohTlsConfig
 from isac_mission.errors import ConfigError
+from isac_mission.service.assembly import LiveOptions
+from isac_mission.service.mission_result import summarize_live
 from isac_mission.wire import Keys
 from tests.support.ports import free_port_block, sitl_ports
 

@@ -27,13 +27,13 @@ from isac_mission.console import (
     MissionView,
 )
 from isac_mission.wire import (
+    ControlMsg,
     Keys,
     TelemetryMsg,
     TrackEntry,
     TrackSetMsg,
-    decode_control,
-    encode_telemetry,
-    encode_track_set,
+    decode,
+    encode,
 )
 from tests.support.browser import browser
 from tests.support.ports import free_tcp_port
@@ -67,7 +67,7 @@ def _telemetry(uav: int, x_m: float) -> bytes:
         "ok",
         published_wall_s=time.time(),
     )
-    return encode_telemetry(msg)
+    return encode(msg)
 
 
 async def _until(pred: Any, what: str) -> None:
@@ -135,7 +135,7 @@ async def test_console_server_pushes_bus_updates_and_validates_every_request() -
                 assert got == 202
                 key, payload = await controls.get(TIMEOUT_S)
                 assert key == KEYS.control
-                sent = decode_control(payload)
+                sent = decode(ControlMsg, payload)
                 assert sent.params == {"rate_min_mbps": 15.0}
                 assert json.loads(payload)["id"] == answer["id"]
                 # Nothing else was sent: the refused requests never reached the bus.
@@ -183,7 +183,7 @@ async def test_a_page_draws_both_tracks_of_a_track_set_with_their_ids() -> None:
             await page.goto(url)
             await page.wait_for_function("window.consoleState.S.mode === 'live'")
             await hub.wait_for_subscribers(KEYS.track, TIMEOUT_S)
-            hub.publish(KEYS.track, encode_track_set(TrackSetMsg(4, 4.0, tracks)))
+            hub.publish(KEYS.track, encode(TrackSetMsg(4, 4.0, tracks)))
             await page.wait_for_function(
                 "(window.consoleState.M.tracksDrawn || []).length === 2",
                 timeout=TIMEOUT_S * 1000,

@@ -18,7 +18,7 @@ from isac_mission.records import read_trace
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.types import SlotPlan
-from isac_mission.wire import Keys, decode_health, decode_plan, decode_track
+from isac_mission.wire import HealthMsg, Keys, PlanMsg, TrackMsg, decode
 from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.independent.pcrb import compare_pcrb
@@ -80,10 +80,10 @@ async def test_ground_loop_flies_every_slot_and_traces_it(
     trace_path = tmp_path / "live.jsonl"
     plans, tracks, health, slots = await _mission(paper, free_tcp_port, trace_path, slots=8)
     assert slots == 8
-    plan_slots = [decode_plan(p).slot for p in plans]
+    plan_slots = [decode(PlanMsg, p).slot for p in plans]
     assert plan_slots == list(range(1, 9))
-    assert [decode_track(t).slot for t in tracks] == list(range(1, 9))
-    assert decode_health(health[-1]).status in ("running", "done")
+    assert [decode(TrackMsg, t).slot for t in tracks] == list(range(1, 9))
+    assert decode(HealthMsg, health[-1]).status in ("running", "done")
     trace = read_trace(trace_path)
     assert [r.slot for r in trace.slots] == list(range(1, 9))
     assert all(r.target_true is not None for r in trace.slots)
@@ -128,16 +128,16 @@ async def test_ground_loop_gives_the_planner_the_predicted_covariance_and_last_p
         paper, free_tcp_port, trace_path, slots=5, planner=recording
     )
     assert slots == 5
-    published = {(p := decode_plan(b)).slot: p for b in plans}
+    published = {(p := decode(PlanMsg, b)).slot: p for b in plans}
     trace = read_trace(trace_path)
     F, W = transition_matrix(paper.dt), process_noise(paper.dt, paper.kappa)
     posteriors = [paper.P0, *(np.asarray(r.P) for r in trace.slots)]
     assert len(inputs) == 5  # plans 1..5 (none after the last slot)
     assert inputs[0].prev_plan is None
     for n, inp in enumerate(inputs, start=1):
-        assert inp.target_cov_pred is not None
+        assert inp.lead.cov_pred is not None
         want = F @ posteriors[n - 1] @ F.T + W
-        np.testing.assert_allclose(inp.target_cov_pred, want, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(inp.lead.cov_pred, want, rtol=1e-9, atol=1e-12)
         if n > 1:
             prev = inp.prev_plan
             assert prev is not None

@@ -17,10 +17,10 @@ from scipy.stats import chi2
 
 from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
-from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import load_scenario
 from isac_mission.experiment.multi_target_metrics import follow
 from isac_mission.records.multi_target import TRACE_FORMAT, MultiTargetSlot
+from isac_mission.service.assembly import LiveOptions
 from isac_mission.tracking.gospa import UNASSIGNED
 from sim.multi_target_scene import MultiTargetScene
 from tests.support.live_cli import ROOT

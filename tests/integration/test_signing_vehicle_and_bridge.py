@@ -16,15 +16,15 @@ from typing import Any
 import pytest
 
 from isac_mission.bus import ZenohBus
-from isac_mission.cli.mission import mirror_signing_counters, signing_counters
 from isac_mission.config import DEFAULT_SIGNING_KEY_ENV
 from isac_mission.mavwire.builders import arm_command, takeoff_command
 from isac_mission.mavwire.dialect import mavlink2
 from isac_mission.mavwire.modes import FlightMode
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.ground.report import GroundReport
+from isac_mission.service.mission_result import mirror_signing_counters, signing_counters
 from isac_mission.timebase import WallTime
-from isac_mission.wire import HealthMsg, decode_health, encode_health
+from isac_mission.wire import HealthMsg, decode, encode
 from tests.support.ports import free_port_block
 from tests.support.signing_peer import (
     HEX_KEY,
@@ -184,4 +184,4 @@ async def test_bridge_believes_only_correctly_signed_telemetry(
             "mavlink replayed": 1,
         }
         health = HealthMsg(0, 0.0, "running", dict(report.counters), "", {})
-        assert decode_health(encode_health(health)).counters["mavlink bad_signature"] == 3
+        assert decode(HealthMsg, encode(health)).counters["mavlink bad_signature"] == 3

@@ -24,7 +24,7 @@ from isac_mission.wire import (
     PlanMsg,
     TruthMsg,
     decode_any,
-    encode_plan,
+    encode,
 )
 from sim.world import World
 from sim.world_options import WorldOptions
@@ -151,7 +151,7 @@ def _plan(slot: int, shares: list[float], s: Scenario) -> bytes:
         pcrb_trace=1.0,
         report=SolveReport(status="ok", solve_s=0.01),
     )
-    return encode_plan(PlanMsg(slot=slot, t_s=float(slot - 1) * s.dt, plan=plan))
+    return encode(PlanMsg.from_plan(slot, float(slot - 1) * s.dt, plan))
 
 
 async def test_lockstep_holds_the_clock_until_the_next_plan_arrives() -> None:

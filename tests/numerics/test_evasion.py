@@ -39,6 +39,7 @@ from isac_mission.planning.fallback import kept_viable
 from isac_mission.planning.margins import SafetyMargins
 from isac_mission.planning.problem import SlotInput
 from isac_mission.planning.slot import SolverKit
+from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import SensingParams
 from isac_mission.types import SlotPlan, SolveReport
 
@@ -309,10 +310,8 @@ def test_a_plan_ending_in_the_targets_path_flies_an_evasive_leg_that_dodges_it()
         prev_xy_m=start_xy,
         prev_bandwidth_share=np.full(2, 0.5),
         prev_bs_of_uav=None,
-        target_state_pred=target_pred,
-        prior_information=np.eye(4),
+        targets=(TargetBelief(target_pred, np.eye(4), s.motion, np.eye(4)),),
         prev_velocity_mps=np.zeros((2, 2)),
-        target_cov_pred=np.eye(4),
     )
     plan = SlotPlan(
         uav_xy_m=start_xy.copy(),

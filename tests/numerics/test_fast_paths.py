@@ -18,6 +18,7 @@ from isac_mission.planning.bandwidth import BandwidthSubproblem
 from isac_mission.planning.feasibility import SlotConstraints
 from isac_mission.planning.positions import PositionSubproblem
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, predict_information
 
 
@@ -113,7 +114,9 @@ def test_default_kit_plans_like_reference_kit(paper: Scenario) -> None:
     rng = np.random.default_rng(6)
     for _ in range(5):
         x_pred = s.x0 + np.concatenate([rng.normal(0, 100, 2), rng.normal(0, 3, 2)])
-        inp = SlotInput(s.uav_start_xy, np.full(3, 1 / 3), None, x_pred, _prior(s))
+        inp = SlotInput(
+            s.uav_start_xy, np.full(3, 1 / 3), None, (TargetBelief(x_pred, _prior(s), s.motion),)
+        )
         a, b = plan_slot(inp, fast, "proposed"), plan_slot(inp, ref, "proposed")
         assert a.report.status == b.report.status == "ok"
         np.testing.assert_array_equal(a.bs_of_uav, b.bs_of_uav)

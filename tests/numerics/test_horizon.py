@@ -40,7 +40,7 @@ from isac_mission.planning.problem import slot_clearance_m, with_end_velocity
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.records import read_trace
 from isac_mission.tracking.pcrb import SensingParams
-from isac_mission.types import Gaussian, SlotPlan
+from isac_mission.types import SlotPlan
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import bound_update, cv_model, jacobian
 
@@ -70,8 +70,8 @@ def _data(s: Scenario, inp: SlotInput, L: int) -> HorizonSlotData:
         serving_xy=s.bs_xy[nearest],
         control_xy=s.bs_xy[nearest],
         keep_out_xy=np.zeros((0, 2)),
-        x_pred=inp.target_state_pred,
-        J_pred=inp.prior_information,
+        x_pred=inp.lead.state_pred,
+        J_pred=inp.lead.prior_information,
         clearance_m=np.full(L, s.d_safe),
     )
 
@@ -133,7 +133,7 @@ def test_horizon_objective_is_the_bound_recursion_recomputed_independently() -> 
     # Independent: hand-written H, the square-root-information update of tests/support.
     F, W = cv_model(s.dt, s.kappa)
     sensing = SensingParams.from_scenario(s)
-    state = np.asarray(inp.target_state_pred, dtype=float)
+    state = np.asarray(inp.lead.state_pred, dtype=float)
     traces = []
     C = None
     for h in range(L):
@@ -141,7 +141,7 @@ def test_horizon_objective_is_the_bound_recursion_recomputed_independently() -> 
         r_diag = sensing.variances(d, eta[h])
         H = jacobian(state, xy[h])
         if h == 0:
-            J = inp.prior_information + H.T @ np.diag(1.0 / r_diag) @ H
+            J = inp.lead.prior_information + H.T @ np.diag(1.0 / r_diag) @ H
             C = np.linalg.inv(J)
         else:
             C, _ = bound_update(C, F, W, H, r_diag)
@@ -149,7 +149,9 @@ def test_horizon_objective_is_the_bound_recursion_recomputed_independently() -> 
         state = F @ state
     expected = float(horizon_weights(L, 0.8, 2.0) @ np.array(traces))
     assert float(nlp.objective(x, p)) == pytest.approx(expected, rel=1e-8)
-    ours = horizon_bound_traces(s, inp.prior_information, inp.target_state_pred, xy, eta, sensing)
+    ours = horizon_bound_traces(
+        s, inp.lead.prior_information, inp.lead.state_pred, xy, eta, sensing
+    )
     np.testing.assert_allclose(ours, traces, rtol=1e-8)
 
 
@@ -168,7 +170,9 @@ def test_the_lifted_recursion_is_the_bound_at_the_start_and_at_the_answer(
     # and the independently recomputed bound (the numpy recursion).
     assert np.max(np.abs(np.asarray(out["g"]))) < 1e-9
     sensing = SensingParams.from_scenario(s)
-    traces = horizon_bound_traces(s, inp.prior_information, inp.target_state_pred, xy, eta, sensing)
+    traces = horizon_bound_traces(
+        s, inp.lead.prior_information, inp.lead.state_pred, xy, eta, sensing
+    )
     w = horizon_weights(L, s.planner.horizon.discount, s.planner.horizon.terminal_weight)
     assert float(out["f"]) == pytest.approx(float(nlp.objective(x, p)), rel=1e-10)
     assert float(out["f"]) == pytest.approx(float(w @ traces), rel=1e-8)
@@ -184,7 +188,7 @@ def test_the_lifted_recursion_is_the_bound_at_the_start_and_at_the_answer(
     sol = nlp.solve(xy0, v0, eta0, hover)
     assert sol.success
     start, answer = (
-        w @ horizon_bound_traces(s, inp.prior_information, inp.target_state_pred, q, e, sensing)
+        w @ horizon_bound_traces(s, inp.lead.prior_information, inp.lead.state_pred, q, e, sensing)
         for q, e in ((xy0, eta0), (sol.uav_xy_m, sol.bandwidth_share))
     )
     assert answer < 0.99 * start
@@ -224,15 +228,15 @@ def test_horizon_plans_carry_their_horizon_and_beat_the_per_slot_start() -> None
         cont, eta = _continued(s, inp, base, L)
         cfg = s.planner.horizon
         w = horizon_weights(L, cfg.discount, cfg.terminal_weight)
-        assert inp.target_cov_pred is not None
+        assert inp.lead.cov_pred is not None
         assert inp.keep_out_xy_m is None
         data = horizon_slot_data(
-            s, inp, np.zeros((s.M, 2)), inp.target_cov_pred, base.bs_of_uav, base.uav_xy_m, L
+            s, inp, np.zeros((s.M, 2)), inp.lead.cov_pred, base.bs_of_uav, base.uav_xy_m, L
         )
         if horizon_nlp(kit).satisfies(cont, None, eta, data):
             compared += 1
             start = w @ horizon_bound_traces(
-                s, inp.prior_information, inp.target_state_pred, cont, eta, kit.sensing
+                s, inp.lead.prior_information, inp.lead.state_pred, cont, eta, kit.sensing
             )
             assert w @ plan.horizon.pcrb_trace <= start * (1 + 1e-6)
     assert kept >= len(inputs[1::6]) // 2
@@ -266,9 +270,9 @@ def test_a_horizon_solve_at_its_iteration_cap_flies_a_better_feasible_iterate_or
             continue
         kinds.append("kept")
         assert f"Maximum_Iterations_Exceeded in 3 it, {AT_CAP_NOTE}" in plan.report.polish
-        assert inp.target_cov_pred is not None
+        assert inp.lead.cov_pred is not None
         data = horizon_slot_data(
-            s, inp, np.zeros((s.M, 2)), inp.target_cov_pred, base.bs_of_uav, base.uav_xy_m, L
+            s, inp, np.zeros((s.M, 2)), inp.lead.cov_pred, base.bs_of_uav, base.uav_xy_m, L
         )
         h = plan.horizon
         assert nlp.satisfies(h.uav_xy_m, None, h.bandwidth_share, data, CAP_FEASIBILITY_TOL)
@@ -276,7 +280,7 @@ def test_a_horizon_solve_at_its_iteration_cap_flies_a_better_feasible_iterate_or
         cont, eta = _continued(s, inp, base, L)
         eta = _shares_meeting_rates(s, cont, eta, data.serving_xy, nlp.margins.link_m)
         start = w @ horizon_bound_traces(
-            s, inp.prior_information, inp.target_state_pred, cont, eta, kit.sensing
+            s, inp.lead.prior_information, inp.lead.state_pred, cont, eta, kit.sensing
         )
         assert w @ h.pcrb_trace < start
     assert set(kinds) == {"kept", "fallback"}, kinds
@@ -537,8 +541,7 @@ def test_a_fleet_size_reached_mid_mission_plans_without_a_build_inside_the_plan(
         uav_v=inp.prev_velocity_mps,
         prev_eta=inp.prev_bandwidth_share,
         prev_assoc=inp.prev_bs_of_uav,
-        prediction=Gaussian(inp.target_state_pred, np.asarray(inp.target_cov_pred)),
-        J_pred=inp.prior_information,
+        targets=inp.targets,
         excluded=excluded,  # vehicles leave the plan (an operator's HOLD, a lost link)
     )
     plan = job.run()
@@ -605,12 +608,12 @@ def test_an_infeasible_per_slot_plan_is_still_a_start_for_the_horizon() -> None:
     plan = plan_horizon(inp, lambda: best_effort, kit, time.perf_counter())
     assert plan.report.status == "ok" and plan.report.fallback == "", plan.report.reason
     assert plan.horizon is not None
-    gaps = np.linalg.norm(plan.uav_xy_m - inp.target_state_pred[None, :2], axis=1)
+    gaps = np.linalg.norm(plan.uav_xy_m - inp.lead.state_pred[None, :2], axis=1)
     assert gaps.min() >= slot_clearance_m(inp, s)
     # The target predicted on top of UAV 0: no plan keeps 14j within a slot's reach.
-    x_pred = np.array(inp.target_state_pred, dtype=float)
+    x_pred = np.array(inp.lead.state_pred, dtype=float)
     x_pred[:2] = inp.prev_xy_m[0]
-    trapped = replace(inp, target_state_pred=x_pred)
+    trapped = replace(inp, targets=(replace(inp.lead, state_pred=x_pred),))
     base = with_end_velocity(Proposed().plan(trapped, kit), trapped, s)
     assert base.report.status == "infeasible"
     plan = plan_horizon(trapped, lambda: base, kit, time.perf_counter())

@@ -12,8 +12,8 @@ from isac_mission.planning.feasibility import SlotConstraints
 from isac_mission.planning.fleet import NO_BS, KitCache, PlanningJob
 from isac_mission.planning.positions import PositionSubproblem
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
-from isac_mission.types import Gaussian
-from isac_mission.wire import PlanMsg, decode_plan, encode_plan
+from isac_mission.tracking.beliefs import TargetBelief
+from isac_mission.wire import PlanMsg, decode, encode
 
 
 def _two_uav(paper: Scenario) -> Scenario:
@@ -55,17 +55,28 @@ def test_planner_keeps_d_safe_from_an_unplanned_vehicle_it_would_otherwise_appro
     x_pred = np.array([900.0, 1600.0, 20.0, 0.0])
     prev = np.array([[1000.0, 1700.0], [1300.0, 1300.0]])
     J = np.linalg.inv(np.diag([25.0, 25.0, 1.0, 1.0]))
-    free = plan_slot(SlotInput(prev, np.full(2, 0.5), None, x_pred, J), SolverKit(s))
+    free = plan_slot(
+        SlotInput(prev, np.full(2, 0.5), None, (TargetBelief(x_pred, J, s.motion),)), SolverKit(s)
+    )
     # Put the keep-out point where UAV 0 went without it.
     keep_out = free.uav_xy_m[[0]].copy()
     kit = SolverKit(s, n_keep_out=1)
-    plan = plan_slot(SlotInput(prev, np.full(2, 0.5), None, x_pred, J, keep_out_xy_m=keep_out), kit)
+    plan = plan_slot(
+        SlotInput(
+            prev,
+            np.full(2, 0.5),
+            None,
+            (TargetBelief(x_pred, J, s.motion),),
+            keep_out_xy_m=keep_out,
+        ),
+        kit,
+    )
     assert plan.report.status == "ok"
     gaps = np.linalg.norm(plan.uav_xy_m - keep_out, axis=1)
     assert np.all(gaps >= s.d_safe)
     assert plan.pcrb_trace >= free.pcrb_trace - 1e-9  # a constraint more cannot help
     with pytest.raises(ValueError, match="keep-out"):
-        plan_slot(SlotInput(prev, np.full(2, 0.5), None, x_pred, J), kit)
+        plan_slot(SlotInput(prev, np.full(2, 0.5), None, (TargetBelief(x_pred, J, s.motion),)), kit)
 
 
 def test_a_job_without_a_vehicle_widens_to_all_and_round_trips_the_codec(
@@ -81,8 +92,7 @@ def test_a_job_without_a_vehicle_widens_to_all_and_round_trips_the_codec(
         uav_v=None,
         prev_eta=np.full(s.M, 1 / 3),
         prev_assoc=None,
-        prediction=Gaussian(s.x0.copy(), s.P0.copy()),
-        J_pred=np.linalg.inv(s.P0),
+        targets=(TargetBelief(s.x0.copy(), np.linalg.inv(s.P0), s.motion, s.P0.copy()),),
         excluded=(1,),
     )
     plan = job.run()
@@ -100,19 +110,18 @@ def test_a_job_without_a_vehicle_widens_to_all_and_round_trips_the_codec(
             s.uav_start_xy[[0, 2]],
             np.full(2, 0.5),
             None,
-            s.x0,
-            np.linalg.inv(s.P0),
+            (TargetBelief(s.x0, np.linalg.inv(s.P0), s.motion),),
             keep_out_xy_m=s.uav_start_xy[[1]],
         ),
         SolverKit(sub, n_keep_out=1),
     )
     np.testing.assert_allclose(plan.uav_xy_m[[0, 2]], alone.uav_xy_m, atol=1e-9)
     # On the wire: -1 with a zero share is valid, -1 with a share is not.
-    back = decode_plan(encode_plan(PlanMsg(7, 7.0, plan)), n_uavs=s.M, n_bs=s.K)
+    back = decode(PlanMsg, encode(PlanMsg.from_plan(7, 7.0, plan)), n_uavs=s.M, n_bs=s.K)
     np.testing.assert_array_equal(back.plan.bs_of_uav, plan.bs_of_uav)
-    bad = encode_plan(PlanMsg(7, 7.0, plan)).replace(b'"assoc":[', b'"assoc":[-1,', 1)
+    bad = encode(PlanMsg.from_plan(7, 7.0, plan)).replace(b'"assoc":[', b'"assoc":[-1,', 1)
     with pytest.raises(MessageError):
-        decode_plan(bad)
+        decode(PlanMsg, bad)
 
 
 def test_hold_needs_no_solver_and_keeps_everyone_in_place(paper: Scenario) -> None:
@@ -125,8 +134,7 @@ def test_hold_needs_no_solver_and_keeps_everyone_in_place(paper: Scenario) -> No
         uav_v=None,
         prev_eta=np.array([0.2, 0.3, 0.5]),
         prev_assoc=np.array([0, 1, 2]),
-        prediction=Gaussian(s.x0.copy(), s.P0.copy()),
-        J_pred=np.linalg.inv(s.P0),
+        targets=(TargetBelief(s.x0.copy(), np.linalg.inv(s.P0), s.motion, s.P0.copy()),),
         excluded=(2,),
     )
     plan = job.hold("timeout: test", "timeout")

@@ -38,9 +38,10 @@ from isac_mission.model.run_noise import draw_multi_target_noise
 from isac_mission.model.targets import TargetPaths
 from isac_mission.planning.multi_target import multi_target_kit
 from isac_mission.planning.problem import SlotInput, build_slot_problem
+from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.gospa import UNASSIGNED, gospa
-from isac_mission.tracking.multi_target import TrackEstimate
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, SumObjective, predict_information
+from isac_mission.tracking.tracker import TrackEstimate
 from isac_mission.types import Gaussian, SlotPlan, SolveReport
 
 
@@ -95,15 +96,16 @@ def test_a_slot_problem_with_other_targets_minimises_their_sum(scenario: Scenari
         scenario.uav_start_xy,
         np.full(scenario.M, 1 / scenario.M),
         None,
-        np.array([600.0, 1600.0, 30.0, 0.0]),
-        J,
+        tuple(
+            TargetBelief(x, Jx, scenario.motion)
+            for x, Jx in ((np.array([600.0, 1600.0, 30.0, 0.0]), J), *others)
+        ),
         keep_out_xy_m=np.full((kit.n_keep_out, 2), -1e6),
-        other_targets=others,
     )
     problem = build_slot_problem(inp, kit)
     assert isinstance(problem.objective, SumObjective)
     q, eta = scenario.uav_start_xy, np.full(scenario.M, 1 / scenario.M)
-    single = PlanningObjective(J, inp.target_state_pred, kit.sensing)
+    single = PlanningObjective(J, inp.lead.state_pred, kit.sensing)
     want = single.value(q, eta) + sum(
         PlanningObjective(Jo, x, kit.sensing).value(q, eta) for x, Jo in others
     )

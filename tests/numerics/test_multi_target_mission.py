@@ -15,7 +15,7 @@ from isac_mission.model.run_noise import draw_multi_target_noise
 from isac_mission.planning.multi_target import (
     KEEP_OUT_CAPACITY,
     multi_target_kit,
-    plan_for_tracks,
+    plan_tracks,
 )
 from isac_mission.records.multi_target import MultiTargetSlot, slot_line
 from isac_mission.service.ground.multi_target import MultiTargetMission
@@ -131,9 +131,9 @@ def test_an_excluded_vehicle_holds_and_the_others_plan_around_it(scenario: Scena
     five = mission.kits.for_active(tuple(idx))
     assert five.n_keep_out == KEEP_OUT_CAPACITY + 1
     eta = mission.eta[idx] / mission.eta[idx].sum()
-    _, alone = plan_for_tracks(
+    alone = plan_tracks(
         five.scenario, "proposed", five, predictions, xy[idx], eta, None, None, None, xy[[4]]
-    )
+    ).plan
     np.testing.assert_allclose(plan.uav_xy_m[idx], alone.uav_xy_m, atol=1e-6)
     np.testing.assert_allclose(plan.bandwidth_share[idx], alone.bandwidth_share, atol=1e-9)
 

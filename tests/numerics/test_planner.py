@@ -21,6 +21,7 @@ from isac_mission.planning.bandwidth import BandwidthSubproblem, lp_vertex
 from isac_mission.planning.feasibility import SlotConstraints
 from isac_mission.planning.positions import SOLVER_MARGIN_M, PositionSubproblem
 from isac_mission.planning.slot import METHODS, SlotInput, SolverKit, plan_slot
+from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, predict_information
 
 
@@ -88,10 +89,12 @@ def test_single_uav_plan_reaches_grid_optimum() -> None:
     )
     kit = SolverKit(s)
     for x_pred in (np.array([700.0, 1600.0, 30.0, 0.0]), np.array([1030.0, 1650.0, 10.0, 20.0])):
-        inp = SlotInput(s.uav_start_xy, np.ones(1), None, x_pred, _prior(s))
+        inp = SlotInput(
+            s.uav_start_xy, np.ones(1), None, (TargetBelief(x_pred, _prior(s), s.motion),)
+        )
         plan = plan_slot(inp, kit, "proposed")
         assert plan.report.status == "ok", plan.report.reason
-        obj = PlanningObjective(inp.prior_information, x_pred, kit.sensing)
+        obj = PlanningObjective(inp.lead.prior_information, x_pred, kit.sensing)
         r = np.linspace(0, s.v_max * s.dt, 120)[:, None]
         a = np.linspace(0, 2 * np.pi, 720, endpoint=False)[None, :]
         pts = s.uav_start_xy[0] + np.stack([r * np.cos(a), r * np.sin(a)], -1).reshape(-1, 2)
@@ -120,7 +123,7 @@ def _independent_violations(
         for j in range(i + 1, s.M):
             if np.linalg.norm(xy[i] - xy[j]) < s.d_safe - 1e-6:
                 bad.append("14i")
-    if np.any(np.linalg.norm(xy - inp.target_state_pred[:2], axis=1) < s.d_safe - 1e-6):
+    if np.any(np.linalg.norm(xy - inp.lead.state_pred[:2], axis=1) < s.d_safe - 1e-6):
         bad.append("14j")
     return bad
 
@@ -140,7 +143,9 @@ def test_ok_plans_satisfy_every_original_constraint(
     centre = rng.uniform(500, 2500, 2)
     prev = centre + rng.normal(0, spread, (s.M, 2))
     x_pred = np.array([*(centre + rng.normal(0, spread, 2)), *rng.normal(0, 20, 2)])
-    inp = SlotInput(prev, rng.dirichlet(np.ones(s.M)), None, x_pred, _prior(s))
+    inp = SlotInput(
+        prev, rng.dirichlet(np.ones(s.M)), None, (TargetBelief(x_pred, _prior(s), s.motion),)
+    )
     plan = plan_slot(inp, _kit(s), method)  # type: ignore[arg-type]
     if plan.report.status == "ok":
         assert (
@@ -161,7 +166,9 @@ def _kit(s: Scenario) -> SolverKit:
 def test_infeasible_rate_gives_communication_optimal_fallback_with_reason() -> None:
     s = parse_scenario({"radio": {"rate_min_bps": 150e6}})
     kit = SolverKit(s)
-    inp = SlotInput(s.uav_start_xy, np.full(3, 1 / 3), None, s.x0, _prior(s))
+    inp = SlotInput(
+        s.uav_start_xy, np.full(3, 1 / 3), None, (TargetBelief(s.x0, _prior(s), s.motion),)
+    )
     plan = plan_slot(inp, kit, "proposed")
     assert plan.report.status == "infeasible"
     assert "R_c*" in plan.report.reason and "R_th" in plan.report.reason
@@ -174,7 +181,10 @@ def test_proposed_objective_not_worse_than_benchmarks_on_the_same_slot(paper: Sc
     s = paper
     kit = _kit(s)
     inp = SlotInput(
-        s.uav_start_xy, np.full(3, 1 / 3), None, s.x0 + np.array([30.0, 0.0, 0.0, 0.0]), _prior(s)
+        s.uav_start_xy,
+        np.full(3, 1 / 3),
+        None,
+        (TargetBelief(s.x0 + np.array([30.0, 0.0, 0.0, 0.0]), _prior(s), s.motion),),
     )
     f = {m: plan_slot(inp, kit, m).pcrb_trace for m in ("proposed", "sd", "aba")}
     assert f["proposed"] <= min(f["sd"], f["aba"]) * (1 + 1e-9)
@@ -186,7 +196,10 @@ def test_target_closing_in_gives_evasive_fallback(paper: Scenario) -> None:
     s = paper
     target = s.uav_start_xy[0] + np.array([5.0, 0.0])
     inp = SlotInput(
-        s.uav_start_xy, np.full(3, 1 / 3), None, np.array([*target, -30.0, 0.0]), _prior(s)
+        s.uav_start_xy,
+        np.full(3, 1 / 3),
+        None,
+        (TargetBelief(np.array([*target, -30.0, 0.0]), _prior(s), s.motion),),
     )
     plan = plan_slot(inp, _kit(s), "proposed")
     assert plan.report.status == "infeasible"
@@ -205,8 +218,7 @@ def test_dynamics_aware_plan_stays_reachable_from_the_coasting_point(paper: Scen
         s.uav_start_xy,
         np.full(3, 1 / 3),
         None,
-        s.x0 + np.array([30.0, 0.0, 0.0, 0.0]),
-        _prior(s),
+        (TargetBelief(s.x0 + np.array([30.0, 0.0, 0.0, 0.0]), _prior(s), s.motion),),
         v,
     )
     plan = plan_slot(inp, SolverKit(s), "proposed")

@@ -100,17 +100,15 @@ def test_the_old_field_names_still_work_and_warn(paper: Scenario) -> None:
             prev_xy=new.prev_xy_m,
             prev_eta=new.prev_bandwidth_share,
             prev_assoc=None,
-            x_pred=new.target_state_pred,
-            J_pred=new.prior_information,
+            targets=new.targets,
         )
     assert "SlotInput.prev_xy is deprecated: use SlotInput.prev_xy_m" in {
         str(w.message) for w in caught
     }
-    assert len(caught) == 5
+    assert len(caught) == 3
     assert np.array_equal(old.prev_xy_m, new.prev_xy_m)
-    assert np.array_equal(old.prior_information, new.prior_information)
-    with pytest.warns(DeprecationWarning, match=r"SlotInput.J_pred is deprecated"):
-        assert old.J_pred is old.prior_information
+    with pytest.warns(DeprecationWarning, match=r"SlotInput.prev_eta is deprecated"):
+        assert old.prev_eta is old.prev_bandwidth_share
     with pytest.warns(DeprecationWarning, match="SlotInput.keep_out_xy is deprecated"):
         moved = dataclasses.replace(new, keep_out_xy=np.zeros((1, 2)))
     assert moved.keep_out_xy_m is not None and moved.keep_out_xy_m.shape == (1, 2)

@@ -47,7 +47,7 @@ def _slot_inputs(s: Scenario, seed: int = 3) -> tuple[SolverKit, list[SlotInput]
 
 
 def _constraints(s: Scenario, inp: SlotInput, assoc: np.ndarray) -> SlotConstraints:
-    return SlotConstraints(inp.prev_xy_m, s.bs_xy[assoc], s.bs_xy, inp.target_state_pred[:2], s)
+    return SlotConstraints(inp.prev_xy_m, s.bs_xy[assoc], s.bs_xy, inp.lead.state_pred[:2], s)
 
 
 def test_nlp_objective_gradient_and_hessian_match_finite_differences() -> None:
@@ -55,7 +55,7 @@ def test_nlp_objective_gradient_and_hessian_match_finite_differences() -> None:
     kit, inputs = _slot_inputs(s)
     inp = inputs[10]
     plan = plan_slot(inp, kit, "proposed-sca")
-    objective = PlanningObjective(inp.prior_information, inp.target_state_pred, kit.sensing)
+    objective = PlanningObjective(inp.lead.prior_information, inp.lead.state_pred, kit.sensing)
     cons = _constraints(s, inp, plan.bs_of_uav)
     nlp = polish_nlp(kit)
     x, p = nlp.pack(plan.uav_xy_m, plan.bandwidth_share, objective, cons)
@@ -94,7 +94,7 @@ def _grid_best_one(
 ) -> float:
     """The best feasible f over a grid of UAV m's disk, the others at plan_xy."""
     objective = PlanningObjective(
-        inp.prior_information, inp.target_state_pred, SolverKit(s).sensing
+        inp.lead.prior_information, inp.lead.state_pred, SolverKit(s).sensing
     )
     cons = _constraints(s, inp, np.asarray(_assoc(s, inp, plan_xy)))
     cands = _disk_grid(inp.prev_xy_m[m], s.v_max * s.dt, n)
@@ -128,7 +128,7 @@ def test_polished_plan_matches_the_grid_at_m2() -> None:
             best = _grid_best_one(s, inp, plan.uav_xy_m, plan.bandwidth_share, m, 300)
             assert plan.pcrb_trace <= best * (1 + 1e-5)
         # The share: a grid over eta_0 in (0, 1), positions fixed.
-        objective = PlanningObjective(inp.prior_information, inp.target_state_pred, kit.sensing)
+        objective = PlanningObjective(inp.lead.prior_information, inp.lead.state_pred, kit.sensing)
         cons = _constraints(s, inp, plan.bs_of_uav)
         e0 = np.linspace(1e-4, 1 - 1e-4, 4001)
         etas = np.stack([e0, 1 - e0], axis=1)

@@ -97,7 +97,7 @@ def test_slsqp_answers_are_feasible_and_a_failed_plan_is_a_miss(
     plan = plan_slot(inp, kit, "proposed")
     p = qb.exact_problem(s, inp, plan)
     objective = PlanningObjective(
-        inp.prior_information, inp.target_state_pred, SensingParams.from_scenario(s)
+        inp.lead.prior_information, inp.lead.state_pred, SensingParams.from_scenario(s)
     )
     start = qb.random_start(p, np.random.default_rng(1))
     assert start is not None

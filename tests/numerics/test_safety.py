@@ -198,9 +198,9 @@ def test_the_trackers_own_errors_meet_the_stated_level_along_the_planned_directi
         outcomes: list[SlotOutcome] = []
         run_closed_loop(s, "proposed", draw_run_noise(s, 100 + seed), kit, outcomes.append)
         for o in outcomes:
-            assert o.slot_input.target_cov_pred is not None
+            assert o.slot_input.lead.cov_pred is not None
             err = o.target_true[:2] - o.target_pred[:2]
-            sigma = slot_sigma_max_m(s, o.slot_input.target_cov_pred)
+            sigma = slot_sigma_max_m(s, o.slot_input.lead.cov_pred)
             away = o.plan.uav_xy_m - o.target_pred[:2]
             u = away / np.linalg.norm(away, axis=1, keepdims=True)
             z += list((u @ err) / sigma)

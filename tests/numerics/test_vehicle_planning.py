@@ -14,6 +14,7 @@ from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import VehicleModel, hermite_position
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import Bound, predict_information
 
 
@@ -36,8 +37,7 @@ def _input(s: Scenario, velocity: np.ndarray) -> SlotInput:
         s.uav_start_xy,
         np.full(s.M, 1 / s.M),
         None,
-        s.x0 + np.array([30.0, 0.0, 0.0, 0.0]),
-        prior,
+        (TargetBelief(s.x0 + np.array([30.0, 0.0, 0.0, 0.0]), prior, s.motion),),
         velocity,
     )
 

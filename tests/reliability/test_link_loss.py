@@ -17,10 +17,10 @@ import numpy as np
 
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.cli.embedded import run_embedded
-from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
 from isac_mission.records import read_trace
-from isac_mission.wire import Keys, decode_health
+from isac_mission.service.assembly import LiveOptions
+from isac_mission.wire import HealthMsg, Keys, decode
 from sim.autopilot.settings import AutopilotSettings
 from sim.vehicle import VehicleLimits
 from tests.support.independent.constraints import check_constraints
@@ -37,7 +37,7 @@ loop's residual (about 0.2 m seen), well under the metres a flying vehicle cover
 
 async def _collect_health(bus: ZenohBus, keys: Keys, seen: list[dict[int, str]]) -> None:
     async for _key, payload in bus.messages(keys.health):
-        seen.append(decode_health(payload).vehicles)
+        seen.append(decode(HealthMsg, payload).vehicles)
 
 
 async def test_vehicle_link_loss_mid_mission_is_planned_around_and_readmitted(

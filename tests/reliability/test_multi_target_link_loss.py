@@ -13,8 +13,8 @@ import numpy as np
 
 from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
-from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import load_scenario
+from isac_mission.service.assembly import LiveOptions
 from tests.support.live_cli import ROOT
 from tests.support.ports import free_port_block, sitl_ports
 

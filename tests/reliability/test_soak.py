@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 import yaml
 
-from isac_mission.cli.mission import summarize_live
 from isac_mission.config import load_scenario
 from isac_mission.service.bridge.setpoints import TIMESTAMPS_KEPT
-from isac_mission.wire import TelemetryMsg, TrackMsg, TruthMsg, decode_track, encode_track
+from isac_mission.service.mission_result import summarize_live
+from isac_mission.wire import TelemetryMsg, TrackMsg, TruthMsg, decode, encode
 from sim.target import ScriptedTarget
 from tests.support.soak import (
     LOOP_RADIUS_M,
@@ -112,14 +112,14 @@ async def test_long_live_mission_keeps_memory_flat(soak_slots: int, tmp_path: Pa
 
 
 def test_track_with_the_information_of_a_close_pass_is_published() -> None:
-    """Found by the soak (two 3600-slot runs ended at slots 1076 and 1082, when encode_track
+    """Found by the soak (two 3600-slot runs ended at slots 1076 and 1082, when the encoder
     refused its own message): the PCRB information of a slot with a UAV well inside D_s of the
     target (paper.yaml: radial-velocity variances of ~1e-9 m^2/s^2 at 10 m) exceeds 1e9, and the
     ground loop's track message must still go out (with paper-literal.yaml J is ~1e18 at any
     distance)."""
     J = np.diag([1.42e9, 1.42e9, 3e9, 3e9])
     msg = TrackMsg(1076, 1076.0, np.array([1500.0, 1600.0, 15.0, 0.0]), np.linalg.inv(J), J, 1e-9)
-    back = decode_track(encode_track(msg))
+    back = decode(TrackMsg, encode(msg))
     np.testing.assert_array_equal(back.J, J)
 
 

@@ -24,7 +24,7 @@ from isac_mission.records import read_trace
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.types import SlotPlan
-from isac_mission.wire import ControlMsg, Keys, decode_plan, encode_control
+from isac_mission.wire import ControlMsg, Keys, PlanMsg, decode, encode
 from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.ports import sitl_ports
@@ -71,7 +71,7 @@ async def test_solver_error_timeout_and_infeasible_slots_fall_back_and_recover(
             raised = restored = False
             async with bus.subscribe(keys.plan) as sub:
                 async for _k, payload in sub:
-                    msg = decode_plan(payload)
+                    msg = decode(PlanMsg, payload)
                     plans.append(msg.plan)
                     if msg.slot == SLOW_SLOT + 1:
                         faulty.release.set()
@@ -79,16 +79,14 @@ async def test_solver_error_timeout_and_infeasible_slots_fall_back_and_recover(
                         raised = True
                         bus.publish(
                             keys.control,
-                            encode_control(
-                                ControlMsg.set_params(8, 0.0, "raise", rate_min_mbps=5000.0)
-                            ),
+                            encode(ControlMsg.set_params(8, 0.0, "raise", rate_min_mbps=5000.0)),
                         )
                     if raised and not restored and msg.plan.report.status == "infeasible":
                         restored = True
                         infeasible_seen.set()
                         bus.publish(
                             keys.control,
-                            encode_control(
+                            encode(
                                 ControlMsg.set_params(msg.slot, 0.0, "restore", rate_min_mbps=10.0)
                             ),
                         )

@@ -3,8 +3,8 @@ telemetry sample closer than D_s to the true target (docs/model.md, "Safety").
 
 The target starts 900 m from UAV 0, flying at 30 m/s (faster than the UAVs) straight at it, and
 turns toward where the UAV would be (on the offline plan of the same mission) at up to a_T =
-`target.max_accel_mps2` all the way (tests/support/soak.py, `pursuit_path`); the world flies that
-path. The offline twin of this mission is asserted too, along the flown legs.
+`target_motion.max_accel_mps2` all the way (tests/support/soak.py, `pursuit_path`); the world
+flies that path. The offline twin of this mission is asserted too, along the flown legs.
 """
 
 from __future__ import annotations

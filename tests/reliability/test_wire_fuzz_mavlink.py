@@ -17,6 +17,7 @@ multicast scouting (BusSettings). The hypothesis runs are derandomized and bound
 from __future__ import annotations
 
 import asyncio
+import gc
 import socket
 from collections import Counter
 from collections.abc import AsyncIterator, Callable
@@ -37,10 +38,7 @@ from isac_mission.mavwire.signing import new_encoder, pack
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.timebase import FuncTime
-from isac_mission.wire import (
-    Keys,
-    decode_telemetry,
-)
+from isac_mission.wire import Keys, TelemetryMsg, decode
 from sim.autopilot.settings import AutopilotSettings
 from tests.support.fuzz import FUZZ, WAIT_S
 from tests.support.loop_calls import call_on_loop
@@ -111,10 +109,18 @@ async def mav_rig(free_tcp_port: int) -> AsyncIterator[MavRig]:
     fuzzer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     fuzzer.bind(("127.0.0.1", 0))
     fuzzer.setblocking(False)
+    # Hypothesis, the vehicle and the bridge share this process: a full collection of its heap
+    # (hypothesis set one off at its first example) stopped every thread for 60-150 ms, then the
+    # vehicle's clock caught up at 8x before the bridge's next setpoint: setpoint gaps of 0.5-0.9
+    # s of the vehicle's 1 s offboard-loss timeout, past it under load (the bridge takes that
+    # HOLD back: test_bridge_uplink_gap.py). Frozen, the heap of before the test is not scanned.
+    gc.collect()
+    gc.freeze()
     try:
         await bridge.start()
         yield MavRig(runner, bridge, hub, asyncio.get_running_loop(), fuzzer)
     finally:
+        gc.unfreeze()
         fuzzer.close()
         await bridge.stop()
         hub.close()
@@ -228,7 +234,7 @@ async def test_fuzz_on_the_vehicle_port_is_counted_and_the_vehicle_still_flies(
         t_ready = bridge.time.now_s()
         while True:
             _, payload = await telemetry.get(WAIT_S)
-            tel = decode_telemetry(payload)
+            tel = decode(TelemetryMsg, payload)
             if tel.t_s >= t_ready:
                 break
         assert tel.link == "ok" and tel.mode == "offboard"
@@ -289,7 +295,7 @@ async def test_fuzz_on_the_bridge_port_is_counted_and_does_not_hijack_the_link(
     assert vehicle.state.mode is FlightMode.OFFBOARD
     assert bridge.counters.setpoints_sent > sent_before
     async with rig.hub.subscribe(KEYS.telemetry(0)) as telemetry:
-        tel = decode_telemetry((await telemetry.get(WAIT_S))[1])
+        tel = decode(TelemetryMsg, (await telemetry.get(WAIT_S))[1])
     assert tel.link == "ok"
     np.testing.assert_allclose(tel.position_xy_m, goal, atol=2.0)
 

@@ -30,10 +30,10 @@ from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.wire import (
     ClockMsg,
-    decode_clock,
-    decode_detection,
-    decode_telemetry,
-    encode_clock,
+    DetectionMsg,
+    TelemetryMsg,
+    decode,
+    encode,
     rejection_reason,
 )
 from tests.support.fuzz import FUZZ, WAIT_S
@@ -112,7 +112,7 @@ def test_each_bad_payload_is_counted_under_its_reason_and_the_mission_still_flie
     assert big == ["payload too large"] * 3
 
     # Then a normal mission: clock, M detections per slot, all N slots complete.
-    world.publish(keys.clock, encode_clock(ClockMsg(0, 0.0, g.s.dt, 1.0, 0.0)))
+    world.publish(keys.clock, encode(ClockMsg(0, 0.0, g.s.dt, 1.0, 0.0)))
     for n in range(1, g.s.N + 1):
         for u in range(m):
             obj = valid_detection(slot=n, uav=u) | {"uav_xy_m": list(g.s.uav_start_xy[u])}
@@ -141,11 +141,11 @@ def test_an_oversized_payload_is_refused_before_it_is_parsed(
     envelope_module = importlib.import_module("isac_mission.wire.envelope")
     monkeypatch.setattr(envelope_module, "loads_strict", parser)
     with pytest.raises(MessageError) as info:
-        decode_detection(body)
+        decode(DetectionMsg, body)
     assert rejection_reason(info.value) == "payload too large"
     assert parsed == []
     # The same parser sees a payload under the limit (the check above can fail).
-    decode_detection(json.dumps(valid_detection()).encode())
+    decode(DetectionMsg, json.dumps(valid_detection()).encode())
     assert parsed
 
 
@@ -197,9 +197,9 @@ def test_mutated_payloads_are_each_counted_or_used_and_never_crash_the_loop(
     keys, m = g.keys, g.s.M
     expected = _rejected(g.counters)
     decoders: dict[str, Callable[[bytes], object]] = {
-        "detections": lambda p: decode_detection(p, n_uavs=m),
-        "telemetry": lambda p: decode_telemetry(p, n_uavs=m),
-        "clock": decode_clock,
+        "detections": lambda p: decode(DetectionMsg, p, n_uavs=m),
+        "telemetry": lambda p: decode(TelemetryMsg, p, n_uavs=m),
+        "clock": lambda p: decode(ClockMsg, p),
     }
     seen: Counter[str] = Counter()
 

@@ -23,7 +23,7 @@ from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.timebase import SlotTimeline, reached
-from isac_mission.wire import ClockMsg, Keys, TelemetryMsg, decode_telemetry, encode_clock
+from isac_mission.wire import ClockMsg, Keys, TelemetryMsg, decode, encode
 from sim.autopilot.endpoint import Autopilot
 from sim.autopilot.settings import AutopilotSettings
 from tests.support.ports import free_udp_ports
@@ -59,7 +59,7 @@ class ClockPublisher:
         slot = -1 if t0 is None or now_s < t0 else SlotTimeline(t0, self.slot_s).slot_of(now_s)
         msg = ClockMsg(slot=slot, t_s=now_s, slot_s=self.slot_s, speed=self.speed, mission_t0_s=t0)
         with contextlib.suppress(RuntimeError):  # the bus closed meanwhile
-            self.bus.publish(KEYS.clock, encode_clock(msg))
+            self.bus.publish(KEYS.clock, encode(msg))
 
 
 @dataclass
@@ -171,7 +171,7 @@ async def next_telemetry(
     deadline = time.monotonic() + TIMEOUT_S
     while True:
         _, payload = await sub.get(max(0.01, deadline - time.monotonic()))
-        msg = decode_telemetry(payload)
+        msg = decode(TelemetryMsg, payload)
         if condition(msg):
             return msg
 

@@ -21,8 +21,8 @@ import numpy as np
 
 from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
-from isac_mission.cli.mission import LiveOptions
 from isac_mission.config import Scenario
+from isac_mission.service.assembly import LiveOptions
 from isac_mission.service.ground.report import SlotEvent
 from tests.support.ports import free_port_block, sitl_ports
 

@@ -35,11 +35,8 @@ from isac_mission.wire import (
     Keys,
     PlanMsg,
     TrackMsg,
-    decode_health,
-    decode_plan,
-    decode_track,
-    encode_clock,
-    encode_detection,
+    decode,
+    encode,
 )
 from tests.support.sim_harness import async_wait_until
 
@@ -62,7 +59,7 @@ class GroundRig:
     health: list[HealthMsg] = field(default_factory=list)
 
     def publish_detection(self, msg: DetectionMsg) -> None:
-        self.world.publish(self.keys.detections(msg.uav), encode_detection(msg))
+        self.world.publish(self.keys.detections(msg.uav), encode(msg))
 
     def publish_raw(self, uav: int, payload: bytes) -> None:
         self.world.publish(self.keys.detections(uav), payload)
@@ -70,7 +67,7 @@ class GroundRig:
     def publish_clock(self, t_s: float) -> None:
         slot = int(np.floor(t_s / self.s.dt + 1e-9))
         msg = ClockMsg(slot=slot, t_s=t_s, slot_s=self.s.dt, speed=1.0, mission_t0_s=0.0)
-        self.world.publish(self.keys.clock, encode_clock(msg))
+        self.world.publish(self.keys.clock, encode(msg))
 
     async def start_mission(self) -> PlanMsg:
         """Announce mission start (t0 = 0) until plan 1 arrives, as the world's 10 Hz clock
@@ -102,13 +99,13 @@ async def collect(rig: GroundRig) -> None:
         async for key, payload in sub:
             kind = key.rsplit("/", 1)[-1]
             if kind == "plan":
-                p = decode_plan(payload)
+                p = decode(PlanMsg, payload)
                 rig.plans[p.slot] = p
             elif kind == "track":
-                t = decode_track(payload)
+                t = decode(TrackMsg, payload)
                 rig.tracks[t.slot] = t
             elif kind == "health":
-                rig.health.append(decode_health(payload))
+                rig.health.append(decode(HealthMsg, payload))
 
 
 @contextlib.asynccontextmanager
@@ -203,7 +200,7 @@ def detections(
 
 def payload_with(msg: DetectionMsg, **fields: object) -> bytes:
     """msg's payload with some fields replaced, NaN written as the bare token (not valid JSON)."""
-    obj = json.loads(encode_detection(msg)) | fields
+    obj = json.loads(encode(msg)) | fields
     return json.dumps(obj, allow_nan=True).encode()
 
 

@@ -28,9 +28,10 @@ from pathlib import Path
 from typing import Any
 
 from isac_mission.bus import BusSettings, tcp_loopback
-from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve, summarize_live
 from isac_mission.config import ImpairmentConfig, Scenario
 from isac_mission.records import read_trace
+from isac_mission.service.assembly import LiveOptions, run_serve
+from isac_mission.service.mission_result import LiveResult, summarize_live
 from sim.world import World
 from sim.world_options import WorldOptions
 from tests.support.ports import free_port_block, sitl_ports

@@ -24,7 +24,7 @@ from isac_mission.wire import (
     PlanMsg,
     TelemetryMsg,
     decode_any,
-    encode_control,
+    encode,
 )
 
 
@@ -130,4 +130,4 @@ class MissionWatch:
         plan = self.last_plan()
         slot = -1 if plan is None else plan.slot
         msg = ControlMsg(slot, self.t_s, request_id, command, uav, dict(params))
-        return await self.send_raw(encode_control(msg), request_id, timeout_s)
+        return await self.send_raw(encode(msg), request_id, timeout_s)

@@ -10,8 +10,8 @@ per-quarter medians and the first-vs-last-quarter ratios the soak test asserts o
 Target: by default a scripted loop, a circle of radius 450 m around (1500, 1600) m flown at
 15 m/s (a lap of about 188 s), clockwise from its west point (1050, 1600) m heading north: it
 turns at 15² / 450 = 0.5 m/s² all the time, within the scenario's manoeuvre bound
-(`target.max_accel_mps2`, 2 m/s²), so that the four quarters of a long run are statistically the
-same mission, and slower than the UAVs, which must keep D_s from it. The circle is flown as a
+(`target_motion.max_accel_mps2`, 2 m/s²), so that the four quarters of a long run are
+statistically the same mission, and slower than the UAVs, which must keep D_s from it. The circle is flown as a
 360-gon (sides 7.9 m, 0.02 m inside the circle), whose corners step the velocity by 0.26 m/s
 twice a slot. An earlier loop, a 24-gon of radius 900 m, stepped it by 3.9 m/s at each corner,
 an acceleration beyond any bound, and most of its infeasible slots came right after a corner
@@ -43,14 +43,15 @@ from typing import Literal
 import numpy as np
 
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
-from isac_mission.cli.mission import LiveOptions, LiveResult, run_serve
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.planning.registry import live_default_method
 from isac_mission.planning.slot import Method
+from isac_mission.service.assembly import LiveOptions, run_serve
 from isac_mission.service.ground.report import SlotEvent
+from isac_mission.service.mission_result import LiveResult
 from isac_mission.types import FloatArray
-from isac_mission.wire import Keys, decode_telemetry, decode_truth
+from isac_mission.wire import Keys, TelemetryMsg, TruthMsg, decode
 from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.ports import free_port_block, sitl_ports
@@ -291,9 +292,9 @@ async def _observe(
             async for key, payload in sub:
                 try:
                     if key.startswith(telemetry):
-                        counter.on_telemetry(decode_telemetry(payload, n_uavs=s.M))
+                        counter.on_telemetry(decode(TelemetryMsg, payload, n_uavs=s.M))
                     elif key == truth:
-                        counter.on_truth(decode_truth(payload))
+                        counter.on_truth(decode(TruthMsg, payload))
                 except MessageError:
                     continue
 

@@ -30,16 +30,7 @@ from isac_mission.config import Scenario
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.report import GroundReport
 from isac_mission.service.ground.settings import GroundSettings
-from isac_mission.wire import (
-    MAX_PAYLOAD_BYTES,
-    ClockMsg,
-    DetectionMsg,
-    Keys,
-    TelemetryMsg,
-    encode_clock,
-    encode_detection,
-    encode_telemetry,
-)
+from isac_mission.wire import MAX_PAYLOAD_BYTES, ClockMsg, DetectionMsg, Keys, TelemetryMsg, encode
 from tests.support.loop_calls import call_on_loop
 
 T = TypeVar("T")
@@ -58,7 +49,7 @@ class BadPayload(NamedTuple):
 def valid_detection(slot: int = 1, uav: int = 0) -> dict[str, Any]:
     """A valid detection payload as a dict."""
     msg = DetectionMsg(slot, 1.0, uav, 812.5, -3.25, np.array([100.0, 200.0]), 0.25)
-    return dict(json.loads(encode_detection(msg)))
+    return dict(json.loads(encode(msg)))
 
 
 def valid_telemetry(uav: int = 0) -> dict[str, Any]:
@@ -66,12 +57,12 @@ def valid_telemetry(uav: int = 0) -> dict[str, Any]:
     msg = TelemetryMsg(
         -1, 1.0, uav, np.array([10.0, 20.0]), 30.0, np.array([1.0, 0.0]), "hold", True, False, "ok"
     )
-    return dict(json.loads(encode_telemetry(msg)))
+    return dict(json.loads(encode(msg)))
 
 
 def valid_clock() -> dict[str, Any]:
     """A valid clock payload as a dict (before the mission: slot -1, no t0)."""
-    return dict(json.loads(encode_clock(ClockMsg(-1, 1.0, 1.0, 1.0, None))))
+    return dict(json.loads(encode(ClockMsg(-1, 1.0, 1.0, 1.0, None))))
 
 
 def _raw(obj: Any) -> bytes:

@@ -168,3 +168,18 @@ def test_a_ground_station_taking_a_vehicle_held_on_control_is_an_override() -> N
     assert rig.see(status("hold", 20.5)) == "control: hold"  # the hold asked for
     assert rig.see(status("rtl", 21.0)) == "operator: RTL"  # then MAVProxy's RTL
     assert rig.counters.overrides == 2
+
+
+def test_the_vehicles_word_on_the_offboard_loss_brings_a_reentry() -> None:
+    """ "Offboard lost: HOLD" with no gap the bridge saw (a one-way gap): the hold is taken back
+    to OFFBOARD (it used to be no override for the text's 10 s, then "operator: HOLD")."""
+    rig = Rig()
+    flying(rig, 20.0)
+    rig.now = 20.0
+    rig.keeper.on_statustext(SimpleNamespace(text=b"Offboard lost: HOLD\x00\x00"))
+    held = status("hold", 20.1)
+    rig.now = 20.1
+    assert rig.watch.observe(held, 20.1, True, True)  # supervision asks for the re-entry
+    assert rig.keeper.after_gap(held, 20.1)  # the loss hold: re-enter
+    assert rig.keeper.reason == "" and rig.counters.overrides == 0
+    assert rig.counters.link_interruptions == 1

@@ -26,13 +26,7 @@ from isac_mission.wire import (
     TrackSetMsg,
     TruthMsg,
     TruthSetMsg,
-    encode_detection,
-    encode_detection_set,
-    encode_telemetry,
-    encode_track,
-    encode_track_set,
-    encode_truth,
-    encode_truth_set,
+    encode,
 )
 
 
@@ -134,7 +128,7 @@ def test_the_view_folds_telemetry_and_tracks_into_updates_and_series() -> None:
         "ok",
         published_wall_s=999.5,
     )
-    updates = view.ingest("isac/paper/telemetry/1", encode_telemetry(tel))
+    updates = view.ingest("isac/paper/telemetry/1", encode(tel))
     assert [t for t, _ in updates] == ["telemetry/1"]
     data = updates[0][1]
     assert data["position_xy_m"] == [10.0, 20.0] and data["published_wall_s"] == 999.5
@@ -142,7 +136,7 @@ def test_the_view_folds_telemetry_and_tracks_into_updates_and_series() -> None:
     P = np.diag([4.0, 1.0, 0.1, 0.1])
     J = np.diag([2.0, 4.0, 10.0, 20.0])
     track = TrackMsg(5, 5.0, np.array([1.0, 2.0, 0.0, 0.0]), P, J, 0.9)
-    topics = dict(view.ingest("isac/paper/track", encode_track(track)))
+    topics = dict(view.ingest("isac/paper/track", encode(track)))
     assert topics["track"]["ellipse"] == pytest.approx({"a_m": 4.0, "b_m": 2.0, "angle_rad": 0.0})
     assert topics["series"] == pytest.approx(
         {"slot": 5, "pcrb_trace": 0.9, "pcrb_pos": 0.75, "pcrb_vel": 0.15}
@@ -154,7 +148,7 @@ def test_the_view_folds_telemetry_and_tracks_into_updates_and_series() -> None:
 
 def test_the_view_counts_bad_payloads_and_changes_nothing() -> None:
     view = _view()
-    good = encode_telemetry(
+    good = encode(
         TelemetryMsg(1, 1.0, 0, np.zeros(2), 100.0, np.zeros(2), "offboard", True, False, "ok")
     )
     bad_uav = good.replace(b'"uav":0', b'"uav":7')
@@ -194,12 +188,12 @@ TRACKS = (  # id, confirmed, x
 
 
 def _truth_set(slot: int) -> bytes:
-    return encode_truth_set(TruthSetMsg(slot, float(slot), TRUTHS, ((0, -1), (), (2,))))
+    return encode(TruthSetMsg(slot, float(slot), TRUTHS, ((0, -1), (), (2,))))
 
 
 def _track_set(slot: int) -> bytes:
     entries = tuple(TrackEntry(i, c, np.array(x), P_TRACK, 0.25 * i) for i, c, x in TRACKS)
-    return encode_track_set(TrackSetMsg(slot, float(slot), entries, published_wall_s=999.0))
+    return encode(TrackSetMsg(slot, float(slot), entries, published_wall_s=999.0))
 
 
 def _expected_errors() -> list[dict[str, Any]]:
@@ -269,12 +263,10 @@ def test_without_a_confirmed_track_each_present_target_has_no_error() -> None:
     view = _view()
     view.ingest("isac/paper/truth", _truth_set(2))
     tentative = TrackEntry(4, False, np.array([100.0, 200.0, 0.0, 0.0]), P_TRACK, 1.0)
-    ((topic, data),) = view.ingest(
-        "isac/paper/track", encode_track_set(TrackSetMsg(2, 2.0, (tentative,)))
-    )
+    ((topic, data),) = view.ingest("isac/paper/track", encode(TrackSetMsg(2, 2.0, (tentative,))))
     assert topic == "tracks" and data["published_wall_s"] is None
     assert data["target_errors"] == [{"index": 0, "error_m": None}, {"index": 2, "error_m": None}]
-    ((_, empty),) = view.ingest("isac/paper/track", encode_track_set(TrackSetMsg(3, 3.0, ())))
+    ((_, empty),) = view.ingest("isac/paper/track", encode(TrackSetMsg(3, 3.0, ())))
     assert empty["tracks"] == [] and "target_errors" not in empty
 
 
@@ -282,7 +274,7 @@ def test_a_detection_set_is_taken_as_a_detection_is() -> None:
     view = _view()
     for m, k in ((0, 3), (2, 0)):  # a UAV that detected nothing still reports
         msg = DetectionSetMsg(8, 8.0, m, np.full((k, 2), 50.0), np.zeros(2), 1 / 3)
-        assert view.ingest(f"isac/paper/detections/{m}", encode_detection_set(msg)) == []
+        assert view.ingest(f"isac/paper/detections/{m}", encode(msg)) == []
     assert view.received == {"detection_set": 2}
     assert view.detection_wall_s == {8: 1000.0}
     assert view.latest == {}
@@ -292,9 +284,9 @@ def test_bad_multi_target_payloads_are_counted_and_change_nothing() -> None:
     view = _view()
     twice = json.loads(_track_set(6))
     twice["tracks"][2]["id"] = 3
-    bad_uav = encode_detection_set(
-        DetectionSetMsg(8, 8.0, 0, np.zeros((0, 2)), np.zeros(2), 0.5)
-    ).replace(b'"uav":0', b'"uav":3')
+    bad_uav = encode(DetectionSetMsg(8, 8.0, 0, np.zeros((0, 2)), np.zeros(2), 0.5)).replace(
+        b'"uav":0', b'"uav":3'
+    )
     no_targets = json.loads(_truth_set(6))
     del no_targets["targets"]
     for key, payload in (
@@ -316,14 +308,12 @@ def test_bad_multi_target_payloads_are_counted_and_change_nothing() -> None:
 def test_a_single_target_mission_gives_the_updates_it_always_gave() -> None:
     view = _view()
     det = DetectionMsg(6, 6.0, 0, 120.0, 1.5, np.zeros(2), 1 / 3)
-    assert view.ingest("isac/paper/detections/0", encode_detection(det)) == []
+    assert view.ingest("isac/paper/detections/0", encode(det)) == []
     truth = TruthMsg(6, 6.0, np.array([100.0, 200.0, 1.0, 0.0]))
-    assert view.ingest("isac/paper/truth", encode_truth(truth)) == [
-        ("truth", json.loads(encode_truth(truth)))
-    ]
+    assert view.ingest("isac/paper/truth", encode(truth)) == [("truth", json.loads(encode(truth)))]
     J = np.diag([2.0, 4.0, 10.0, 20.0])
     track = TrackMsg(6, 6.0, np.array([103.0, 204.0, 1.0, 0.0]), P_TRACK, J, 0.9)
-    updates = view.ingest("isac/paper/track", encode_track(track))
+    updates = view.ingest("isac/paper/track", encode(track))
     assert [t for t, _ in updates] == ["track", "series"]
     assert updates[1][1] == pytest.approx(
         {"slot": 6, "pcrb_trace": 0.9, "pcrb_pos": 0.75, "pcrb_vel": 0.15, "error_m": 5.0}

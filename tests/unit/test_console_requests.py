@@ -16,7 +16,7 @@ from isac_mission.console.requests import (
 )
 from isac_mission.console.server import parse_address
 from isac_mission.errors import ConfigError
-from isac_mission.wire import decode_control
+from isac_mission.wire import ControlMsg, decode
 
 
 @pytest.mark.parametrize(
@@ -63,7 +63,7 @@ def test_a_good_set_request_becomes_a_control_message_the_ground_loop_accepts() 
     assert rid == "abc"
     obj = json.loads(payload)
     assert obj["id"] == "abc" and obj["command"] == "set" and obj["slot"] == 7
-    assert decode_control(payload).params == {"rate_min_mbps": 20.0}
+    assert decode(ControlMsg, payload).params == {"rate_min_mbps": 20.0}
 
 
 def test_login_needs_a_password() -> None:

@@ -14,28 +14,18 @@ import pytest
 
 from isac_mission.config import load_scenario
 from isac_mission.console.state import DEFAULT_FOLLOW_GATE_M, TRACK_ROWS_SENT, MissionView
-from isac_mission.wire import (
-    TrackEntry,
-    TrackMsg,
-    TrackSetMsg,
-    TruthMsg,
-    TruthSetMsg,
-    encode_track,
-    encode_track_set,
-    encode_truth,
-    encode_truth_set,
-)
+from isac_mission.wire import TrackEntry, TrackMsg, TrackSetMsg, TruthMsg, TruthSetMsg, encode
 
 P = np.diag([4.0, 1.0, 0.1, 0.1])
 J = np.diag([2.0, 4.0, 10.0, 20.0])
 
 
 def _truth(slot: int, x_m: float) -> bytes:
-    return encode_truth(TruthMsg(slot, float(slot), np.array([x_m, 200.0, 30.0, 0.0])))
+    return encode(TruthMsg(slot, float(slot), np.array([x_m, 200.0, 30.0, 0.0])))
 
 
 def _track(slot: int, x_m: float) -> bytes:
-    return encode_track(TrackMsg(slot, float(slot), np.array([x_m, 200.0, 30.0, 0.0]), P, J, 0.9))
+    return encode(TrackMsg(slot, float(slot), np.array([x_m, 200.0, 30.0, 0.0]), P, J, 0.9))
 
 
 def test_a_track_carries_the_truth_of_its_own_slot_not_the_latest() -> None:
@@ -72,12 +62,12 @@ def _multi_view() -> MissionView:
 
 
 def _truth_set(slot: int) -> bytes:
-    return encode_truth_set(TruthSetMsg(slot, float(slot), TARGETS))
+    return encode(TruthSetMsg(slot, float(slot), TARGETS))
 
 
 def _track_set(slot: int) -> bytes:
     entries = tuple(TrackEntry(i, c, np.array(x), P, 0.1 * i + slot) for i, c, x in TRACKS)
-    return encode_track_set(TrackSetMsg(slot, float(slot), entries))
+    return encode(TrackSetMsg(slot, float(slot), entries))
 
 
 def _by_id(data: dict[str, Any]) -> dict[int, dict[str, Any]]:

@@ -8,7 +8,7 @@ import numpy as np
 
 from isac_mission.config import parse_scenario
 from isac_mission.types import SlotPlan, SolveReport
-from isac_mission.wire import Keys, PlanMsg, decode_detection, encode_plan
+from isac_mission.wire import DetectionMsg, Keys, PlanMsg, decode, encode
 from sim.emulator import SensingEmulator
 from sim.sensing import SensingModel, Sensor
 
@@ -30,7 +30,7 @@ def _plan(slot: int, shares: list[float]) -> bytes:
         pcrb_trace=1.0,
         report=SolveReport(status="ok"),
     )
-    return encode_plan(PlanMsg(slot=slot, t_s=0.0, plan=plan))
+    return encode(PlanMsg.from_plan(slot, 0.0, plan))
 
 
 def _emulator() -> tuple[SensingEmulator, FakeBus]:
@@ -48,7 +48,7 @@ def test_equal_shares_until_a_plan_then_the_latest_plan_not_after_the_slot() -> 
     assert len(bus.sent) == 3
     keys = [k for k, _ in bus.sent]
     assert keys == ["isac/t/detections/0", "isac/t/detections/1", "isac/t/detections/2"]
-    assert [decode_detection(p).bandwidth_share for _, p in bus.sent] == [1 / 3] * 3
+    assert [decode(DetectionMsg, p).bandwidth_share for _, p in bus.sent] == [1 / 3] * 3
     em.on_plan_payload(_plan(1, [0.5, 0.3, 0.2]))
     em.on_plan_payload(_plan(3, [0.2, 0.2, 0.6]))  # for a later slot: not used before it
     np.testing.assert_array_equal(em.shares_for(1), [0.5, 0.3, 0.2])
@@ -56,7 +56,7 @@ def test_equal_shares_until_a_plan_then_the_latest_plan_not_after_the_slot() -> 
     np.testing.assert_array_equal(em.shares_for(3), [0.2, 0.2, 0.6])
     bus.sent.clear()
     em.emit(2, 2.0, target, uav_xy)
-    assert [decode_detection(p).bandwidth_share for _, p in bus.sent] == [0.5, 0.3, 0.2]
+    assert [decode(DetectionMsg, p).bandwidth_share for _, p in bus.sent] == [0.5, 0.3, 0.2]
     assert em.detections_published == 6 and em.plans_received == 2
 
 

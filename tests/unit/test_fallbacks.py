@@ -16,7 +16,7 @@ from isac_mission.planning.fleet import KitCache, PlanningJob
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.records import SlotRecord, read_trace
 from isac_mission.service.ground.report import MissionTotals
-from isac_mission.types import Gaussian
+from isac_mission.tracking.beliefs import TargetBelief
 
 
 def unreachable_rate(s: Scenario) -> Scenario:
@@ -49,10 +49,8 @@ def slot_input(s: Scenario) -> SlotInput:
         prev_xy_m=s.uav_start_xy,
         prev_bandwidth_share=np.full(s.M, 1.0 / s.M),
         prev_bs_of_uav=None,
-        target_state_pred=s.x0,
-        prior_information=np.asarray(np.linalg.inv(s.P0), dtype=float),
+        targets=(TargetBelief(s.x0, np.asarray(np.linalg.inv(s.P0), dtype=float), s.motion, s.P0),),
         prev_velocity_mps=np.zeros((s.M, 2)),
-        target_cov_pred=s.P0,
     )
 
 
@@ -81,8 +79,7 @@ def planning_job(s: Scenario) -> PlanningJob:
         uav_v=None,
         prev_eta=np.full(s.M, 1.0 / s.M),
         prev_assoc=None,
-        prediction=Gaussian(s.x0, s.P0),
-        J_pred=np.asarray(np.linalg.inv(s.P0), dtype=float),
+        targets=(TargetBelief(s.x0, np.asarray(np.linalg.inv(s.P0), dtype=float), s.motion, s.P0),),
     )
 
 
@@ -142,7 +139,7 @@ def test_an_operator_hold_of_every_vehicle_is_a_hold_not_a_failure(paper: Scenar
     """Every vehicle held by an operator: status `operator hold`, no fallback, and nobody
     served (share 0, no BS), as the operator's reply says; the plan message carries it. A
     vehicle out for another reason (a lost link) makes it `no vehicles`, a fallback."""
-    from isac_mission.wire import PlanMsg, decode_plan, encode_plan
+    from isac_mission.wire import PlanMsg, decode, encode
 
     s = paper
     job = dataclasses.replace(
@@ -156,7 +153,7 @@ def test_an_operator_hold_of_every_vehicle_is_a_hold_not_a_failure(paper: Scenar
     assert plan.report.status == "operator hold" and plan.report.fallback == ""
     np.testing.assert_array_equal(plan.bandwidth_share, np.zeros(s.M))
     np.testing.assert_array_equal(plan.bs_of_uav, np.full(s.M, -1))
-    sent = decode_plan(encode_plan(PlanMsg(4, 10.0, plan)), n_uavs=s.M)
+    sent = decode(PlanMsg, encode(PlanMsg.from_plan(4, 10.0, plan)), n_uavs=s.M)
     np.testing.assert_array_equal(sent.plan.bandwidth_share, np.zeros(s.M))
     lost = dataclasses.replace(job, operator_held=tuple(range(s.M - 1))).run()
     assert lost.report.status == "no vehicles" and lost.report.fallback == "no vehicles"

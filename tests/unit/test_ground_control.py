@@ -14,11 +14,12 @@ from isac_mission.service.ground.report import GroundReport
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.wire import (
     ControlMsg,
+    ControlReplyMsg,
+    FleetMsg,
     Keys,
     TelemetryMsg,
-    decode_control_reply,
-    decode_fleet,
-    encode_control,
+    decode,
+    encode,
 )
 
 KEYS = Keys("paper")
@@ -73,11 +74,11 @@ def desk(paper: Scenario) -> tuple[ControlDesk, Bus, VehicleWatch, State]:
 
 def ask(d: ControlDesk, bus: Bus, rid: str, command: str, uav: int | None = None) -> Any:
     bus.sent.clear()
-    reply = d.on_request(encode_control(ControlMsg(4, 40.0, rid, command, uav)))
+    reply = d.on_request(encode(ControlMsg(4, 40.0, rid, command, uav)))
     keys = [k for k, _ in bus.sent]
     assert keys[-1] == KEYS.control_reply
-    assert decode_control_reply(bus.sent[-1][1]) == reply
-    fleet = [decode_fleet(p) for k, p in bus.sent if k == KEYS.fleet]
+    assert decode(ControlReplyMsg, bus.sent[-1][1]) == reply
+    fleet = [decode(FleetMsg, p) for k, p in bus.sent if k == KEYS.fleet]
     return reply, fleet
 
 
@@ -131,7 +132,7 @@ def test_an_overridden_vehicle_is_released_not_held_or_resumed(paper: Scenario) 
 
 def test_set_and_malformed_requests(paper: Scenario) -> None:
     d, bus, watch, state = desk(paper)
-    reply = d.on_request(encode_control(ControlMsg.set_params(4, 40.0, "s1", rate_min_mbps=8.0)))
+    reply = d.on_request(encode(ControlMsg.set_params(4, 40.0, "s1", rate_min_mbps=8.0)))
     assert reply.accepted and reply.effect == "R_th = 8 Mbit/s from slot 6 on"
     assert state.scenario.r_th == 8e6 * 1.05
     bus.sent.clear()

@@ -75,8 +75,8 @@ def test_the_planner_gets_the_predicted_covariance_and_last_slots_plan(paper: Sc
     rec, plans, beliefs_P = _fly(paper, [(), (), ()])
     F, W = transition_matrix(paper.dt), process_noise(paper.dt, paper.kappa)
     for n, inp in enumerate(rec.inputs):
-        assert inp.target_cov_pred is not None
-        np.testing.assert_allclose(inp.target_cov_pred, F @ beliefs_P[n] @ F.T + W, rtol=1e-12)
+        assert inp.lead.cov_pred is not None
+        np.testing.assert_allclose(inp.lead.cov_pred, F @ beliefs_P[n] @ F.T + W, rtol=1e-12)
     assert rec.inputs[0].prev_plan is None  # slot 1 has no previous plan
     for n in (1, 2):
         prev = rec.inputs[n].prev_plan

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from isac_mission.cli.mission import LiveResult, summarize_live
 from isac_mission.records import SlotRecord
 from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport
+from isac_mission.service.mission_result import LiveResult, summarize_live
 
 
 def _record(n: int, rng: np.random.Generator) -> SlotRecord:

@@ -2,7 +2,8 @@
 
 Pure math never imports I/O; each I/O library has exactly one adapter package; `sim/` and the
 service are peers on the neutral layer and import neither each other nor the command line
-(the embedded entry alone imports `sim`); no module holds two jobs' worth of lines.
+(the embedded entry alone imports `sim`; the command line calls the service's assembly, never
+the other way round); no module holds two jobs' worth of lines.
 
 Imports are parsed from the source (ast), so a lazy import inside a function counts too, and
 relative imports are resolved against the module's package. Each rule is a function of the
@@ -187,6 +188,17 @@ def sim_violations(root: Path) -> list[str]:
     return out
 
 
+def service_violations(root: Path) -> list[str]:
+    """Modules of the service that import the command line (the command line parses options,
+    prints, and calls the service's assembly: the service takes what it needs as ports)."""
+    out = []
+    for path in python_files(root, ["isac_mission/service"]):
+        bad = sorted(m for m in imported_modules(path, root) if within(m, CLI))
+        if bad:
+            out.append(f"{_rel(path, root)}: imports {', '.join(bad)}")
+    return out
+
+
 def sim_importer_violations(root: Path) -> list[str]:
     """Modules of isac_mission that import `sim`: only the embedded entry may (it runs the
     world, alone for `isac-mission sim` or beside the service for `run`)."""
@@ -254,6 +266,11 @@ def test_each_io_library_has_one_adapter(library: str, adapter: str) -> None:
 
 def test_sim_imports_neither_the_service_nor_the_cli() -> None:
     assert sim_violations(ROOT) == []
+
+
+def test_the_service_imports_no_cli() -> None:
+    assert (ROOT / "isac_mission/service").is_dir()
+    assert service_violations(ROOT) == []
 
 
 def test_only_the_embedded_entry_imports_sim() -> None:
@@ -336,6 +353,7 @@ def test_each_rule_reports_a_violation(tmp_path: Path) -> None:
             "isac_mission/cli/live.py": "import sim.world\nfrom isac_mission.service import x\n",
             "isac_mission/records/writer.py": "from isac_mission.experiment import plots\n",
             "isac_mission/tracking/cycle.py": "def f():\n    from isac_mission.service import g\n",
+            "isac_mission/service/bridge/fleet.py": "def f():\n    from ...cli import stopping\n",
         },
     )
     assert pure_io_violations(root) == ["isac_mission/planning/slot.py: imports socket"]
@@ -354,6 +372,9 @@ def test_each_rule_reports_a_violation(tmp_path: Path) -> None:
     assert [v.split(":")[0] for v in neutral_violations(root)] == [
         "isac_mission/records/writer.py",
         "isac_mission/tracking/cycle.py",
+    ]
+    assert service_violations(root) == [
+        "isac_mission/service/bridge/fleet.py: imports isac_mission.cli, isac_mission.cli.stopping"
     ]
 
 
@@ -374,3 +395,4 @@ def test_a_clean_tree_has_no_violations(tmp_path: Path) -> None:
     assert sim_violations(root) == []
     assert sim_importer_violations(root) == []
     assert neutral_violations(root) == []
+    assert service_violations(root) == []

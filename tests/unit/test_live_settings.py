@@ -9,10 +9,10 @@ import pytest
 from typer.testing import CliRunner
 
 from isac_mission.cli import app
-from isac_mission.cli.mission import LiveOptions, planning_scenario
 from isac_mission.config import Scenario
 from isac_mission.config.live_settings import LIVE_SETTINGS, LiveSettings
 from isac_mission.records import read_trace
+from isac_mission.service.assembly import LiveOptions, planning_scenario
 
 
 def test_live_settings_plan_with_the_live_margins(paper: Scenario) -> None:

@@ -72,7 +72,7 @@ def test_one_known_plain_target_under_targets_is_the_single_target_path() -> Non
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        (lambda d: d["target"].update(initial_state=[1, 2, 3, 4]), "not both"),
+        (lambda d: d.update(target={"initial_state": [1, 2, 3, 4]}), "under targets: only"),
         (lambda d: d["targets"][2].pop("turn_rate_radps"), "needs turn_rate_radps"),
         (lambda d: d["targets"][0].update(turn_rate_radps=0.1), "is for motion coordinated_turn"),
         (lambda d: d["targets"][0].update(motion="waypoints"), "needs waypoints_xy_m"),

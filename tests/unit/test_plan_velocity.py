@@ -20,7 +20,7 @@ from isac_mission.service.bridge.setpoints import SetpointStream
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.timebase import FuncTime
 from isac_mission.types import SlotPlan, SolveReport
-from isac_mission.wire import PlanMsg, decode_plan, encode_plan
+from isac_mission.wire import PlanMsg, decode, encode
 
 V = np.array([[12.5, -3.0], [0.0, 0.0], [-20.0, 7.25]])
 
@@ -34,7 +34,7 @@ def _plan(velocity: np.ndarray | None) -> PlanMsg:
         report=SolveReport("ok", "", solve_s=0.01),
         uav_velocity_mps=velocity,
     )
-    return PlanMsg(slot=4, t_s=3.0, plan=plan)
+    return PlanMsg.from_plan(4, 3.0, plan)
 
 
 def _obj(payload: bytes) -> dict[str, Any]:
@@ -43,28 +43,28 @@ def _obj(payload: bytes) -> dict[str, Any]:
 
 
 def test_the_plan_carries_the_planned_velocity_and_old_plans_still_decode() -> None:
-    back = decode_plan(encode_plan(_plan(V)), n_uavs=3, n_bs=5)
+    back = decode(PlanMsg, encode(_plan(V)), n_uavs=3, n_bs=5)
     assert back.plan.uav_velocity_mps is not None
     np.testing.assert_array_equal(back.plan.uav_velocity_mps, V)
     # A plan without the field (the paper's kinematics, or an older ground loop): None.
-    without = encode_plan(_plan(None))
+    without = encode(_plan(None))
     assert "end_velocity_mps" not in _obj(without)
-    assert decode_plan(without, n_uavs=3).plan.uav_velocity_mps is None
+    assert decode(PlanMsg, without, n_uavs=3).plan.uav_velocity_mps is None
     null = json.dumps(_obj(without) | {"end_velocity_mps": None}).encode()
-    assert decode_plan(null, n_uavs=3).plan.uav_velocity_mps is None
+    assert decode(PlanMsg, null, n_uavs=3).plan.uav_velocity_mps is None
 
 
 def test_a_bad_planned_velocity_is_refused_with_its_field() -> None:
-    obj = _obj(encode_plan(_plan(V)))
+    obj = _obj(encode(_plan(V)))
     for bad, field in (
         ({"end_velocity_mps": V[:2].tolist()}, "plan.end_velocity_mps: 2 values, expected 3"),
         ({"end_velocity_mps": [[1.0], [2.0, 3.0], [4.0, 5.0]]}, "plan.end_velocity_mps[0]"),
         ({"end_velocity_mps": [["a", 1.0], [2.0, 3.0], [4.0, 5.0]]}, "plan.end_velocity_mps[0]"),
     ):
         with pytest.raises(MessageError, match=field.replace("[", r"\[").replace("]", r"\]")):
-            decode_plan(json.dumps(obj | bad).encode(), n_uavs=3)
+            decode(PlanMsg, json.dumps(obj | bad).encode(), n_uavs=3)
     with pytest.raises(MessageError, match="end_velocity_mps"):
-        encode_plan(_plan(np.where(V == 0.0, np.nan, V)))
+        encode(_plan(np.where(V == 0.0, np.nan, V)))
 
 
 def test_the_hermite_leg_is_the_vehicle_models_leg_and_ends_at_the_planned_velocity() -> None:

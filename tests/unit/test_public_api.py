@@ -43,9 +43,9 @@ def test_first_slot_input_starts_at_the_start_points() -> None:
         s.M,
     ) and inp.prev_bandwidth_share.sum() == pytest.approx(1.0)
     assert inp.prev_bs_of_uav is None
-    assert inp.target_state_pred.shape == (4,) and inp.prior_information.shape == (4, 4)
+    assert inp.lead.state_pred.shape == (4,) and inp.lead.prior_information.shape == (4, 4)
     # One slot of the constant-velocity model from x0.
-    assert np.allclose(inp.target_state_pred[:2], s.x0[:2] + s.dt * s.x0[2:])
+    assert np.allclose(inp.lead.state_pred[:2], s.x0[:2] + s.dt * s.x0[2:])
 
 
 def test_plan_slot_is_the_planner_on_the_first_slot_input() -> None:

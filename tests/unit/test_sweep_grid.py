@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +14,7 @@ import yaml
 
 from isac_mission.errors import ConfigError
 from isac_mission.experiment.sweep.grid import (
+    apply_overrides,
     expand_grid,
     load_grid,
     parse_grid,
@@ -103,6 +105,143 @@ def test_bad_grids_are_rejected_with_the_key(grid: Any, needle: str) -> None:
     with pytest.raises(ConfigError, match=r"grid\.yaml") as err:
         parse_grid(grid, "grid.yaml")
     assert needle in str(err.value)
+
+
+OLD_PAPER = Path(__file__).resolve().parent / "data" / "scenarios-0.1" / "paper.yaml"
+"""0.1.0's paper.yaml: its one target under the deprecated `target:`."""
+
+
+def _read(path: Path) -> dict[str, Any]:
+    data = yaml.safe_load(path.read_text())
+    assert isinstance(data, dict)
+    return data
+
+
+def test_an_index_sweeps_a_list_entry_as_the_old_target_key_did(base: dict[str, Any]) -> None:
+    rcs = [-10, 0, 10]
+    points = expand_grid(base, parse_grid({"targets.0.rcs_dbsm": rcs, "slots": 4}))
+    assert [p.values for p in points] == [(("targets.0.rcs_dbsm", v),) for v in rcs]
+    assert [p.scenario.rcs_m2 for p in points] == pytest.approx([0.1, 1.0, 10.0], rel=1e-12)
+    assert [p.scenario.targets[0].rcs_m2 for p in points] == [p.scenario.rcs_m2 for p in points]
+    assert len({p.key for p in points}) == 3
+    assert base["targets"][0]["rcs_dbsm"] == -10  # the base mapping is left untouched
+    # The old key on the old-form file gives the very same scenarios.
+    with pytest.warns(DeprecationWarning, match="target: is deprecated"):
+        old = expand_grid(_read(OLD_PAPER), parse_grid({"target.rcs_dbsm": rcs, "slots": 4}))
+    for a, b in zip(old, points, strict=True):
+        assert a.scenario.rcs_m2 == b.scenario.rcs_m2
+        assert a.scenario.targets == b.scenario.targets
+        assert a.scenario.trace_config() == b.scenario.trace_config()
+
+
+def test_an_index_sweeps_a_whole_entry_value_and_indexes_nested_lists(
+    base: dict[str, Any],
+) -> None:
+    states = [[600, 1600, 30, 0], [500, 1400, 20, 5]]
+    points = expand_grid(base, parse_grid({"targets.0.initial_state": states, "slots": 4}))
+    assert [p.scenario.x0.tolist() for p in points] == states
+    with pytest.warns(DeprecationWarning, match="target: is deprecated"):
+        old = expand_grid(
+            _read(OLD_PAPER), parse_grid({"target.initial_state": states, "slots": 4})
+        )
+    assert [p.scenario.x0.tolist() for p in old] == states
+    # An index into a list of a list entry: the target's vx; a UAV's start point.
+    grid = parse_grid({"targets.0.initial_state.2": [20], "uavs.start_xy_m.1": [[900, 1000]]})
+    (p,) = expand_grid(base, grid)
+    assert p.scenario.x0.tolist() == [600, 1600, 20, 0]
+    assert p.scenario.uav_start_xy.tolist() == [[1500, 2300], [900, 1000], [2193, 1100]]
+    assert base["uavs"]["start_xy_m"][1] == [807, 1100]
+
+
+def test_an_index_picks_its_entry_of_several() -> None:
+    multi = _read(ROOT / "config" / "multi-target.yaml")
+    points = expand_grid(multi, parse_grid({"targets.1.rcs_dbsm": [-10, 0]}))
+    assert [p.scenario.targets[1].rcs_m2 for p in points] == pytest.approx([0.1, 1.0])
+    for p in points:
+        assert p.scenario.targets[0].rcs_m2 == pytest.approx(0.1)
+        assert p.scenario.targets[2].rcs_m2 == pytest.approx(10 ** (-0.7))
+
+
+@pytest.mark.parametrize(
+    ("path", "needle"),
+    [
+        ("targets.x.rcs_dbsm", "targets is a list: index it by a non-negative integer (got 'x')"),
+        ("targets.-1.rcs_dbsm", "targets is a list: index it by a non-negative integer"),
+        ("targets.01.rcs_dbsm", "index it by a non-negative integer (got '01')"),
+        ("targets.0", "targets.0: is a section, not a value"),
+        ("targets.0.rcs", "unknown key 'rcs' under targets.0"),
+        ("targets.0.rcs_dbsm.0", "targets.0.rcs_dbsm is not a section or a list"),
+        ("targets.0.initial_state.4", "index 4 is out of range: targets.0.initial_state has 4"),
+        ("uavs.0", "unknown key '0' under uavs"),
+    ],
+)
+def test_bad_indexes_are_rejected_with_the_path(path: str, needle: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        parse_grid({path: [1]}, "grid.yaml")
+    assert str(err.value).startswith(f"grid.yaml: {path}: ")
+    assert needle in str(err.value) and "\n" not in str(err.value)
+
+
+def test_paths_one_inside_the_other_are_rejected() -> None:
+    with pytest.raises(
+        ConfigError, match=r"uavs\.count and uavs\.start_xy_m\.1 cannot both be swept"
+    ):
+        parse_grid({"uavs.count": [3], "uavs.start_xy_m.1": [[0, 0]]}, "grid.yaml")
+    with pytest.raises(
+        ConfigError,
+        match=r"^grid\.yaml: targets and targets\.0\.rcs_dbsm cannot both be swept \(one is",
+    ):
+        parse_grid({"targets.0.rcs_dbsm": [0], "targets": [[]]}, "grid.yaml")
+
+
+def test_an_index_the_config_cannot_take_is_one_line_naming_the_path(
+    base: dict[str, Any],
+) -> None:
+    grid = parse_grid({"targets.1.rcs_dbsm": [-10, 0, 10], "uavs.start_xy_m.3": [[1, 2]]})
+    with pytest.raises(ConfigError) as err:
+        expand_grid(base, grid, "paper.yaml")
+    assert str(err.value).splitlines() == [
+        "paper.yaml: targets.1.rcs_dbsm: index 1 is out of range: targets has 1 entry in the "
+        "config",
+        "paper.yaml: uavs.start_xy_m.3: index 3 is out of range: uavs.start_xy_m has 3 entries "
+        "in the config",
+    ]
+    # A list the config leaves out has no entries to change (a grid never adds one).
+    with pytest.raises(ConfigError) as err:
+        expand_grid(base, parse_grid({"base_stations.xy_m.0": [[1, 2]]}), "paper.yaml")
+    assert str(err.value) == (
+        "paper.yaml: base_stations.xy_m.0: index 0 is out of range: the config gives no "
+        "base_stations.xy_m"
+    )
+    with pytest.raises(ConfigError) as err:
+        expand_grid(_read(OLD_PAPER), parse_grid({"targets.0.rcs_dbsm": [0]}), "old.yaml")
+    assert str(err.value) == (
+        "old.yaml: targets.0.rcs_dbsm: index 0 is out of range: the config gives no targets "
+        "(it gives its target under the deprecated target:, e.g. target.rcs_dbsm)"
+    )
+
+
+@pytest.mark.parametrize(
+    ("targets", "needle"),
+    [
+        (
+            {"0": {"rcs_dbsm": -10}},
+            "targets.0.rcs_dbsm: targets is not a list in the config (a mapping)",
+        ),
+        ("secret", "targets.0.rcs_dbsm: targets is not a list in the config (a string)"),
+        ([5], "targets.0.rcs_dbsm: targets.0 is not a mapping in the config (a number)"),
+        ([None], "targets.0.rcs_dbsm: targets.0 is not a mapping in the config (null)"),
+    ],
+)
+def test_an_entry_of_the_wrong_kind_is_named_not_echoed(
+    base: dict[str, Any], targets: Any, needle: str
+) -> None:
+    bad = {**base, "targets": targets}
+    with pytest.raises(ConfigError) as err:
+        expand_grid(bad, parse_grid({"targets.0.rcs_dbsm": [0]}), "bad.yaml")
+    assert str(err.value) == f"bad.yaml: {needle}"
+    with pytest.raises(ConfigError, match=re.escape(needle)):
+        apply_overrides(bad, [("targets.0.rcs_dbsm", 0)], None)
 
 
 def test_bad_value_names_the_point_path_and_value(base: dict[str, Any]) -> None:

@@ -28,8 +28,8 @@ def _payload(**fields: object) -> bytes:
     ],
 )
 def test_every_command_round_trips(msg: wire.ControlMsg) -> None:
-    data = wire.encode_control(msg)
-    assert wire.decode_control(data, n_uavs=3) == msg
+    data = wire.encode(msg)
+    assert wire.decode(wire.ControlMsg, data, n_uavs=3) == msg
     assert wire.decode_any(data) == msg
     read = wire.read_request(data, n_uavs=3)
     assert read.msg == msg and read.error is None and read.request_id == msg.request_id
@@ -62,7 +62,7 @@ def test_every_command_round_trips(msg: wire.ControlMsg) -> None:
 )
 def test_a_malformed_request_names_the_field(fields: dict[str, object], text: str) -> None:
     with pytest.raises(MessageError) as err:
-        wire.decode_control(_payload(**fields), n_uavs=3)
+        wire.decode(wire.ControlMsg, _payload(**fields), n_uavs=3)
     assert str(err.value).startswith(text)
     read = wire.read_request(_payload(**fields), n_uavs=3)
     assert read.msg is None and read.error is not None
@@ -80,15 +80,17 @@ def test_an_unreadable_request_has_no_id() -> None:
 
 def test_reply_and_fleet_round_trip_and_are_checked() -> None:
     reply = wire.ControlReplyMsg(3, 30.0, "r1", "hold", True, "ok", "held", (1,))
-    assert wire.decode_control_reply(wire.encode_control_reply(reply)) == reply
+    assert wire.decode(wire.ControlReplyMsg, wire.encode(reply)) == reply
     refused = wire.ControlReplyMsg(3, 30.0, None, None, False, "payload: not JSON", "nothing")
-    assert wire.decode_any(wire.encode_control_reply(refused)) == refused
+    assert wire.decode_any(wire.encode(refused)) == refused
     fleet = wire.FleetMsg(3, 30.0, "r1", "land", (0, 2))
-    assert wire.decode_fleet(wire.encode_fleet(fleet), n_uavs=3) == fleet
+    assert wire.decode(wire.FleetMsg, wire.encode(fleet), n_uavs=3) == fleet
     with pytest.raises(MessageError, match=r"fleet\.uavs\[1\]: 5 is outside \[0, 2\]"):
-        wire.decode_fleet(wire.encode_fleet(wire.FleetMsg(3, 30.0, "r", "hold", (0, 5))), n_uavs=3)
+        wire.decode(
+            wire.FleetMsg, wire.encode(wire.FleetMsg(3, 30.0, "r", "hold", (0, 5))), n_uavs=3
+        )
     with pytest.raises(MessageError, match=r"fleet\.uavs"):
-        wire.encode_fleet(wire.FleetMsg(3, 30.0, "r", "hold", ()))
+        wire.encode(wire.FleetMsg(3, 30.0, "r", "hold", ()))
 
 
 def test_telemetry_carries_the_override() -> None:
@@ -107,7 +109,7 @@ def test_telemetry_carries_the_override() -> None:
         "ok",
         override="operator: HOLD",
     )
-    assert wire.decode_telemetry(wire.encode_telemetry(tel)).override == "operator: HOLD"
-    obj = json.loads(wire.encode_telemetry(tel))
+    assert wire.decode(wire.TelemetryMsg, wire.encode(tel)).override == "operator: HOLD"
+    obj = json.loads(wire.encode(tel))
     del obj["override"]  # optional: an older sender's telemetry
-    assert wire.decode_telemetry(json.dumps(obj).encode()).override == ""
+    assert wire.decode(wire.TelemetryMsg, json.dumps(obj).encode()).override == ""

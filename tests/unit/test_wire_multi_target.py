@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -20,14 +21,10 @@ from isac_mission.wire import (
     TrackEntry,
     TrackSetMsg,
     TruthSetMsg,
+    decode,
     decode_any,
-    decode_detection_set,
-    decode_track_set,
-    decode_truth_set,
     detection_set_messages,
-    encode_detection_set,
-    encode_track_set,
-    encode_truth_set,
+    encode,
 )
 from isac_mission.wire.schema import message_schemas
 
@@ -108,11 +105,11 @@ def _assert_same_tracks(a: TrackSetMsg, b: TrackSetMsg) -> None:
 
 def test_detection_set_round_trip() -> None:
     msg = _detection_set()
-    data = encode_detection_set(msg)
+    data = encode(msg)
     obj = _obj(data)
     assert obj["schema"] == "isac/1" and obj["type"] == "detection_set"
     assert obj["measurements"] == [[812.25, -3.5], [1200.0, 7.25], [95.5, 0.0]]
-    back = decode_detection_set(data, n_uavs=3)
+    back = decode(DetectionSetMsg, data, n_uavs=3)
     assert (back.slot, back.t_s, back.uav, back.bandwidth_share) == (4, 4.0, 1, 0.25)
     assert back.measurements.dtype == np.float64
     np.testing.assert_array_equal(back.measurements, msg.measurements)
@@ -121,9 +118,9 @@ def test_detection_set_round_trip() -> None:
 
 def test_an_empty_detection_set_is_sent_and_decodes_to_zero_rows() -> None:
     for empty in (np.zeros((0, 2)), np.array([])):
-        data = encode_detection_set(_detection_set(measurements=empty))
+        data = encode(_detection_set(measurements=empty))
         assert _obj(data)["measurements"] == []
-        assert decode_detection_set(data).measurements.shape == (0, 2)
+        assert decode(DetectionSetMsg, data).measurements.shape == (0, 2)
 
 
 def test_detection_set_messages_split_a_slot_per_uav() -> None:
@@ -132,7 +129,7 @@ def test_detection_set_messages_split_a_slot_per_uav() -> None:
     msgs = detection_set_messages(2, 2.5, reports, xy, np.array([0.5, 0.25, 0.25]))
     assert [m.uav for m in msgs] == [0, 1, 2]
     for m, msg in enumerate(msgs):
-        back = decode_detection_set(encode_detection_set(msg), n_uavs=3)
+        back = decode(DetectionSetMsg, encode(msg), n_uavs=3)
         assert (back.slot, back.t_s, back.bandwidth_share) == (2, 2.5, [0.5, 0.25, 0.25][m])
         np.testing.assert_array_equal(back.measurements, reports[m].reshape(-1, 2))
         np.testing.assert_array_equal(back.uav_xy_m, xy[m])
@@ -140,12 +137,12 @@ def test_detection_set_messages_split_a_slot_per_uav() -> None:
 
 def test_truth_set_round_trip_with_null_targets_and_origins() -> None:
     msg = _truth_set()
-    data = encode_truth_set(msg)
+    data = encode(msg)
     obj = _obj(data)
     assert obj["type"] == "truth_set"
     assert obj["targets"][1] is None  # a target not in the scene
     assert obj["origins"] == [[0, -1, 2], [], [-1]]
-    back = decode_truth_set(data)
+    back = decode(TruthSetMsg, data)
     assert (back.slot, back.t_s) == (4, 4.0)
     assert back.states.shape == (3, 4)
     np.testing.assert_array_equal(back.states, msg.states)  # NaN rows compare equal
@@ -154,36 +151,34 @@ def test_truth_set_round_trip_with_null_targets_and_origins() -> None:
 
 
 def test_truth_set_origins_are_optional() -> None:
-    obj = _obj(encode_truth_set(_truth_set(origins=())))
+    obj = _obj(encode(_truth_set(origins=())))
     assert obj["origins"] == []
     del obj["origins"]
-    assert decode_truth_set(_bytes(obj)).origins == ()
+    assert decode(TruthSetMsg, _bytes(obj)).origins == ()
 
 
 def test_track_set_round_trip() -> None:
     for msg in (_track_set(), _track_set(published_wall_s=1.9e9 + 0.25), _track_set(tracks=())):
-        data = encode_track_set(msg)
+        data = encode(msg)
         obj = _obj(data)
         assert obj["type"] == "track_set"
         assert ("published_wall_s" in obj) == (msg.published_wall_s is not None)
-        _assert_same_tracks(decode_track_set(data), msg)
-    first = _obj(encode_track_set(_track_set()))["tracks"][0]
+        _assert_same_tracks(decode(TrackSetMsg, data), msg)
+    first = _obj(encode(_track_set()))["tracks"][0]
     assert set(first) == {"id", "confirmed", "x", "P", "pcrb_position_trace"}
     assert first["id"] == 1 and first["confirmed"] is True
 
 
 def test_decode_any_returns_the_multi_target_classes() -> None:
-    back = decode_any(encode_detection_set(_detection_set()))
+    back = decode_any(encode(_detection_set()))
     assert isinstance(back, DetectionSetMsg)
     np.testing.assert_array_equal(back.measurements, _detection_set().measurements)
-    assert isinstance(decode_any(encode_truth_set(_truth_set())), TruthSetMsg)
-    track_set = decode_any(encode_track_set(_track_set()))
+    assert isinstance(decode_any(encode(_truth_set())), TruthSetMsg)
+    track_set = decode_any(encode(_track_set()))
     assert isinstance(track_set, TrackSetMsg)
     _assert_same_tracks(track_set, _track_set())
     # The single-target messages on the same keys still decode as before.
-    assert isinstance(
-        decode_any(wire.encode_truth(wire.TruthMsg(1, 1.0, np.zeros(4)))), wire.TruthMsg
-    )
+    assert isinstance(decode_any(wire.encode(wire.TruthMsg(1, 1.0, np.zeros(4)))), wire.TruthMsg)
 
 
 def test_the_largest_messages_fit_the_payload_limit() -> None:
@@ -202,26 +197,26 @@ def test_the_largest_messages_fit_the_payload_limit() -> None:
             )
         )
     big = TrackSetMsg(10**9, 1e9 - 1 / 3, tuple(tracks), 1.8e9 + 1 / 3)
-    data = encode_track_set(big)
+    data = encode(big)
     assert len(data) < 0.6 * MAX_PAYLOAD_BYTES
-    _assert_same_tracks(decode_track_set(data), big)
+    _assert_same_tracks(decode(TrackSetMsg, data), big)
     z = np.column_stack(
         [rng.uniform(100.0, 99_999.0, MAX_MEASUREMENTS) + 1 / 3, -rng.uniform(0.0, 100.0, 512)]
     )
-    data = encode_detection_set(_detection_set(measurements=z, uav=255, bandwidth_share=1 / 3))
+    data = encode(_detection_set(measurements=z, uav=255, bandwidth_share=1 / 3))
     assert len(data) < 0.4 * MAX_PAYLOAD_BYTES
-    np.testing.assert_array_equal(decode_detection_set(data).measurements, z)
+    np.testing.assert_array_equal(decode(DetectionSetMsg, data).measurements, z)
     states = -rng.uniform(1e3, 1e4, (MAX_TARGETS, 4)) - 1 / 3
-    data = encode_truth_set(_truth_set(states=states, origins=((-1,) * 20,) * 6))
-    np.testing.assert_array_equal(decode_truth_set(data).states, states)
+    data = encode(_truth_set(states=states, origins=((-1,) * 20,) * 6))
+    np.testing.assert_array_equal(decode(TruthSetMsg, data).states, states)
 
 
 # ----------------------------------------------------------------------------- malformed
 
 
 def test_detection_set_refusals_name_the_field() -> None:
-    obj = _obj(encode_detection_set(_detection_set()))
-    decode = decode_detection_set
+    obj = _obj(encode(_detection_set()))
+    decode = partial(wire.decode, DetectionSetMsg)
     reason = _expect(
         _bytes({**obj, "measurements": [[1.0, 2.0], [-1.0, 0.5]]}),
         "detection_set.measurements[1][0]",
@@ -258,8 +253,8 @@ def test_detection_set_refusals_name_the_field() -> None:
 
 
 def test_truth_set_refusals_name_the_field() -> None:
-    obj = _obj(encode_truth_set(_truth_set()))
-    decode = decode_truth_set
+    obj = _obj(encode(_truth_set()))
+    decode = partial(wire.decode, TruthSetMsg)
     reason = _expect(_bytes({**obj, "origins": [[0, -2]]}), "truth_set.origins[0][1]", decode)
     assert reason == "truth_set.origins[0][1]: -2 is outside [-1, 63]"
     _expect(_bytes({**obj, "origins": [[], [MAX_TARGETS]]}), "truth_set.origins[1][0]", decode)
@@ -279,9 +274,9 @@ def test_truth_set_refusals_name_the_field() -> None:
 
 
 def test_track_set_refusals_name_the_field() -> None:
-    obj = _obj(encode_track_set(_track_set()))
+    obj = _obj(encode(_track_set()))
     one, two = obj["tracks"]
-    decode = decode_track_set
+    decode = partial(wire.decode, TrackSetMsg)
     reason = _expect(
         _bytes({**obj, "tracks": [{**one, "id": 0}]}), "track_set.tracks[0].id", decode
     )
@@ -337,9 +332,9 @@ def test_track_set_refusals_name_the_field() -> None:
 @pytest.mark.parametrize(
     ("encode", "decode", "msg"),
     [
-        (encode_detection_set, decode_detection_set, _detection_set()),
-        (encode_truth_set, decode_truth_set, _truth_set()),
-        (encode_track_set, decode_track_set, _track_set()),
+        (encode, partial(wire.decode, DetectionSetMsg), _detection_set()),
+        (encode, partial(wire.decode, TruthSetMsg), _truth_set()),
+        (encode, partial(wire.decode, TrackSetMsg), _track_set()),
     ],
 )
 def test_a_nan_token_in_the_json_text_is_refused(encode: Any, decode: Any, msg: Any) -> None:
@@ -353,34 +348,34 @@ def test_a_nan_token_in_the_json_text_is_refused(encode: Any, decode: Any, msg: 
 
 
 def test_decode_any_names_the_field_of_the_multi_target_message() -> None:
-    det = _obj(encode_detection_set(_detection_set()))
+    det = _obj(encode(_detection_set()))
     _expect(
         _bytes({**det, "measurements": [[-1.0, 0.0]]}),
         "detection_set.measurements[0][0]",
         decode_any,
     )
-    truth = _obj(encode_truth_set(_truth_set()))
+    truth = _obj(encode(_truth_set()))
     _expect(_bytes({**truth, "origins": [[-5]]}), "truth_set.origins[0][0]", decode_any)
-    tracks = _obj(encode_track_set(_track_set()))
+    tracks = _obj(encode(_track_set()))
     one = tracks["tracks"][0]
     _expect(_bytes({**tracks, "tracks": [one, one]}), "track_set.tracks[1].id", decode_any)
 
 
 def test_encoders_refuse_what_decoders_would_refuse() -> None:
     with pytest.raises(MessageError, match=r"detection_set\.measurements\[1\]"):
-        encode_detection_set(_detection_set(measurements=np.array([[1.0, 0.0], [-2.0, 0.0]])))
+        encode(_detection_set(measurements=np.array([[1.0, 0.0], [-2.0, 0.0]])))
     with pytest.raises(MessageError, match=r"detection_set\.measurements"):
-        encode_detection_set(_detection_set(measurements=np.zeros((3, 3))))
+        encode(_detection_set(measurements=np.zeros((3, 3))))
     with pytest.raises(MessageError, match=r"detection_set\.measurements\[0\]"):
-        encode_detection_set(_detection_set(measurements=np.array([[np.nan, 1.0]])))
+        encode(_detection_set(measurements=np.array([[np.nan, 1.0]])))
     with pytest.raises(MessageError, match=r"truth_set\.targets\[0\]"):
-        encode_truth_set(_truth_set(states=np.array([[1.0, np.nan, 0.0, 0.0]])))
+        encode(_truth_set(states=np.array([[1.0, np.nan, 0.0, 0.0]])))
     with pytest.raises(MessageError, match=r"truth_set\.origins"):
-        encode_truth_set(_truth_set(origins=((0, -3),)))
+        encode(_truth_set(origins=((0, -3),)))
     with pytest.raises(MessageError, match=r"track_set\.tracks\[1\]\.id"):
-        encode_track_set(_track_set(tracks=(_entry(2), _entry(2))))
+        encode(_track_set(tracks=(_entry(2), _entry(2))))
     with pytest.raises(MessageError, match=r"track_set\.tracks\[0\]\.P"):
-        encode_track_set(_track_set(tracks=(TrackEntry(1, True, np.zeros(4), np.eye(3), 1.0),)))
+        encode(_track_set(tracks=(TrackEntry(1, True, np.zeros(4), np.eye(3), 1.0),)))
 
 
 # ----------------------------------------------------------------------------- schemas
@@ -412,10 +407,10 @@ def test_the_schemas_carry_the_bounds_the_decoders_enforce() -> None:
 def test_an_encoded_payload_has_exactly_the_fields_the_schema_names() -> None:
     schemas = message_schemas()
     for kind, data in (
-        ("detection_set", encode_detection_set(_detection_set())),
-        ("truth_set", encode_truth_set(_truth_set())),
-        ("track_set", encode_track_set(_track_set(published_wall_s=1.9e9))),
+        ("detection_set", encode(_detection_set())),
+        ("truth_set", encode(_truth_set())),
+        ("track_set", encode(_track_set(published_wall_s=1.9e9))),
     ):
         assert set(_obj(data)) == set(schemas[kind]["properties"]), kind
-    entry = _obj(encode_track_set(_track_set()))["tracks"][0]
+    entry = _obj(encode(_track_set()))["tracks"][0]
     assert set(entry) == set(schemas["track_set"]["$defs"]["TrackEntryWire"]["properties"])

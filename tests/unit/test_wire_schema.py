@@ -9,7 +9,7 @@ import numpy as np
 from typer.testing import CliRunner
 
 from isac_mission.cli import app
-from isac_mission.wire import MAX_UAVS, SCHEMA, DetectionMsg, encode_detection
+from isac_mission.wire import MAX_UAVS, SCHEMA, DetectionMsg, encode
 from isac_mission.wire.models import MODELS
 from isac_mission.wire.schema import UNION_NAME, message_schemas, union_schema, write_schemas
 
@@ -76,7 +76,5 @@ def test_the_schema_command_prints_every_schema_as_json() -> None:
     printed = json.loads(result.output)
     assert sorted(printed) == sorted([*KINDS, UNION_NAME])
     # A payload the encoder writes has exactly the fields the schema names (plus none unknown).
-    payload = json.loads(
-        encode_detection(DetectionMsg(1, 1.0, 0, 10.0, 0.5, np.array([1.0, 2.0]), 0.5))
-    )
+    payload = json.loads(encode(DetectionMsg(1, 1.0, 0, 10.0, 0.5, np.array([1.0, 2.0]), 0.5)))
     assert set(payload) == set(printed["detection"]["properties"])

@@ -4,6 +4,10 @@ Grid file (YAML mapping):
 
 * ``<dotted.path>: [v1, v2, ...]`` -- a scenario key (as in config/paper.yaml) and its values,
   e.g. ``uavs.max_speed_mps: [15, 25]``. The study is the cartesian product of all such lists.
+  A non-negative integer in a path indexes a list, 0 the first entry: ``targets.0.rcs_dbsm``
+  (the first target's RCS), ``targets.1.initial_state``, ``uavs.start_xy_m.2``,
+  ``targets.0.initial_state.2`` (its vx). The entry must be in the config (a grid changes
+  entries, it never adds one); two paths one inside the other cannot both be swept.
 * ``uavs.count: [3, 6]`` (special) -- the number of UAVs M. M UAVs are placed evenly on a ring:
   centre = centroid of the config's ``uavs.start_xy_m``, radius = their mean distance to it
   (a quarter of the smaller area side if the config has a single UAV), the first UAV at the config's
@@ -13,7 +17,9 @@ Grid file (YAML mapping):
   slots * slot_s for quick studies; default: the config's duration).
 
 Every grid point is validated with `parse_scenario` before any work starts; an invalid point
-raises ConfigError naming the grid path(s) and value(s).
+raises ConfigError naming the grid path(s) and value(s). A path the config cannot take (an index
+past the end of its list, a list or mapping expected where the config has another value) raises
+one ConfigError line per path, naming it.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, cast, get_args, get_origin
 
 import numpy as np
 import yaml
@@ -99,29 +105,75 @@ def _coerce(v: Value) -> Value:
     return v
 
 
+_INDEX = re.compile(r"0|[1-9][0-9]*")
+
+
+def _index(part: str) -> int | None:
+    """The list index a path part names (a non-negative integer, no sign or leading zero)."""
+    return int(part) if _INDEX.fullmatch(part) else None
+
+
+def _non_optional(ann: Any) -> Any:
+    """`X` of an optional `X | None` annotation (the deprecated `target:`, `multi_target:`)."""
+    args = get_args(ann)
+    if type(None) in args:
+        rest = [a for a in args if a is not type(None)]
+        return rest[0] if len(rest) == 1 else ann
+    return ann
+
+
+def _is_section(ann: Any) -> bool:
+    return isinstance(ann, type) and issubclass(ann, BaseModel)
+
+
 def _check_path(path: str, source: str) -> None:
-    """Raise ConfigError unless `path` names a leaf of ScenarioFile (or is uavs.count)."""
+    """Raise ConfigError unless `path` names a value of ScenarioFile (or is uavs.count): keys of
+    sections, non-negative integer indexes of lists (and of fixed-length tuples, within them)."""
     if path == UAV_COUNT_PATH:
         return
-    model: type[BaseModel] = ScenarioFile
+    ann: Any = ScenarioFile
     parts = path.split(".")
     for i, part in enumerate(parts):
-        field = model.model_fields.get(part)
-        if field is None:
-            where = ".".join(parts[:i]) or "the top level"
-            known = ", ".join(sorted(model.model_fields))
-            raise ConfigError(
-                f"{source}: {path}: unknown key {part!r} under {where} (known: {known})"
-            )
-        ann = field.annotation
-        is_section = isinstance(ann, type) and issubclass(ann, BaseModel)
-        last = i == len(parts) - 1
-        if last and is_section:
-            raise ConfigError(f"{source}: {path}: is a section, not a value; name one of its keys")
-        if not last:
-            if not is_section:
-                raise ConfigError(f"{source}: {path}: {'.'.join(parts[: i + 1])} is not a section")
+        where = ".".join(parts[:i])
+        if _is_section(ann):
             model = cast(type[BaseModel], ann)
+            field = model.model_fields.get(part)
+            if field is None:
+                known = ", ".join(sorted(model.model_fields))
+                raise ConfigError(
+                    f"{source}: {path}: unknown key {part!r} under {where or 'the top level'} "
+                    f"(known: {known})"
+                )
+            ann = _non_optional(field.annotation)
+        elif get_origin(ann) in (list, tuple):
+            index = _index(part)
+            if index is None:
+                raise ConfigError(
+                    f"{source}: {path}: {where} is a list: index it by a non-negative integer "
+                    f"(got {part!r})"
+                )
+            args = get_args(ann)
+            if get_origin(ann) is tuple and Ellipsis not in args:
+                if index >= len(args):
+                    raise ConfigError(
+                        f"{source}: {path}: index {index} is out of range: {where} has "
+                        f"{len(args)} entries"
+                    )
+                ann = _non_optional(args[index])
+            else:
+                ann = _non_optional(args[0]) if args else Any
+        else:
+            raise ConfigError(f"{source}: {path}: {where} is not a section or a list")
+    if _is_section(ann):
+        raise ConfigError(f"{source}: {path}: is a section, not a value; name one of its keys")
+
+
+def _overlapping(paths: Sequence[str]) -> tuple[str, str] | None:
+    """Two swept paths one inside the other (`uavs.start_xy_m`, `uavs.start_xy_m.0`), if any."""
+    for a, b in itertools.permutations(paths, 2):
+        if b.startswith(a + "."):
+            return a, b
+    return None
 
 
 def parse_grid(data: Any, source: str = "<grid>") -> GridSpec:
@@ -163,8 +215,13 @@ def parse_grid(data: Any, source: str = "<grid>") -> GridSpec:
             raise ConfigError(f"{source}: {path}: values must be integers >= 1 (got {values!r})")
         axes.append((path, tuple(_coerce(v) for v in values)))
     paths = [p for p, _ in axes]
-    if UAV_COUNT_PATH in paths and "uavs.start_xy_m" in paths:
-        raise ConfigError(f"{source}: uavs.count and uavs.start_xy_m cannot both be swept")
+    ring = [p for p in paths if p == "uavs.start_xy_m" or p.startswith("uavs.start_xy_m.")]
+    if UAV_COUNT_PATH in paths and ring:
+        raise ConfigError(f"{source}: uavs.count and {ring[0]} cannot both be swept")
+    if (pair := _overlapping(paths)) is not None:
+        raise ConfigError(
+            f"{source}: {pair[0]} and {pair[1]} cannot both be swept (one is inside the other)"
+        )
     runs = ints["runs"]
     return GridSpec(
         axes=tuple(axes),
@@ -205,9 +262,87 @@ def ring_start_points(
     return [[float(round(x, 6)), float(round(y, 6))] for x, y in pts]
 
 
+@dataclass(frozen=True)
+class _MapPlace:
+    """Where a path's value goes: `node[key]` of a mapping."""
+
+    node: dict[str, Any]
+    key: str
+
+
+@dataclass(frozen=True)
+class _ListPlace:
+    """Where a path's value goes: `node[index]` of a list, within it."""
+
+    node: list[Any]
+    index: int
+
+
+_Place = _MapPlace | _ListPlace
+
+
 def _defaults(section: str) -> dict[str, Any]:
     field = ScenarioFile.model_fields[section]
     return cast(BaseModel, field.get_default(call_default_factory=True)).model_dump(mode="json")
+
+
+def _kind(value: Any) -> str:
+    """What a config value is, in YAML's words (never the value: it may be a secret)."""
+    if value is None:
+        return "null"
+    if isinstance(value, dict | list):
+        return "a mapping" if isinstance(value, dict) else "a list"
+    if isinstance(value, bool):
+        return "a boolean"
+    return "a number" if isinstance(value, int | float) else "a string"
+
+
+def _place(data: dict[str, Any], path: str, create: bool) -> _Place | None:
+    """Where `path` puts its value in the config mapping `data`: (the mapping, its key) or (the
+    list, its index). A section the config leaves out is created empty (create=True; with
+    create=False the walk stops there and returns None). Raises ConfigError, one line naming
+    the path, for an index past the end of its list (or into a list the config leaves out) and
+    for a list or a mapping expected where the config has another value."""
+    parts = path.split(".")
+    node: dict[str, Any] | list[Any] = data
+    for i, part in enumerate(parts):
+        parent, here = ".".join(parts[:i]), ".".join(parts[: i + 1])
+        child: Any
+        if isinstance(node, list):
+            index = _index(part)
+            if index is None:
+                raise ConfigError(
+                    f"{path}: {parent} is a list: index it by a non-negative integer (got {part!r})"
+                )
+            if index >= len(node):
+                n = len(node)
+                raise ConfigError(
+                    f"{path}: index {index} is out of range: {parent} has {n} "
+                    f"{'entry' if n == 1 else 'entries'} in the config"
+                )
+            if i == len(parts) - 1:
+                return _ListPlace(node, index)
+            child = node[index]
+        else:
+            if i == len(parts) - 1:
+                return _MapPlace(node, part)
+            child = node.get(part)
+        wants_list = _index(parts[i + 1]) is not None
+        if child is None and isinstance(node, dict):
+            if wants_list:
+                raise ConfigError(
+                    f"{path}: index {parts[i + 1]} is out of range: the config gives no {here}"
+                )
+            if not create:
+                return None
+            child = {}
+            node[part] = child
+        if wants_list and not isinstance(child, list):
+            raise ConfigError(f"{path}: {here} is not a list in the config ({_kind(child)})")
+        if not wants_list and not isinstance(child, dict):
+            raise ConfigError(f"{path}: {here} is not a mapping in the config ({_kind(child)})")
+        node = child
+    return None  # unreachable: str.split gives at least one part
 
 
 def apply_overrides(
@@ -220,15 +355,11 @@ def apply_overrides(
         if path == UAV_COUNT_PATH:
             count = cast(int, value)
             continue
-        *sections, leaf = path.split(".")
-        node = data
-        for part in sections:
-            child = node.get(part)
-            if not isinstance(child, dict):
-                child = {}
-                node[part] = child
-            node = child
-        node[leaf] = copy.deepcopy(value)
+        place = _place(data, path, create=True)
+        if isinstance(place, _ListPlace):
+            place.node[place.index] = copy.deepcopy(value)
+        elif isinstance(place, _MapPlace):
+            place.node[place.key] = copy.deepcopy(value)
     if count is not None:
         uavs = data.setdefault("uavs", {})
         if not isinstance(uavs, dict):
@@ -254,8 +385,19 @@ def scenario_key(data: dict[str, Any]) -> str:
 
 def expand_grid(base: dict[str, Any], grid: GridSpec, source: str = "<config>") -> list[GridPoint]:
     """Validate every grid point; raise one ConfigError listing every bad point."""
-    points: list[GridPoint] = []
+    paths = [p for p in grid.paths if p != UAV_COUNT_PATH]
     problems: list[str] = []
+    for path in paths:
+        try:
+            _place(base, path, create=False)
+        except ConfigError as err:
+            hint = ""
+            if path.startswith("targets.") and "targets" not in base and "target" in base:
+                hint = " (it gives its target under the deprecated target:, e.g. target.rcs_dbsm)"
+            problems.append(f"{source}: {err}{hint}")
+    if problems:
+        raise ConfigError("\n".join(problems))
+    points: list[GridPoint] = []
     for i, combo in enumerate(grid.combinations()):
         values = tuple(zip(grid.paths, combo, strict=True))
         label = ", ".join(f"{p}={fmt_value(v)}" for p, v in values) or "(base)"

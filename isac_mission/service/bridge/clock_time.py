@@ -17,7 +17,7 @@ from collections.abc import Callable
 from isac_mission.bus import BusSettings, Subscription, ZenohBus
 from isac_mission.errors import IsacError, MessageError
 from isac_mission.timebase import SimTime, SlotTimeline
-from isac_mission.wire import ClockMsg, Keys, decode_clock
+from isac_mission.wire import ClockMsg, Keys, decode
 
 log = logging.getLogger(__name__)
 
@@ -147,7 +147,7 @@ class ClockSimTime:
     async def _consume(self, sub: Subscription) -> None:
         async for _key, payload in sub:
             try:
-                msg = decode_clock(payload)
+                msg = decode(ClockMsg, payload)
             except MessageError as err:
                 self.invalid += 1
                 if self.invalid <= 5 or self.invalid % 100 == 0:

@@ -31,7 +31,7 @@ from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
 from isac_mission.timebase import SimTime, plan_is_late
 from isac_mission.types import FloatArray
-from isac_mission.wire import Keys, PlanMsg, decode_fleet, decode_plan
+from isac_mission.wire import FleetMsg, Keys, PlanMsg, decode
 
 log = logging.getLogger(__name__)
 
@@ -276,7 +276,7 @@ class BridgeFleet:
         async with self.bus.subscribe(self.keys.plan, maxsize=16) as sub:
             async for _key, payload in sub:
                 try:
-                    plan = decode_plan(payload, n_uavs=n)
+                    plan = decode(PlanMsg, payload, n_uavs=n)
                 except MessageError as err:
                     self.counters.plans_invalid += 1
                     self.counters.last_error = str(err)
@@ -298,7 +298,7 @@ class BridgeFleet:
         async with self.bus.subscribe(self.keys.fleet, maxsize=16) as sub:
             async for _key, payload in sub:
                 try:
-                    msg = decode_fleet(payload, n_uavs=n)
+                    msg = decode(FleetMsg, payload, n_uavs=n)
                 except MessageError as err:
                     self.counters.fleet_invalid += 1
                     self.counters.last_error = str(err)

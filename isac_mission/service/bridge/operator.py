@@ -10,7 +10,7 @@ from typing import Any
 from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.offboard import OffboardEntry
-from isac_mission.service.bridge.override import OverrideWatch
+from isac_mission.service.bridge.override import OverrideWatch, is_offboard_loss
 from isac_mission.service.bridge.setpoints import SetpointStream
 from isac_mission.service.bridge.supervision import LinkWatch
 from isac_mission.timebase import SimTime
@@ -53,11 +53,15 @@ class OverrideKeeper:
         self.texts = OverrideWatch()
 
     def on_statustext(self, msg: Any) -> None:
-        """A STATUSTEXT from the vehicle (its failsafes announce themselves)."""
+        """A STATUSTEXT from the vehicle (its failsafes announce themselves; the offboard loss
+        opens link supervision's re-entry watch)."""
         text = msg.text
         if isinstance(text, bytes):
             text = text.split(b"\x00", 1)[0].decode("utf-8", errors="replace")
-        self.texts.on_statustext(self.time.now_s(), str(text))
+        now = self.time.now_s()
+        self.texts.on_statustext(now, str(text))
+        if is_offboard_loss(str(text)):
+            self.watch.offboard_loss_reported(now)
 
     def after_gap(self, st: VehicleStatus, now: float) -> bool:
         """Link supervision asks for a re-entry: True when it is the offboard-loss HOLD or LAND

@@ -8,10 +8,17 @@ started (`start`/`stop`), once the vehicle's address is known and a mission alti
 While `follow_vehicle` is on (the vehicle is not the service's: an operator's mode, its own
 failsafe, an operator's hold), the setpoint is the vehicle's own position, altitude included, at
 rest, so that a plain switch back to OFFBOARD leaves it where it is; goals are still kept.
+
+The stream notes its own gaps (the uplink side of link supervision, supervision.py): how long it
+has been silent while started (`silent_s`) and the longest gap between two setpoints sent since
+the last look (`take_gap_s`), in simulation seconds as the vehicle counts them (the larger of the
+simulation time and the wall time x speed that passed: a stalled process, or a simulation that
+catches up after a pause, runs the vehicle's clock on while no setpoint goes out).
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -82,6 +89,10 @@ class SetpointStream:
         self._streaming = False
         self.follow_vehicle = False
         """Send the vehicle's own position instead of the leg (see the module doc)."""
+        self._sent_s: float | None = None
+        """Simulation time of the latest setpoint sent since the stream started (None: none)."""
+        self._sent_wall_s = 0.0
+        self._longest_gap_s = 0.0
 
     @property
     def streaming(self) -> bool:
@@ -173,10 +184,33 @@ class SetpointStream:
         if not self._streaming:
             self._streaming = True
             self.since_s = self.time.now_s()
+            self._sent_s = None  # a new stream: no gap since the last one
 
     def stop(self) -> None:
         """Stop streaming."""
         self._streaming = False
+        self._sent_s = None
+
+    def _since_sent_s(self) -> float:
+        """Simulation seconds since the latest setpoint sent (0 before the first): the larger of
+        the simulation time and the wall time x speed that passed (see the module doc)."""
+        if self._sent_s is None:
+            return 0.0
+        gap_s = self.time.now_s() - self._sent_s
+        speed = self.time.speed
+        if math.isfinite(speed):
+            gap_s = max(gap_s, (time.monotonic() - self._sent_wall_s) * speed)
+        return gap_s
+
+    def silent_s(self) -> float:
+        """How long the started stream has sent nothing, simulation s (0 while stopped)."""
+        return self._since_sent_s() if self._streaming else 0.0
+
+    def take_gap_s(self) -> float:
+        """The longest gap between two setpoints sent since the last call, simulation s (0:
+        none); resets it."""
+        gap_s, self._longest_gap_s = self._longest_gap_s, 0.0
+        return gap_s
 
     def send(self, periodic: bool = True) -> None:
         """Send the current setpoint; `periodic` marks the stream's own ticks (whose wall times
@@ -202,7 +236,9 @@ class SetpointStream:
             )
         if self.link.send(msg):
             self.counters.setpoints_sent += 1
+            self._longest_gap_s = max(self._longest_gap_s, self._since_sent_s())
             wall = time.monotonic()
+            self._sent_s, self._sent_wall_s = now, wall
             if periodic:
                 self.setpoint_wall_s.append(wall)
             firsts = self.first_setpoint_wall_s

@@ -6,9 +6,14 @@ stream keeps running meanwhile (the uplink may still work). When heartbeats retu
 bridge is flying the mission, the bridge re-enters OFFBOARD if the
 vehicle took its loss action. A radio gap shorter than link loss but longer than PX4's
 offboard-loss timeout (`interruption_after_s`) also leaves the vehicle in hold: after such a gap
-in its position stream, the bridge re-enters OFFBOARD once the vehicle reports the hold. A mode
-change by anyone else while the link is up is respected (no re-entry). Pure state: the bridge
-calls `observe` with each status and runs the re-entry itself (docs/reliability.md).
+in its position stream, the bridge re-enters OFFBOARD once the vehicle reports the hold. So it does
+after a gap in its own setpoint stream (the uplink: a stalled process, or a simulation catching up
+after a pause, while positions kept coming) longer than the offboard-loss timeout less one
+setpoint period (`uplink_gap_limit_s`: the vehicle stamps setpoints when they arrive), and after
+the vehicle announces the offboard loss itself (a STATUSTEXT: a one-way gap the bridge cannot
+see). A mode change by anyone else while the link is up is respected (no re-entry). Pure state:
+the bridge calls `observe_uplink` and `observe` with each status and runs the re-entry itself
+(docs/reliability.md).
 """
 
 from __future__ import annotations
@@ -24,7 +29,8 @@ log = logging.getLogger(__name__)
 
 
 class LinkWatch:
-    """Follows one vehicle's link-state transitions and position-stream gaps.
+    """Follows one vehicle's link-state transitions and the gaps of its position and setpoint
+    streams.
 
     Args:
         settings: The bridge's settings (index, link_lost_after_s, interruption_after_s).
@@ -46,6 +52,15 @@ class LinkWatch:
         """Simulation time of the first `observe`: positions stamped before it are not compared
         (a bridge fed by the world's clock stamps what it hears before the first clock message
         with 0, and that is no time the vehicle was heard at)."""
+        self._uplink_gap_s: float | None = None
+        """The longest setpoint-stream gap of the re-entry watch, not counted yet (it is counted
+        and logged if the vehicle's hold follows: an uplink gap alone need not have cost
+        anything)."""
+        self._loss_reported = False
+        """The vehicle announced the offboard loss during the re-entry watch (not counted yet)."""
+        self._uplink_silent = False
+        """The setpoint stream is silent for longer than `uplink_gap_limit_s` now: no re-entry
+        until it runs again (the vehicle refuses OFFBOARD without a recent setpoint)."""
 
     @property
     def index(self) -> int:
@@ -56,6 +71,71 @@ class LinkWatch:
     def _window_s(self) -> float:
         """How long after a gap a mode change is the gap's: 3 x interruption_after_s + 2 s."""
         return 3.0 * self.settings.interruption_after_s + 2.0
+
+    @property
+    def uplink_gap_limit_s(self) -> float:
+        """A gap in the setpoint stream longer than this may have cost the vehicle its
+        OFFBOARD: interruption_after_s (the vehicle's COM_OF_LOSS_T) less one setpoint period,
+        for the jitter of the vehicle stamping setpoints on arrival (at least half of it)."""
+        s = self.settings
+        t = s.interruption_after_s
+        return max(t - 1.0 / s.setpoint_rate_hz, 0.5 * t)
+
+    def observe_uplink(self, gap_s: float, silent_s: float, now_s: float) -> None:
+        """Take the setpoint stream's state at simulation time `now_s`: `gap_s`, its longest
+        gap between two setpoints since the last call, and `silent_s`, how long it has sent
+        nothing now (simulation s; setpoints.py). A gap longer than `uplink_gap_limit_s` opens
+        the re-entry watch, like a gap in the position stream; a silence that long marks a gap
+        (so that a hold seen before the stream resumes is not taken for an override)."""
+        limit = self.uplink_gap_limit_s
+        self._uplink_silent = silent_s > limit
+        if self._uplink_silent:
+            self._gap_until_s = max(self._gap_until_s, now_s + self._window_s)
+        if gap_s <= limit:
+            return
+        log.debug("vehicle %d: no setpoint sent for %.2f s", self.index, gap_s)
+        if not self._counted_watch(now_s):
+            self._uplink_gap_s = max(gap_s, self._uplink_gap_s or 0.0)
+        self._open_watch(now_s)
+
+    def offboard_loss_reported(self, now_s: float) -> None:
+        """The vehicle announced its offboard-loss failsafe (STATUSTEXT) at simulation time
+        `now_s`: it heard no setpoint for its timeout, whether or not the bridge saw a gap (a
+        one-way radio gap). Opens the re-entry watch, like a gap."""
+        if not self._counted_watch(now_s):
+            self._loss_reported = True
+        self._open_watch(now_s)
+
+    def _counted_watch(self, now_s: float) -> bool:
+        """A re-entry watch is open for a gap counted already (one in the position stream)."""
+        pending = self._uplink_gap_s is not None or self._loss_reported
+        return now_s <= self._reentry_watch_until_s and not pending
+
+    def _open_watch(self, now_s: float) -> None:
+        self._reentry_watch_until_s = now_s + self._window_s
+        self._gap_until_s = max(self._gap_until_s, now_s + self._window_s)
+
+    def _count_pending(self, mode: str) -> None:
+        """The vehicle left OFFBOARD after an uplink gap or its announced offboard loss: one
+        interruption, logged once with the gap's length."""
+        gap_s, reported = self._uplink_gap_s, self._loss_reported
+        self._uplink_gap_s, self._loss_reported = None, False
+        if gap_s is None and not reported:
+            return
+        self.counters.link_interruptions += 1
+        said = "; the vehicle reported the offboard loss" if reported else ""
+        if gap_s is None:
+            log.warning("vehicle %d: %s%s; link interrupted", self.index, mode.upper(), said)
+            return
+        log.warning(
+            "vehicle %d: %s after %.2f s without a setpoint sent (the offboard-loss timeout is "
+            "%.1f s)%s; link interrupted",
+            self.index,
+            mode.upper(),
+            gap_s,
+            self.settings.interruption_after_s,
+            said,
+        )
 
     def gap_recent(self, st: VehicleStatus, now_s: float) -> bool:
         """True while a mode change may be the offboard-loss action of a link gap: the link is
@@ -107,15 +187,20 @@ class LinkWatch:
                     st.position_s - last,
                 )
                 self.counters.link_interruptions += 1
-                self._reentry_watch_until_s = now_s + self._window_s
-                self._gap_until_s = now_s + self._window_s
+                self._uplink_gap_s, self._loss_reported = None, False  # this one is counted
+                self._open_watch(now_s)
+        if now_s > self._reentry_watch_until_s:
+            # The watch ended without a hold: the uplink gap cost nothing.
+            self._uplink_gap_s, self._loss_reported = None, False
+            return False
         if (
-            now_s <= self._reentry_watch_until_s
-            and not st.lost
+            not st.lost
             and st.mode != "offboard"
             and want_offboard
             and reentry_idle
+            and not self._uplink_silent
         ):
             self._reentry_watch_until_s = -math.inf
+            self._count_pending(st.mode)
             return True
         return False

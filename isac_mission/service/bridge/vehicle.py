@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import logging
 import math
 import time
@@ -52,7 +51,7 @@ from isac_mission.service.bridge.supervision import LinkWatch
 from isac_mission.service.bridge.telemetry import telemetry_message, vehicle_xy
 from isac_mission.timebase import SimTime
 from isac_mission.types import FloatArray
-from isac_mission.wire import Keys, TelemetryMsg, encode_telemetry
+from isac_mission.wire import Keys, TelemetryMsg, encode
 
 log = logging.getLogger(__name__)
 
@@ -359,18 +358,20 @@ class VehicleBridge:
         self._supervise(st)
         msg = self.telemetry(st)
         if msg is not None and self._bus is not None:
-            stamped = dataclasses.replace(msg, published_wall_s=time.time())
-            self._bus.publish(self.keys.telemetry(self.index), encode_telemetry(stamped))
+            stamped = msg.model_copy(update={"published_wall_s": time.time()})
+            self._bus.publish(self.keys.telemetry(self.index), encode(stamped))
             self.counters.telemetry_published += 1
 
     def _supervise(self, st: VehicleStatus) -> None:
-        """Follow link-state transitions (supervision.py); after a loss or an interruption that
-        left the vehicle in the offboard-loss HOLD or LAND, take it back to OFFBOARD; any other
-        exit from OFFBOARD is an override (operator.py, override.py)."""
+        """Follow link-state transitions and the gaps of both streams, positions and setpoints
+        (supervision.py); after a loss or an interruption that left the vehicle in the
+        offboard-loss HOLD or LAND, take it back to OFFBOARD; any other exit from OFFBOARD is an
+        override (operator.py, override.py)."""
         now = self.time.now_s()
         if st.mode == "offboard":
             self._offboard.awaiting = False
         idle = self._reentry is None or self._reentry.done()
+        self._watch.observe_uplink(self._stream.take_gap_s(), self._stream.silent_s(), now)
         if self._watch.observe(st, now, self._offboard.want, idle):
             if self._keeper.after_gap(st, now):
                 self._start_reentry()

@@ -26,11 +26,12 @@ from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.service.ground.startup import PlanningGate
 from isac_mission.wire import (
     MAX_REASON_CHARS,
+    ClockMsg,
     HealthMsg,
     Keys,
-    decode_clock,
-    decode_telemetry,
-    encode_health,
+    TelemetryMsg,
+    decode,
+    encode,
     rejection_reason,
 )
 
@@ -174,13 +175,13 @@ class BusLoop:
     # ------------------------------------------------------------------ common inputs
 
     def _on_clock(self, payload: bytes) -> None:
-        msg = decode_clock(payload)
+        msg = decode(ClockMsg, payload)
         self.t_s = max(self.t_s, msg.t_s)
         if msg.mission_t0_s is not None and self.mission_t0_s is None:
             self.mission_t0_s = msg.mission_t0_s
 
     def _on_telemetry(self, payload: bytes) -> None:
-        self.vehicles.on_telemetry(decode_telemetry(payload, n_uavs=self.s.M))
+        self.vehicles.on_telemetry(decode(TelemetryMsg, payload, n_uavs=self.s.M))
         self._update_vehicle_states()
 
     def _on_control(self, payload: bytes) -> None:
@@ -212,9 +213,14 @@ class BusLoop:
     def _publish_health(self, status: str) -> None:
         rep, slot = self.report, max(self.state.slot, 0)
         msg = HealthMsg(
-            slot, self.t_s, status, dict(rep.counters), rep.last_error, self.vehicles.status()
+            slot=slot,
+            t_s=self.t_s,
+            status=status,
+            counters=dict(rep.counters),
+            last_error=rep.last_error,
+            vehicles=self.vehicles.status(),
         )
         try:
-            self.bus.publish(self.keys.health, encode_health(msg))
+            self.bus.publish(self.keys.health, encode(msg))
         except Exception as err:  # the bus may already be closing at shutdown
             log.debug("health not published: %s", err)

@@ -33,8 +33,7 @@ from isac_mission.wire import (
     ControlReplyMsg,
     FleetMsg,
     Keys,
-    encode_control_reply,
-    encode_fleet,
+    encode,
     read_request,
     rejection_reason,
 )
@@ -132,25 +131,32 @@ class ControlDesk:
             log.warning("operator request %r refused: %s", read.request_id, outcome.reason)
         slot, t_s = max(self.state().slot, -1), self.t_s()
         if outcome.fleet_command is not None and read.request_id is not None:
-            fleet = FleetMsg(slot, t_s, read.request_id, outcome.fleet_command, outcome.vehicles)
-            self.bus.publish(self.keys.fleet, encode_fleet(fleet))
+            fleet = FleetMsg(
+                slot=slot,
+                t_s=t_s,
+                request_id=read.request_id,
+                command=outcome.fleet_command,
+                uavs=outcome.vehicles,
+            )
+            self.bus.publish(self.keys.fleet, encode(fleet))
         reply = ControlReplyMsg(
-            slot,
-            t_s,
-            read.request_id,
-            read.command,
-            outcome.accepted,
-            outcome.reason,
-            outcome.effect,
-            outcome.vehicles,
+            slot=slot,
+            t_s=t_s,
+            request_id=read.request_id,
+            command=read.command,
+            accepted=outcome.accepted,
+            reason=outcome.reason,
+            effect=outcome.effect,
+            vehicles=outcome.vehicles,
         )
-        self.bus.publish(self.keys.control_reply, encode_control_reply(reply))
+        self.bus.publish(self.keys.control_reply, encode(reply))
         return reply
 
     # ------------------------------------------------------------------ commands
 
     def _execute(self, msg: ControlMsg) -> Outcome:
         if msg.command == "set":
+            assert msg.params is not None  # set carries them (wire.control_models)
             return Outcome(True, "parameters valid", self._set(msg.params))
         every = tuple(range(self.n_uavs)) if msg.uav is None else (msg.uav,)
         if msg.command in ("hold", "land"):

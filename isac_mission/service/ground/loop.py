@@ -38,11 +38,10 @@ from isac_mission.wire import (
     DetectionMsg,
     PlanMsg,
     TrackMsg,
+    TruthMsg,
     collect_detections,
-    decode_detection,
-    decode_truth,
-    encode_plan,
-    encode_track,
+    decode,
+    encode,
 )
 
 log = logging.getLogger(__name__)
@@ -105,10 +104,10 @@ class GroundLoop(BusLoop):
     # ------------------------------------------------------------------ inputs
 
     def _on_detection(self, payload: bytes) -> None:
-        self.detections.add(decode_detection(payload, n_uavs=self.s.M), self.state.slot)
+        self.detections.add(decode(DetectionMsg, payload, n_uavs=self.s.M), self.state.slot)
 
     def _on_truth(self, payload: bytes) -> None:
-        msg = decode_truth(payload)
+        msg = decode(TruthMsg, payload)
         self.truth[msg.slot] = msg.target_x
 
     # ------------------------------------------------------------------ the slot machine
@@ -184,8 +183,16 @@ class GroundLoop(BusLoop):
     def _track_and_truth(self, n: int, record: SlotRecord) -> tuple[SlotRecord, FloatArray | None]:
         """Publish slot n's track; the record with the world's truth for slot n (if it came)."""
         b, j = self.state.belief, self.state.bound
-        track = TrackMsg(n, self.t_s, b.x, b.P, j.J, j.trace, time.time())
-        self._publish(self.keys.track, lambda: encode_track(track))
+        track = TrackMsg(
+            slot=n,
+            t_s=self.t_s,
+            x=b.x,
+            P=b.P,
+            J=j.J,
+            pcrb_trace=j.trace,
+            published_wall_s=time.time(),
+        )
+        self._publish(self.keys.track, lambda: encode(track))
         truth = self.truth.pop(n, None)
         if truth is not None:
             record = SlotRecord.from_dict(record.to_dict() | {"target_true": truth.tolist()})
@@ -279,8 +286,8 @@ class GroundLoop(BusLoop):
         else:
             plan = self._marked_if_late(job.slot, plan)
             pending = self.state.commit(job, plan)
-            msg = PlanMsg(pending.slot, self.t_s, pending.plan)
-            self._publish(self.keys.plan, lambda: encode_plan(msg))
+            msg = PlanMsg.from_plan(pending.slot, self.t_s, pending.plan)
+            self._publish(self.keys.plan, lambda: encode(msg))
             if plan.report.status == OPERATOR_HOLD:
                 log.info("slot %d: %s", pending.slot, plan.report.reason)
             elif plan.report.status != "ok":

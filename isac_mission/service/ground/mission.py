@@ -30,6 +30,13 @@ from isac_mission.types import (
 )
 
 
+def job_prediction(job: PlanningJob) -> SlotPrediction:
+    """The slot prediction a planning job was made from: its one target's belief."""
+    (target,) = job.targets
+    assert target.cov_pred is not None
+    return SlotPrediction(Gaussian(target.state_pred, target.cov_pred), target.prior_information)
+
+
 @dataclass(frozen=True)
 class PendingSlot:
     """What was decided for slot n before its measurements: prediction and plan."""
@@ -158,8 +165,7 @@ class MissionState:
             uav_v=v,
             prev_eta=self.eta,
             prev_assoc=self.assoc,
-            prediction=predicted.prediction,
-            J_pred=predicted.prior,
+            targets=(predicted.belief(self.model.motion),),
             excluded=excluded,
             prev_plan=prev_plan,
             operator_held=tuple(sorted(operator_held)),
@@ -169,7 +175,7 @@ class MissionState:
         """Adopt `plan` (from job.run(), or a fallback) as the plan of slot n+1."""
         if job.slot != self.slot + 1:
             raise ValueError(f"job for slot {job.slot}, but the next slot is {self.slot + 1}")
-        predicted = SlotPrediction(job.prediction, job.J_pred)
+        predicted = job_prediction(job)
         self.pending = PendingSlot(job.slot, predicted, plan, job.uav_xy, job.uav_v, job.excluded)
         self.last_plan = (job.slot, job.active, plan)
         return self.pending

@@ -4,7 +4,7 @@ The same slot recursion as the offline multi-target loop (experiment/multi_targe
 split where the live service waits for the network: after slot n's reports are in (or waited
 for: assembler.py), every track is updated (tracking/multi_target.py), the tracks go out as a
 `track_set`, the slot's trace line is written and flushed (records/multi_target.py), and slot
-n + 1 is planned for the predicted tracks (planning/multi_target.plan_for_tracks) on the planner
+n + 1 is planned for the predicted tracks (planning/multi_target.plan_tracks) on the planner
 thread within the time budget. The world's `truth_set` goes into the trace only (with the
 measurements' origins, for the metrics); the tracker never reads it.
 
@@ -41,7 +41,7 @@ from isac_mission.planning.multi_target import (
     check_multi_target_method,
     hold_without_track,
     multi_target_kit,
-    plan_for_tracks,
+    plan_tracks,
 )
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records.multi_target import MultiTargetSlot, end_line, header_line, slot_line
@@ -51,11 +51,8 @@ from isac_mission.service.ground.mission import leg_start_state
 from isac_mission.service.ground.planner_thread import consume_result, in_daemon_thread
 from isac_mission.service.ground.report import SLOTS_KEPT
 from isac_mission.service.ground.settings import GroundSettings
-from isac_mission.tracking.multi_target import (
-    MultiTargetTracker,
-    TrackerSettings,
-    TrackPrediction,
-)
+from isac_mission.tracking.multi_target import MultiTargetTracker, TrackerSettings
+from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan, SolveReport
 from isac_mission.wire import (
     DetectionSetMsg,
@@ -63,10 +60,8 @@ from isac_mission.wire import (
     TrackEntry,
     TrackSetMsg,
     TruthSetMsg,
-    decode_detection_set,
-    decode_truth_set,
-    encode_plan,
-    encode_track_set,
+    decode,
+    encode,
 )
 
 log = logging.getLogger(__name__)
@@ -172,9 +167,10 @@ class MultiTargetMission:
         s = self._scenario
         prev = self.last_plan if self.last_excluded == excluded else None
         if not excluded:
-            return plan_for_tracks(
+            planned = plan_tracks(
                 s, self.method, self.kit, predictions, uav_xy, self.eta, self.assoc, uav_v, prev
             )
+            return planned.planned_for, planned.plan
         active = tuple(m for m in range(s.M) if m not in excluded)
         if not active:
             # Nobody is served: every share 0, no BS (planning/fallback.hold_plan's rule).
@@ -189,7 +185,7 @@ class MultiTargetMission:
         assoc = None if self.assoc is None else self.assoc[idx]
         if assoc is not None and np.any(assoc < 0):
             assoc = None
-        planned_for, sub = plan_for_tracks(
+        planned = plan_tracks(
             kit.scenario,
             self.method,
             kit,
@@ -201,7 +197,7 @@ class MultiTargetMission:
             None if prev is None else active_part(prev, active),
             extra_keep_out_xy=uav_xy[list(excluded)],
         )
-        return planned_for, widen_plan(sub, uav_xy, excluded)
+        return planned.planned_for, widen_plan(planned.plan, uav_xy, excluded)
 
     def commit(
         self,
@@ -284,15 +280,15 @@ def track_set_message(slot: MultiTargetSlot, t_s: float) -> TrackSetMsg:
     """The `track_set` of a slot's tracks, stamped with the wall clock."""
     entries = tuple(
         TrackEntry(
-            t.track_id,
-            t.confirmed,
-            t.belief.x,
-            t.belief.P,
-            float(np.trace(t.bound.C[:2, :2])),
+            track_id=t.track_id,
+            confirmed=t.confirmed,
+            x=t.belief.x,
+            P=t.belief.P,
+            pcrb_position_trace=float(np.trace(t.bound.C[:2, :2])),
         )
         for t in slot.tracks
     )
-    return TrackSetMsg(slot.slot, t_s, entries, time.time())
+    return TrackSetMsg(slot=slot.slot, t_s=t_s, tracks=entries, published_wall_s=time.time())
 
 
 class MultiTargetGround(BusLoop):
@@ -363,10 +359,10 @@ class MultiTargetGround(BusLoop):
     # ------------------------------------------------------------------ inputs
 
     def _on_detection(self, payload: bytes) -> None:
-        self.detections.add(decode_detection_set(payload, n_uavs=self.s.M), self.state.slot)
+        self.detections.add(decode(DetectionSetMsg, payload, n_uavs=self.s.M), self.state.slot)
 
     def _on_truth(self, payload: bytes) -> None:
-        msg = decode_truth_set(payload)
+        msg = decode(TruthSetMsg, payload)
         if msg.slot > self.state.slot:
             self.truth[msg.slot] = msg
 
@@ -409,7 +405,7 @@ class MultiTargetGround(BusLoop):
         for old in [k for k in self.truth if k < n]:
             del self.truth[old]
         slot = self.state.process(n, msgs, truth, self._uav_positions(det_xy))
-        self._publish(self.keys.track, lambda: encode_track_set(track_set_message(slot, self.t_s)))
+        self._publish(self.keys.track, lambda: encode(track_set_message(slot, self.t_s)))
         latency_from = self.detections.last_detection_wall if msgs else None
         if latency_from is not None:
             self.report.last_detection_wall_s[n] = latency_from
@@ -476,8 +472,8 @@ class MultiTargetGround(BusLoop):
         self.planning = None
         try:
             st.commit(n, planned_for, plan, uav_xy, excluded)
-            msg = PlanMsg(n, self.t_s, plan)
-            self._publish(self.keys.plan, lambda: encode_plan(msg))
+            msg = PlanMsg.from_plan(n, self.t_s, plan)
+            self._publish(self.keys.plan, lambda: encode(msg))
             if plan.report.status not in ("ok", OPERATOR_HOLD):
                 self.report.last_error = f"slot {n}: {plan.report.reason}"
             latency = 0.0 if latency_from is None else time.monotonic() - latency_from

@@ -1,0 +1,98 @@
+"""How a target is believed to move: the one interface every predictor of the target takes.
+
+A motion model gives, for a step of dt_s seconds, the transition F [4, 4] and the process noise
+W [4, 4] of the state x = [x_m, y_m, vx_mps, vy_mps], and the predicted mean and covariance along
+a path of times (the leg samples of a slot, the slots of a horizon). The trackers, the bound's
+recursion, the planner's predicted target points and clearances, the offline truth and the
+simulated world all take one; none of them writes a motion model's equations itself.
+
+`ConstantVelocity` (eq. 3-4) is the one implementation. Pure numpy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.types import FloatArray
+
+
+@dataclass(frozen=True)
+class PredictedPath:
+    """The predicted target along times_s [T] (s after the belief's instant): means [T, 4]
+    (m, m/s) and covariances [T, 4, 4]."""
+
+    times_s: FloatArray
+    means: FloatArray
+    covariances: FloatArray
+
+
+class MotionModel(Protocol):
+    """A target's motion model: state [4] = (x_m, y_m, vx_mps, vy_mps)."""
+
+    def transition(self, dt_s: float) -> FloatArray:
+        """F [4, 4]: the mean's step over dt_s (s; negative steps back)."""
+        ...
+
+    def process_noise(self, dt_s: float) -> FloatArray:
+        """W [4, 4]: the covariance the step of dt_s (s) adds."""
+        ...
+
+    def position_after(self, state: Any, t_s: float) -> Any:
+        """The predicted position [2] t_s seconds after the instant of state [4], for a numpy
+        array or a symbolic vector (CasADi SX: the planner's NLPs build on it)."""
+        ...
+
+    def predicted_path(
+        self, mean: FloatArray, covariance: FloatArray | None, times_s: FloatArray
+    ) -> PredictedPath:
+        """The prediction from (mean [4], covariance [4, 4]; None: zeros) at each of times_s
+        [T] (s after their instant, non-negative)."""
+        ...
+
+
+@dataclass(frozen=True)
+class ConstantVelocity:
+    """Constant velocity with white-acceleration noise of intensity kappa_m2ps3 (eq. 3-4)."""
+
+    kappa_m2ps3: float
+
+    def transition(self, dt_s: float) -> FloatArray:
+        return transition_matrix(dt_s)
+
+    def process_noise(self, dt_s: float) -> FloatArray:
+        return process_noise(dt_s, self.kappa_m2ps3)
+
+    def position_after(self, state: Any, t_s: float) -> Any:
+        return state[:2] + t_s * state[2:]
+
+    def predicted_path(
+        self, mean: FloatArray, covariance: FloatArray | None, times_s: FloatArray
+    ) -> PredictedPath:
+        # F(t) P F(t)^T + W(t) block by block (pp, pv, vv: position, cross, velocity), in closed
+        # form so that each time costs a few vector operations.
+        t = np.asarray(times_s, dtype=float).reshape(-1)
+        x = np.asarray(mean, dtype=float)
+        P = np.zeros((4, 4)) if covariance is None else np.asarray(covariance, dtype=float)
+        means = np.empty((len(t), 4))
+        means[:, :2] = x[None, :2] + t[:, None] * x[None, 2:]
+        means[:, 2:] = x[None, 2:]
+        pp, pv, vv = P[:2, :2], P[:2, 2:], P[2:, 2:]
+        eye = np.eye(2)[None]
+        kappa = self.kappa_m2ps3
+        tt = t[:, None, None]
+        covariances = np.empty((len(t), 4, 4))
+        covariances[:, :2, :2] = (
+            pp[None]
+            + tt * (pv + pv.T)[None]
+            + (t**2)[:, None, None] * vv[None]
+            + (kappa * t**3 / 3)[:, None, None] * eye
+        )
+        cross = pv[None] + tt * vv[None] + (kappa * t**2 / 2)[:, None, None] * eye
+        covariances[:, :2, 2:] = cross
+        covariances[:, 2:, :2] = np.transpose(cross, (0, 2, 1))
+        covariances[:, 2:, 2:] = vv[None] + (kappa * t)[:, None, None] * eye
+        return PredictedPath(t, means, covariances)
