@@ -67,28 +67,34 @@ def resolved_method(method: str | None, s: Scenario, out_dir: Path, resume: bool
     return live_default_method(s.multi_target)
 
 
-def resume_problem(s: Scenario, trace: Path) -> str | None:
-    """Why `serve --resume` must not continue `trace` for `s` (None: it may): the trace is
-    complete (its last slot is N: nothing left to fly), it does not read, or `s` is a
-    multi-target mission (which cannot resume a trace yet). Reads the file, never writes it."""
+def resume_problem(s: Scenario, trace: Path, method: str) -> str | None:
+    """Why `serve --resume` must not continue `trace` for `s` flown with `method` (None: it
+    may): the trace is complete (its last slot is N: nothing left to fly), or it does not read;
+    on a multi-target mission also when it is not this mission's, method's and configuration's
+    multi-target trace, or its last slot line lacks what a restart needs
+    (service/ground/multi_target.py `resume_refusal`). Reads the file, never writes it."""
     from isac_mission.errors import MessageError
     from isac_mission.records.progress import trace_progress
 
-    if trace.exists():
-        try:
-            progress = trace_progress(trace)
-        except MessageError as err:
-            return f"cannot continue {trace}: {err}"
-        if progress.last_slot >= s.N:
-            return (
-                f"the trace is complete: {progress.last_slot}/{s.N} slots in {trace}; nothing "
-                "to resume (start a new mission without --resume, or in another --out)"
-            )
-    if s.multi_target:
+    if not trace.exists():
+        return None
+    try:
+        progress = trace_progress(trace)
+    except MessageError as err:
+        return f"cannot continue {trace}: {err}"
+    if progress.last_slot >= s.N:
         return (
-            f"{s.mission_id} is a multi-target mission, which cannot resume a trace yet "
-            "(docs/service.md, 'Several intruders'); start it without --resume"
+            f"the trace is complete: {progress.last_slot}/{s.N} slots in {trace}; nothing "
+            "to resume (start a new mission without --resume, or in another --out)"
         )
+    if s.multi_target:
+        from isac_mission.service.assembly import LiveOptions, live_trace_limits, planning_scenario
+        from isac_mission.service.ground.multi_target import live_trace_config, resume_refusal
+
+        # The config line the mission would write: it plans with the live settings.
+        planning = planning_scenario(s, LiveOptions())
+        config = live_trace_config(planning, method, live_trace_limits(s, planning))
+        return resume_refusal(trace, config, s.N)
     return None
 
 
@@ -195,7 +201,7 @@ def _checked_options(command: LiveCommand, s: Scenario) -> tuple[LiveOptions, st
             err_console.print(f"--method: {err}", highlight=False)
             raise typer.Exit(2) from None
     if command.resume:
-        problem = resume_problem(s, out_dir / f"trace_{method}.jsonl")
+        problem = resume_problem(s, out_dir / f"trace_{method}.jsonl", method)
         if problem is not None:
             err_console.print(f"--resume: {problem}", highlight=False, markup=False)
             raise typer.Exit(2)

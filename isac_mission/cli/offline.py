@@ -10,14 +10,19 @@ import typer
 from rich.table import Table
 
 from isac_mission.cli.app import ConfigArg, app, console, err_console, load_or_exit
-from isac_mission.planning.registry import methods_help
+from isac_mission.planning.registry import max_targets, methods_help
 from isac_mission.quiet import quiet_highs_banner
 
 if TYPE_CHECKING:
     from isac_mission.config import Scenario
 
-DEFAULT_METHODS = "proposed,sd,aba,crb,horizon"
-DEFAULT_MULTI_TARGET_METHODS = "proposed,sd,aba,crb"
+DEFAULT_METHODS = ("proposed", "sd", "aba", "crb", "horizon")
+
+
+def default_methods(several_targets: bool) -> str:
+    """`simulate`'s methods without --methods: DEFAULT_METHODS, on a scenario of several targets
+    those the registry says plan for several (Registered.max_targets)."""
+    return ",".join(m for m in DEFAULT_METHODS if not several_targets or max_targets(m) != 1)
 
 
 @app.command("check-config")
@@ -91,8 +96,8 @@ def simulate(
     methods: Annotated[
         str | None,
         typer.Option(
-            help=f"Comma-separated: {methods_help()}. Default: {DEFAULT_METHODS}; on a "
-            f"multi-target scenario {DEFAULT_MULTI_TARGET_METHODS} (horizon plans one target)."
+            help=f"Comma-separated: {methods_help()}. Default: {default_methods(False)}; on a "
+            f"multi-target scenario {default_methods(True)} (the others plan one target)."
         ),
     ] = None,
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 2,
@@ -113,7 +118,7 @@ def simulate(
     s = load_or_exit(config)
     if live_settings:
         s = _with_live_settings(s)
-    default = DEFAULT_MULTI_TARGET_METHODS if s.multi_target else DEFAULT_METHODS
+    default = default_methods(s.multi_target)
     chosen = [m.strip() for m in (methods or default).split(",") if m.strip()]
     unknown = sorted(set(chosen) - set(METHODS))
     if unknown or not chosen:

@@ -40,7 +40,7 @@ def sweep(
         int | None,
         typer.Option(min=0, help="Base seed (default: the grid's, else the config's)."),
     ] = None,
-    plots: Annotated[bool, typer.Option(help="Write RMSE-vs-parameter PNGs.")] = True,
+    plots: Annotated[bool, typer.Option(help="Write RMSE- (or GOSPA-) vs-parameter PNGs.")] = True,
     live_settings: Annotated[
         bool,
         typer.Option(

@@ -350,15 +350,16 @@ def multi_target_reasons(s: Scenario) -> list[str]:
 
 
 def single_target_problem(s: Scenario) -> str | None:
-    """Why `sweep` and `replay` cannot take `s` yet, or None: the multi-target path (several
-    targets, false alarms, an SNR detection model, a target that turns, comes late or must be
-    found) has its tracker, its offline closed loop (`simulate`) and its live service (`run`,
-    `serve`, `sim`), but not yet a sweep or a replay."""
+    """Why `replay` (and `closed_loop.run_closed_loop`, the labelled target's loop) cannot take
+    `s` yet, or None: the multi-target path (several targets, false alarms, an SNR detection
+    model, a target that turns, comes late or must be found) has its tracker, its offline closed
+    loop (`simulate`, `sweep`) and its live service (`run`, `serve`, `sim`), but not yet a
+    replay."""
     if not s.multi_target:
         return None
     why = "targets/detection" if multi_target_reasons(s) else "tracker.kind multi"
     return (
         f"{why}: this scenario takes the multi-target path (docs/model.md, "
-        "'Several targets'): `simulate`, `run`, `serve` and `sim` fly it; `sweep` and "
-        "`replay` take single-target scenarios only, so far"
+        "'Several targets'): `simulate`, `sweep`, `run`, `serve` and `sim` fly it; "
+        "`replay` takes single-target scenarios only, so far"
     )

@@ -13,6 +13,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from isac_mission.tracking.gospa import CUTOFF_M
+
 
 class Section(BaseModel):
     """Base of every scenario section: frozen, unknown keys rejected."""
@@ -230,7 +232,7 @@ class MultiTrackerConfig(Section):
         60.0, gt=0, description="The fastest intruder: a faster new track is clutter, m/s."
     )
     gospa_cutoff_m: float = Field(
-        10.0, gt=0, description="GOSPA's cut-off c, m (p = 2, alpha = 2)."
+        CUTOFF_M, gt=0, description="GOSPA's cut-off c, m (p = 2, alpha = 2)."
     )
 
     @model_validator(mode="after")

@@ -33,6 +33,7 @@ from isac_mission.experiment.comparison import pooled, run_figures
 from isac_mission.nlp_cache import CompiledNlpCache
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord, TraceWriter
+from isac_mission.tracking.gospa import CUTOFF_M, mission_gospa
 
 # The paper's Section IV: % reduction of the proposed method's location and velocity error
 # against SD, ABA and CRB-criterion.
@@ -70,14 +71,17 @@ class MethodSummary:
     vel_rmse_from2: float = math.nan
     fallbacks: dict[str, int] = field(default_factory=dict)
     """Slots whose method's answer was not flown, by kind (SolveReport.fallback)."""
+    gospa_m: float = math.nan
+    """The mission-mean GOSPA (m) of the estimated target position, over slots 1..N and runs
+    (tracking/gospa.py; one target: min(error, c)), the figure reported for several targets."""
 
     @property
     def pcrb_total(self) -> float:
         return self.pcrb_pos + self.pcrb_vel
 
 
-def summarize(results: Sequence[RunResult]) -> MethodSummary:
-    """Aggregate the runs of one method."""
+def summarize(results: Sequence[RunResult], gospa_cutoff_m: float = CUTOFF_M) -> MethodSummary:
+    """Aggregate the runs of one method (GOSPA with cut-off gospa_cutoff_m, m)."""
     err = np.array([r.est - r.true for r in results])  # [R, N, 4]
     C = np.array([r.pcrb for r in results])  # [R, N, 4, 4]
     loc_se = np.sum(err[..., :2] ** 2, axis=-1)
@@ -104,6 +108,16 @@ def summarize(results: Sequence[RunResult]) -> MethodSummary:
         loc_rmse_from2=figures["loc_rmse"],
         vel_rmse_from2=figures["vel_rmse"],
         fallbacks=dict(Counter(f for r in results for f in r.fallback if f)),
+        gospa_m=float(
+            np.mean(
+                [
+                    mission_gospa(
+                        list(r.true[:, None, :2]), list(r.est[:, None, :2]), gospa_cutoff_m
+                    )[1]
+                    for r in results
+                ]
+            )
+        ),
     )
 
 

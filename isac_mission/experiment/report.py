@@ -94,6 +94,17 @@ def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
     return t
 
 
+def gospa_table(summaries: Sequence[MethodSummary], cutoff_m: float) -> Table:
+    """One row per method: the mission-mean GOSPA and the target's mean position bound, the
+    figures a scenario of several targets reports per target (experiment/multi_target_report.py)."""
+    t = Table(title=f"GOSPA (c = {cutoff_m:g} m, p = 2) and the target's bound")
+    for col in ("method", "GOSPA m", "tr(PCRB_pos) m²"):
+        t.add_column(col, justify="right" if col != "method" else "left")
+    for s in summaries:
+        t.add_row(LABELS.get(s.method, s.method), f"{s.gospa_m:.4g}", f"{s.pcrb_pos:.4g}")
+    return t
+
+
 def figures_table(summaries: Sequence[MethodSummary], title: str) -> Table:
     """One row per method: whole tr(PCRB) (mission mean, slots 11..N, second half), location and
     velocity RMSE over slots 2..N pooled over runs, MSE / tr(PCRB_pos), plan time."""
@@ -324,10 +335,12 @@ def simulate_report(
             progress=lambda m, r: bar.advance(task),
             workers=workers,
         )
-    summaries: dict[str, MethodSummary] = {m: summarize(results[m]) for m in methods}
+    cutoff_m = s.multi_tracker.gospa_cutoff_m
+    summaries: dict[str, MethodSummary] = {m: summarize(results[m], cutoff_m) for m in methods}
     print_table(
         console, summary_table(list(summaries.values()), f"{s.mission_id}: {runs_text(runs)}")
     )
+    print_table(console, gospa_table(list(summaries.values()), cutoff_m))
     rows = reduction_rows(summaries) if BASELINE in summaries else []
     bench_rows = benchmark_rows(summaries) if BASELINE in summaries else []
     if bench_rows:

@@ -23,7 +23,8 @@ class TraceProgress:
     """A trace's progress: slots, the complete slot lines on disk; last_slot, the number of the
     last of them (0: none); multi_target, a multi-target trace; config, its config line (empty
     when the file has no complete line); end, how its last run ended when its `end` line follows
-    the last slot (`Trace.end`; None: killed, offline, or no line yet)."""
+    the last slot (`Trace.end`; None: killed, offline, or no line yet); last_line: a
+    multi-target trace's last slot line as parsed (None: no slot, or a single-target trace)."""
 
     path: Path
     slots: int
@@ -31,6 +32,7 @@ class TraceProgress:
     multi_target: bool
     config: dict[str, Any]
     end: MissionEnd | None = None
+    last_line: dict[str, Any] | None = None
 
 
 def _multi_target_progress(path: Path, lines: list[bytes]) -> TraceProgress:
@@ -40,6 +42,7 @@ def _multi_target_progress(path: Path, lines: list[bytes]) -> TraceProgress:
     head = loads_line(lines[0].decode("utf-8"))
     numbers: list[int] = []
     ends: list[MissionEnd] = []
+    last_line: dict[str, Any] | None = None
     for lineno, raw in enumerate(lines[1:], start=2):
         if not raw.strip():
             continue
@@ -56,9 +59,10 @@ def _multi_target_progress(path: Path, lines: list[bytes]) -> TraceProgress:
         if numbers and slot <= numbers[-1]:
             raise MessageError(f"{path}: line {lineno}: slot {slot} after slot {numbers[-1]}")
         numbers.append(slot)
+        last_line = obj
     last = numbers[-1] if numbers else 0
     end = ends[-1] if ends and ends[-1].last_slot == last else None
-    return TraceProgress(path, len(numbers), last, True, dict(head["config"]), end)
+    return TraceProgress(path, len(numbers), last, True, dict(head["config"]), end, last_line)
 
 
 def trace_progress(path: str | Path) -> TraceProgress:

@@ -305,6 +305,19 @@ async def _solver_kit(
     return kit, compiled, ahead
 
 
+def live_trace_limits(s: Scenario, planning: Scenario) -> dict[str, object]:
+    """What a live trace's config line states over the planning scenario's: the vehicles' real
+    limits (v_max, r_th, d_safe), and the planner's budget beside them (plan_*)."""
+    return {
+        "v_max": s.v_max,
+        "r_th": s.r_th,
+        "d_safe": s.d_safe,
+        "plan_v_max": planning.v_max,
+        "plan_r_th": planning.r_th,
+        "plan_d_safe": planning.d_safe,
+    }
+
+
 def _ground_loop(
     s: Scenario,
     planning: Scenario,
@@ -323,15 +336,7 @@ def _ground_loop(
         plan_rate_factor=opts.plan_rate_factor,
         plan_budget_s=opts.plan_budget_s,
         wait_for_telemetry=True,  # the bridges publish it (ground/startup.py)
-        # The trace states the vehicles' real limit; the planner's budget goes beside it.
-        trace_config={
-            "v_max": s.v_max,
-            "r_th": s.r_th,
-            "d_safe": s.d_safe,
-            "plan_v_max": planning.v_max,
-            "plan_r_th": planning.r_th,
-            "plan_d_safe": planning.d_safe,
-        },
+        trace_config=live_trace_limits(s, planning),
     )
     if s.multi_target:
         initial_errors = world.initial_errors if world is not None else None

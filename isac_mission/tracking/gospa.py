@@ -22,6 +22,9 @@ from scipy.optimize import linear_sum_assignment
 
 from isac_mission.types import FloatArray, IntArray
 
+CUTOFF_M = 10.0
+"""The scenarios' default GOSPA cut-off c (m; tracker.multi.gospa_cutoff_m)."""
+
 UNASSIGNED = -1
 """Gospa.assignment of a true point with no estimate within the cut-off."""
 
@@ -46,7 +49,11 @@ class Gospa:
 
 
 def gospa(
-    truth: FloatArray, estimates: FloatArray, c: float = 10.0, p: float = 2.0, alpha: float = 2.0
+    truth: FloatArray,
+    estimates: FloatArray,
+    c: float = CUTOFF_M,
+    p: float = 2.0,
+    alpha: float = 2.0,
 ) -> Gospa:
     """GOSPA between the true points truth [n, d] and the estimates [m, d] (module docstring)."""
     if not c > 0:

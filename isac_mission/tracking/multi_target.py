@@ -32,6 +32,10 @@ refutes the track. Two refutations in a row that agree move the track there, its
 refuted slot is no hit for a track not yet confirmed, so a ghost is not confirmed before its
 repair.
 
+A restart: `saved` gives what the tracker carries from a slot to the next (`TrackerState`,
+written to a live trace's slot line: records/multi_target.py), and `restored` makes a tracker
+that goes on from it exactly (`serve --resume`).
+
 Pure: numpy and scipy. Shapes: M UAVs, T tracks, k_m measurements of UAV m.
 """
 
@@ -141,6 +145,36 @@ class TrackerSettings:
         )
 
 
+@dataclass(frozen=True)
+class SavedTrack:
+    """One track as it goes from one slot to the next (what `MultiTargetTracker.saved` keeps):
+    track_id, confirmed, belief (x [4], P [4, 4]), information J [4, 4] of its bound, hits: its
+    hits within its first `confirm_window` slots (what confirmation counts), misses_in_row: the
+    slots in a row without a hit (what deletion counts), refuted: a refutation a UAV made this
+    slot, waiting for the next slot's to agree (module docstring, "A ghost"; None: none)."""
+
+    track_id: int
+    confirmed: bool
+    belief: Gaussian
+    information: FloatArray
+    hits: tuple[bool, ...]
+    misses_in_row: int
+    refuted: Gaussian | None = None
+
+
+@dataclass(frozen=True)
+class TrackerState:
+    """Everything the tracker carries from one slot's update to the next slot's predict:
+    tracks (tentative and confirmed, in the tracker's order), candidates (the internal ones,
+    negative IDs, each a belief whose bound is its covariance: started this slot), next_id: the
+    ID the next new track gets (IDs never repeat). A restart continues from it exactly
+    (`MultiTargetTracker.restored`)."""
+
+    tracks: tuple[SavedTrack, ...]
+    candidates: tuple[Gaussian, ...]
+    next_id: int
+
+
 @dataclass
 class _Track:
     track_id: int
@@ -167,6 +201,57 @@ class MultiTargetTracker:
         self._next_id = 1
         self._next_candidate = 1
         self._gate = gate_threshold(settings.gate_prob)
+
+    @classmethod
+    def restored(cls, settings: TrackerSettings, state: TrackerState) -> MultiTargetTracker:
+        """The tracker as it was when `saved` gave `state` (after a slot's update): the same
+        tracks in the same order, with their IDs, beliefs, bounds, hits and refutations, the
+        same candidates, and the same next ID; it goes on exactly as that tracker would.
+        ValueError for IDs that are not positive, repeat, or are not below next_id."""
+        ids = [t.track_id for t in state.tracks]
+        if any(i <= 0 for i in ids) or len(set(ids)) != len(ids):
+            raise ValueError(f"track IDs must be positive and distinct, got {ids}")
+        if ids and max(ids) >= state.next_id:
+            raise ValueError(f"next track ID {state.next_id} is not above the IDs {ids}")
+        tracker = cls(settings)
+        for t in state.tracks:
+            refuted = None if t.refuted is None else _copied(t.refuted)
+            tracker._tracks.append(
+                _Track(
+                    t.track_id,
+                    _copied(t.belief),
+                    Bound.from_information(np.array(t.information, dtype=np.float64)),
+                    t.confirmed,
+                    hits=list(t.hits),
+                    misses_in_row=t.misses_in_row,
+                    refuted=refuted,
+                )
+            )
+        for belief in state.candidates:
+            tracker._start(_copied(belief), confirmed=False, candidate=True)
+        tracker._next_id = state.next_id
+        return tracker
+
+    def saved(self) -> TrackerState:
+        """What the tracker carries to the next slot (call after `update`): `restored` gives
+        it back."""
+        window = self.settings.confirm_window
+        tracks = tuple(
+            SavedTrack(
+                t.track_id,
+                t.confirmed,
+                _copied(t.belief),
+                t.bound.J.copy(),
+                tuple(t.hits[:window]),
+                t.misses_in_row,
+                None if t.refuted is None else _copied(t.refuted),
+            )
+            for t in self._tracks
+            if t.track_id > 0
+        )
+        # The candidates are last in the tracker's order: started after the slot's management.
+        candidates = tuple(_copied(t.belief) for t in self._tracks if t.track_id < 0)
+        return TrackerState(tracks, candidates, self._next_id)
 
     def add_confirmed(self, belief: Gaussian) -> int:
         """Start a confirmed track from a known prior (its bound from the same covariance);
@@ -397,3 +482,8 @@ class MultiTargetTracker:
             and any(not outside_gate(o.belief, t.belief, self._gate) for o in old)
         ]
         self._tracks = [t for t in self._tracks if t.track_id not in deleted]
+
+
+def _copied(g: Gaussian) -> Gaussian:
+    """A belief with arrays of its own (writable float64)."""
+    return Gaussian(x=np.array(g.x, dtype=np.float64), P=np.array(g.P, dtype=np.float64))

@@ -9,6 +9,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import psutil
 import pytest
 import yaml
@@ -24,7 +25,8 @@ TIMING_FIELDS = {"solve_median_ms"}
 
 
 def _numbers(row: Any) -> dict[str, Any]:
-    return {k: v for k, v in asdict(row).items() if k not in TIMING_FIELDS}
+    """Every field but the timings and a multi-target run's figures (compared on their own)."""
+    return {k: v for k, v in asdict(row).items() if k not in TIMING_FIELDS | {"figures"}}
 
 
 def _listening_hosts() -> set[str]:
@@ -92,6 +94,51 @@ def test_dask_sweep_equals_serial_and_binds_loopback() -> None:
     assert agg_serial == agg_dask
     assert len({s["loc_rmse"] for s in agg_serial}) > 1
     assert {r.seed for r in serial} == {3, 4}
+
+
+def _same_figures(a: TaskRow, b: TaskRow) -> bool:
+    """The runs' multi-target figures are equal, array by array (NaN equal to NaN)."""
+    assert a.figures is not None and b.figures is not None
+    fa, fb = a.figures, b.figures
+    arrays = [(fa.gospa_m, fb.gospa_m), (fa.localisation_m2, fb.localisation_m2)]
+    arrays += [(fa.missed_m2, fb.missed_m2), (fa.false_m2, fb.false_m2)]
+    for ta, tb in zip(fa.targets, fb.targets, strict=True):
+        if (ta.seen_slot, ta.confirmed_slot, ta.id_switches) != (
+            tb.seen_slot,
+            tb.confirmed_slot,
+            tb.id_switches,
+        ):
+            return False
+        arrays += [(ta.squared_error_m2, tb.squared_error_m2), (ta.bound_m2, tb.bound_m2)]
+    return fa.false_track_runs == fb.false_track_runs and all(
+        np.array_equal(x, y, equal_nan=True) for x, y in arrays
+    )
+
+
+@pytest.mark.timeout(300)
+def test_dask_sweep_of_several_targets_equals_serial() -> None:
+    base = yaml.safe_load((ROOT / "config" / "multi-target.yaml").read_text())
+    base["targets"][1]["appears_s"] = 2  # in the scene within the short mission
+    grid = parse_grid(
+        {
+            "target_motion.process_noise_intensity": [0.25, 1.0],
+            "methods": ["proposed", "sd"],
+            "runs": 1,
+            "slots": 5,
+        }
+    )
+    points = expand_grid(base, grid)
+    tasks = make_tasks(points, grid, seed=3)
+    serial = run_serial(tasks)
+    with dask_client(None, workers=2) as client:
+        distributed_rows = run_dask(client, tasks)
+    for a, b in zip(serial, distributed_rows, strict=True):
+        assert repr(_numbers(a)) == repr(_numbers(b))  # the one target's columns: NaN
+        assert _same_figures(a, b)
+    agg_serial = [repr(_numbers(s)) for s in aggregate(serial, points)]
+    assert agg_serial == [repr(_numbers(s)) for s in aggregate(distributed_rows, points)]
+    assert all(s.tracking is not None for s in aggregate(serial, points))
+    assert len({r.gospa_m for r in serial}) > 1
 
 
 def test_cli_sweep_serial_writes_csv_and_plots(tmp_path: Path) -> None:

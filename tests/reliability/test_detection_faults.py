@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import asyncio
 import random
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -82,7 +81,9 @@ async def test_detection_faults_are_counted_and_never_used_twice(
     plan = await rig.plan(3)
     det3 = detections(s, 3, plan.plan.bandwidth_share, rng)
     first = det3[0]
-    tampered = replace(first, range_m=first.range_m + 80.0, radial_velocity_mps=-3.0)
+    tampered = first.model_copy(
+        update={"range_m": first.range_m + 80.0, "radial_velocity_mps": -3.0}
+    )
     rig.publish_detection(first)
     rig.publish_detection(tampered)
     for d in det3[1:]:
@@ -124,7 +125,9 @@ async def test_detection_faults_are_counted_and_never_used_twice(
     det7 = detections(s, 7, plan.plan.bandwidth_share, rng)
     rig.publish_raw(0, payload_with(det7[0], range_m="NaN"))
     rig.publish_raw(2, payload_with(det7[2], range_m=float("nan")))
-    missed = replace(det7[1], range_m=float("nan"), radial_velocity_mps=float("nan"))
+    missed = det7[1].model_copy(
+        update={"range_m": float("nan"), "radial_velocity_mps": float("nan")}
+    )
     rig.publish_detection(missed)
     await rig.until_counted("rejected payload non-finite", 1)
     await rig.until_counted("rejected detection.range_m", 1)

@@ -372,3 +372,13 @@ def test_the_multi_target_gospa_table_keeps_the_convention(
     assert row["gospa_change_pct"][0] == pytest.approx(-20.0)
     if runs > 1:
         assert row["gospa_reduction_pct"] == pytest.approx([20.0, 20.0, 20.0])
+
+
+def test_a_single_target_summary_reports_its_gospa() -> None:
+    """One target, one estimate: GOSPA (c = 10 m, p = 2) is the position error up to c. Slot 1's
+    100 m error counts c; the others err_m (here 3 m, then 4 m in the second run)."""
+    s = summarize([_run("proposed", 1, 20, 2.0, 3.0), _run("proposed", 2, 20, 4.0, 4.0)])
+    want = np.mean([(10.0 + 19 * 3.0) / 20, (10.0 + 19 * 4.0) / 20])
+    assert s.gospa_m == pytest.approx(want, rel=1e-12)
+    far = summarize([_run("proposed", 1, 5, 1.0, 25.0)], gospa_cutoff_m=30.0)
+    assert far.gospa_m == pytest.approx((30.0 + 4 * 25.0) / 5, rel=1e-12)

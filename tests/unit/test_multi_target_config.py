@@ -95,19 +95,14 @@ def test_bad_multi_target_input_is_named(change: Any, message: str) -> None:
         parse_scenario(data, "bad")
 
 
-def test_sweep_refuses_the_multi_target_path_clearly() -> None:
+def test_replay_refuses_the_multi_target_path_clearly(tmp_path: Path) -> None:
+    # `sweep` flies it (tests/unit/test_sweep_multi_target.py); the trace is never read.
     result = CliRunner().invoke(
-        app,
-        [
-            "sweep",
-            "--grid",
-            str(ROOT / "config/grids/example.yaml"),
-            str(ROOT / "config" / "multi-target.yaml"),
-        ],
+        app, ["replay", str(ROOT / "config" / "multi-target.yaml"), str(tmp_path / "t.jsonl")]
     )
     assert result.exit_code == 2
     said = " ".join(result.output.split())  # rich wraps the message at the path's length
-    assert "multi-target path" in said and "`sweep` and `replay` take single-target" in said
+    assert "multi-target path" in said and "`replay` takes single-target" in said
 
 
 @pytest.mark.parametrize("command", ["run", "serve"])

@@ -3,6 +3,7 @@ paper comparison table states its sign convention."""
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import re
 
@@ -15,6 +16,7 @@ from isac_mission.experiment.report import (
     TABLE_WIDTH_NOT_TERMINAL,
     benchmark_rows,
     benchmark_table,
+    gospa_table,
     paper_change_pct,
     print_table,
     summary_table,
@@ -142,3 +144,16 @@ def test_a_terminal_keeps_its_own_width() -> None:
     print_table(console, summary_table(list(_summaries().values()), "paper: 20 runs"))
     plain = re.sub(r"\x1b\[[0-9;]*m", "", out.getvalue())
     assert max(len(line) for line in plain.splitlines()) <= 100
+
+
+def test_the_gospa_table_shows_each_methods_gospa_and_bound() -> None:
+    summaries = {
+        m: dataclasses.replace(s, gospa_m=0.5 + 0.25 * i)
+        for i, (m, s) in enumerate(_summaries().items())
+    }
+    out = io.StringIO()
+    print_table(Console(file=out), gospa_table(list(summaries.values()), 10.0))
+    text = out.getvalue()
+    assert "c = 10 m" in text
+    for s in summaries.values():
+        assert f"{s.gospa_m:.4g}" in text and f"{s.pcrb_pos:.4g}" in text

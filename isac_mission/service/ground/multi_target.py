@@ -12,8 +12,10 @@ What the single-target loop does and this one does too: plans wait for fresh tel
 start (startup.py's gate), a plan over budget is a hold (status "timeout"), invalid payloads are
 counted and dropped, operators' requests are answered (control.py; `set` changes R_th from the
 next slot), a vehicle out of the plan holds and the others plan around it (planning/fleet.py's
-kits and widening). What it does not do yet (docs/service.md, "Several intruders"): resume a
-trace.
+kits and widening), and `--resume` continues a trace after its last complete slot: the tracker
+restored from that line (records/multi_target.py `resume_point`), the gate closed until the
+vehicles report, the slots the world ran meanwhile traced `held` or `unobserved`
+(docs/service.md, "Several intruders").
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import logging
 import os
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO
@@ -32,7 +34,7 @@ import numpy as np
 
 from isac_mission.bus import ZenohBus
 from isac_mission.config import Scenario
-from isac_mission.errors import ConfigError
+from isac_mission.errors import ConfigError, MessageError
 from isac_mission.model.detections import UavReport
 from isac_mission.planning.fallback import NO_BS, OPERATOR_HOLD
 from isac_mission.planning.fleet import OPERATOR_HOLD_REASON, KitCache, active_part, widen_plan
@@ -44,13 +46,25 @@ from isac_mission.planning.multi_target import (
     plan_tracks,
 )
 from isac_mission.planning.slot import Method, SolverKit
-from isac_mission.records.multi_target import MultiTargetSlot, end_line, header_line, slot_line
+from isac_mission.records.multi_target import (
+    MultiTargetSlot,
+    ResumePoint,
+    config_differences,
+    end_line,
+    header_line,
+    resume_fields,
+    resume_point,
+    slot_line,
+)
+from isac_mission.records.progress import trace_progress
 from isac_mission.service.ground.assembler import DetectionAssembler
 from isac_mission.service.ground.bus_loop import BusLoop
 from isac_mission.service.ground.mission import leg_start_state
 from isac_mission.service.ground.planner_thread import consume_result, in_daemon_thread
 from isac_mission.service.ground.report import SLOTS_KEPT
 from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.service.ground.startup import HELD, UNOBSERVED
+from isac_mission.timebase import SlotTimeline
 from isac_mission.tracking.multi_target import MultiTargetTracker, TrackerSettings
 from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan, SolveReport
@@ -113,6 +127,31 @@ class MultiTargetMission:
         self.last_plan: SlotPlan | None = None
         self.last_excluded: tuple[int, ...] = ()
         """The vehicles the last committed plan left out (its prev_plan role needs the same)."""
+
+    @classmethod
+    def resumed(
+        cls,
+        s: Scenario,
+        kit: SolverKit,
+        method: Method,
+        point: ResumePoint,
+        initial_errors: FloatArray | None = None,
+    ) -> MultiTargetMission:
+        """Continue after a trace's slot line (`resume_point`): its tracker (tracks, IDs,
+        candidates, next ID), its plan's shares and BSs; no last plan (the vehicles were not
+        flying this loop's plan). ValueError when the line does not fit `s`."""
+        mission = cls(s, kit, method, initial_errors)
+        if point.slot >= s.N:
+            raise ValueError(f"slot {point.slot} is the mission's last ({s.N}): nothing to resume")
+        if point.plan_eta.shape != (s.M,) or point.assoc.shape != (s.M,):
+            raise ValueError(f"slot {point.slot}'s line is not for {s.M} UAVs")
+        mission.tracker = MultiTargetTracker.restored(
+            TrackerSettings.from_scenario(s), point.tracker
+        )
+        mission.slot = point.slot
+        mission.eta = np.array(point.plan_eta, dtype=float)
+        mission.assoc = np.array(point.assoc, dtype=np.int64)
+        return mission
 
     @property
     def scenario(self) -> Scenario:
@@ -240,6 +279,7 @@ class MultiTargetMission:
             uav_xy[m] = msg.uav_xy_m
             measurements.append(msg.measurements)
         update = self.tracker.update(measurements, uav_xy, eta, self.kit.sensing)
+        saved = self.tracker.saved()
         reports = tuple(
             UavReport(z, _origins(truth, m, len(z))) for m, z in enumerate(measurements)
         )
@@ -259,7 +299,95 @@ class MultiTargetMission:
             reports,
             update.tracks,
             pending.planned_for,
+            saved,
         )
+
+    def skip(
+        self,
+        n: int,
+        msgs: dict[int, DetectionSetMsg],
+        truth: TruthSetMsg | None,
+        compute_xy: FloatArray,
+        why: str,
+    ) -> MultiTargetSlot:
+        """Slot n = slot + 1 ran without a plan of this loop (after a resume or a stall:
+        startup.py): its pending plan, if any, is dropped; the tracks are predicted (unless the
+        pending plan's prediction already did) and take the reports that arrived, with the shares
+        they were measured with. Status `held`, or `unobserved` when nothing arrived; a UAV
+        without a report has a null position in the line (compute_xy [M, 2], finite, is used
+        for the computation only, where it contributes nothing)."""
+        if n != self.slot + 1:
+            raise ValueError(f"slot {n} is not the next slot {self.slot + 1}")
+        s = self._scenario
+        if self.pending is None:
+            self.start_known_tracks()
+            self.tracker.predict()
+        known = np.full((s.M, 2), np.nan)
+        eta = np.array(self.eta, dtype=float)
+        for m, msg in msgs.items():
+            known[m] = msg.uav_xy_m
+            eta[m] = msg.bandwidth_share
+        status = HELD if msgs else UNOBSERVED
+        reason = (
+            f"{status}: no plan of the ground loop for this slot ({why}); "
+            f"{len(msgs)} of {s.M} reports"
+        )
+        assoc = self.assoc if self.assoc is not None else np.full(s.M, NO_BS, dtype=np.int64)
+        plan = SlotPlan(
+            known, assoc, eta, float("nan"), SolveReport(status, reason, fallback=status)
+        )
+        self.pending = PendingPlan(n, plan, 0, np.asarray(compute_xy, dtype=float))
+        slot = self.process(n, msgs, truth, compute_xy)
+        self.last_plan = None  # this slot had no plan of ours: the next one starts afresh
+        return replace(slot, uav_xy_m=known)
+
+
+def live_trace_config(
+    planning: Scenario, method: str, limits: Mapping[str, object]
+) -> dict[str, object]:
+    """The config line of a live multi-target trace: the planning scenario's config, its seed
+    and the method, and `limits` over them (GroundSettings.trace_config: the vehicles' real
+    limits beside the planner's, service/assembly.py `live_trace_limits`)."""
+    return planning.trace_config() | {"seed": planning.seed, "method": method} | dict(limits)
+
+
+def resume_refusal(path: Path, config: Mapping[str, object], n_slots: int) -> str | None:
+    """Why the multi-target trace at `path` must not be continued by a mission that writes
+    `config` as its config line (None: it may): it does not read, it is a single-target trace,
+    it is complete (slot N = n_slots traced), it is another mission's, method's or config's, or
+    its last slot line lacks what a restart needs (a trace written before resume existed).
+    Reads the file, never writes it."""
+    try:
+        progress = trace_progress(path)
+    except MessageError as err:
+        return f"cannot continue {path}: {err}"
+    if not progress.config:
+        return None  # killed before its config line was complete: a new trace is started
+    if not progress.multi_target:
+        return f"{path} is a single-target trace, not a multi-target mission's"
+    if progress.last_slot >= n_slots:
+        return (
+            f"the trace is complete: {progress.last_slot}/{n_slots} slots in {path}; nothing "
+            "to resume (start a new mission without --resume, or in another --out)"
+        )
+    fresh = "start a new mission without --resume, or in another --out"
+    theirs = progress.config
+    for key, what in (("mission_id", "mission"), ("method", "method")):
+        if theirs.get(key) != config.get(key):
+            return (
+                f"{path} is a trace of {what} {theirs.get(key)!r}, not {config.get(key)!r}; "
+                + fresh
+            )
+    if progress.last_line is not None:
+        try:
+            resume_point(progress.last_line)
+        except MessageError as err:
+            return f"cannot continue {path}: {err}"
+    differ = config_differences(theirs, config)
+    if differ:
+        shown = ", ".join(differ[:6]) + (f" and {len(differ) - 6} more" if len(differ) > 6 else "")
+        return f"{path} was flown with another configuration (it differs in {shown}); {fresh}"
+    return None
 
 
 def _origins(truth: TruthSetMsg | None, m: int, k: int) -> IntArray:
@@ -306,15 +434,11 @@ class MultiTargetGround(BusLoop):
         on_slot: Callable[[MultiTargetSlot, float], None] | None = None,
         initial_errors: FloatArray | None = None,
     ) -> None:
-        if settings.resume:
-            raise ConfigError(
-                f"{scenario.mission_id}: a multi-target mission cannot resume a trace yet "
-                "(docs/service.md, 'Several intruders'); start it without --resume"
-            )
         super().__init__(scenario, bus, settings)
         self.state = MultiTargetMission(
             scenario, kit or multi_target_kit(scenario), settings.method, initial_errors
         )
+        self.initial_errors = initial_errors
         self.on_slot = on_slot
         self.slots: deque[MultiTargetSlot] = deque(maxlen=SLOTS_KEPT)
         """The last SLOTS_KEPT slots (the trace keeps every one)."""
@@ -323,26 +447,60 @@ class MultiTargetGround(BusLoop):
         )
         self.truth: dict[int, TruthSetMsg] = {}
         self._trace: IO[str] | None = None
+        self.last_traced = 0
+        """The last slot in the trace (a resumed trace's last slot before this run's)."""
 
     # ------------------------------------------------------------------ lifecycle
 
+    def trace_config(self) -> dict[str, object]:
+        """The config line this loop writes (docs/trace.md)."""
+        return live_trace_config(self.s, self.settings.method, self.settings.trace_config)
+
     def _open_trace(self) -> None:
+        """Create the trace with its config line, or (settings.resume) continue it after its
+        last complete slot: a torn last line is cut off, and the mission goes on from the last
+        slot line (ConfigError when the trace is another mission's or config's, or its line
+        cannot be continued). A trace killed before its config line was complete starts
+        afresh."""
         path = self.settings.trace_path
         if path is None:
             return
         Path(path).parent.mkdir(parents=True, exist_ok=True)
-        config = (
-            self.s.trace_config()
-            | {"seed": self.s.seed, "method": self.settings.method}
-            | self.settings.trace_config
-        )
+        if self.settings.resume and path.exists() and b"\n" in path.read_bytes():
+            self._resume_trace(path)
+            return
+        if self.settings.resume and path.exists():
+            log.warning("%s has no complete line; starting a new trace", path)
         self._trace = open(path, "w", encoding="utf-8")  # noqa: SIM115 (closed in run)
-        self._write_line(header_line(config))
+        self._write_line(header_line(self.trace_config()))
+
+    def _resume_trace(self, path: Path) -> None:
+        """Continue the trace at `path` (see _open_trace)."""
+        refusal = resume_refusal(path, self.trace_config(), self.s.N)
+        if refusal is not None:
+            raise ConfigError(f"--resume: {refusal}")
+        progress = trace_progress(path)
+        if progress.last_line is not None:
+            point = resume_point(progress.last_line)
+            try:
+                self.state = MultiTargetMission.resumed(
+                    self.s, self.state.kit, self.settings.method, point, self.initial_errors
+                )
+            except ValueError as err:
+                raise ConfigError(f"--resume: cannot continue {path}: {err}") from None
+            self.last_traced = point.slot
+            self.gate.close("resume")
+            log.info("resuming after slot %d from %s", point.slot, path)
+        data = path.read_bytes()
+        with path.open("r+b") as raw:  # a torn last line (killed inside write) is cut off
+            raw.truncate(data.rfind(b"\n") + 1)
+            raw.flush()
+            os.fsync(raw.fileno())
+        self._trace = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed in run)
 
     def _close_trace(self) -> None:
         if self._trace is not None:
-            last = self.slots[-1].slot if self.slots else 0
-            self._write_line(end_line(self.mission_end(last)))
+            self._write_line(end_line(self.mission_end(self.last_traced)))
             self._trace.close()
 
     def _write_line(self, line: str) -> None:
@@ -380,9 +538,7 @@ class MultiTargetGround(BusLoop):
         st = self.state
         if self.done.is_set() or self.planning is not None:
             return
-        if self.gate.closed and (
-            self.mission_t0_s is None or not self.gate.try_open(self.vehicles, self.t_s)
-        ):
+        if self.gate.closed and not self._open_gate():
             return
         if st.pending is None and not st.done and self.mission_t0_s is not None:
             st.start_known_tracks()
@@ -396,16 +552,40 @@ class MultiTargetGround(BusLoop):
         if st.done and self.planning is None:
             self.done.set()
 
+    def _open_gate(self) -> bool:
+        """Open the gate once the vehicles reported (startup.py); the slots the world has run
+        meanwhile without a plan of this loop (after a resume or a stall) are traced `held`
+        or `unobserved`."""
+        t0 = self.mission_t0_s
+        if t0 is None or not self.gate.try_open(self.vehicles, self.t_s):
+            return False
+        st = self.state
+        world_slot = SlotTimeline(t0, self.s.dt).slot_of(self.t_s)
+        for n in range(st.slot + 1, min(world_slot, self.s.N) + 1):
+            msgs = self.detections.take(n)
+            slot = st.skip(n, msgs, self._truth_of(n), self._uav_positions(), self.gate.reason)
+            self._publish_tracks(slot)
+            self._complete(slot, 0.0)
+        return True
+
+    def _publish_tracks(self, slot: MultiTargetSlot) -> None:
+        self._publish(self.keys.track, lambda: encode(track_set_message(slot, self.t_s)))
+
+    def _truth_of(self, n: int) -> TruthSetMsg | None:
+        """The world's truth of slot n, if it came (older ones are dropped)."""
+        truth = self.truth.pop(n, None)
+        for old in [k for k in self.truth if k < n]:
+            del self.truth[old]
+        return truth
+
     def _process_slot(self, n: int) -> None:
         msgs = self.detections.take(n)
         det_xy = np.full((self.s.M, 2), np.nan)
         for m, msg in msgs.items():
             det_xy[m] = msg.uav_xy_m
-        truth = self.truth.pop(n, None)
-        for old in [k for k in self.truth if k < n]:
-            del self.truth[old]
+        truth = self._truth_of(n)
         slot = self.state.process(n, msgs, truth, self._uav_positions(det_xy))
-        self._publish(self.keys.track, lambda: encode(track_set_message(slot, self.t_s)))
+        self._publish_tracks(slot)
         latency_from = self.detections.last_detection_wall if msgs else None
         if latency_from is not None:
             self.report.last_detection_wall_s[n] = latency_from
@@ -487,7 +667,8 @@ class MultiTargetGround(BusLoop):
 
     def _complete(self, slot: MultiTargetSlot, latency_s: float) -> None:
         """Slot n is done once plan n+1 is out: trace line, counters, health, on_slot."""
-        self._write_line(slot_line(slot, {"latency_ms": latency_s * 1e3}))
+        self._write_line(slot_line(slot, {"latency_ms": latency_s * 1e3, **resume_fields(slot)}))
+        self.last_traced = slot.slot
         self.slots.append(slot)
         self.report.counters["slots"] += 1
         if slot.plan.report.status != "ok":
