@@ -41,9 +41,10 @@ class MotionModel(Protocol):
         """W [4, 4]: the covariance the step of dt_s (s) adds."""
         ...
 
-    def position_after(self, state: Any, t_s: float) -> Any:
-        """The predicted position [2] t_s seconds after the instant of state [4], for a numpy
-        array or a symbolic vector (CasADi SX: the planner's NLPs build on it)."""
+    def position_after(self, state: Any, t_s: float | FloatArray) -> Any:
+        """The predicted position [2] t_s seconds after the instant of state [4] (negative:
+        before it), for a numpy array or a symbolic vector (CasADi SX: the planner's NLPs build
+        on it); t_s [S, 1] of numpy times gives the positions [S, 2]."""
         ...
 
     def predicted_path(
@@ -66,7 +67,7 @@ class ConstantVelocity:
     def process_noise(self, dt_s: float) -> FloatArray:
         return process_noise(dt_s, self.kappa_m2ps3)
 
-    def position_after(self, state: Any, t_s: float) -> Any:
+    def position_after(self, state: Any, t_s: float | FloatArray) -> Any:
         return state[:2] + t_s * state[2:]
 
     def predicted_path(

@@ -23,7 +23,6 @@ from isac_mission.planning.legs import (
     leg_accel_bound_mps2,
     leg_fractions,
     sample_clearances_m,
-    target_leg_points,
     uav_leg_points,
 )
 from isac_mission.planning.margins import SafetyMargins, hermite_bulge_m, leg_samples, rule_on
@@ -83,17 +82,22 @@ class SlotConstraints:
         """True when 14i/14j are checked along the legs (the rule on)."""
         return rule_on(self.scenario)
 
-    def target_points(self, fractions: FloatArray | None = None) -> FloatArray:
-        """The predicted target [S, 2] at the leg samples (or at `fractions` [S]), constant
-        velocity."""
+    def _target_state(self) -> FloatArray:
+        """The predicted target [4] at the slot's end (at rest without a velocity)."""
         v = np.zeros(2) if self.target_velocity_mps is None else self.target_velocity_mps
+        return np.concatenate([np.asarray(self.target_xy, dtype=float), np.asarray(v, float)])
+
+    def target_points(self, fractions: FloatArray | None = None) -> FloatArray:
+        """The predicted target [S, 2] at the leg samples tau_i dt (or at `fractions` [S]) of
+        the slot ending at its prediction, by the scenario's motion model."""
         f = self.leg_fractions if fractions is None else fractions
-        return target_leg_points(self.target_xy, v, f, self.scenario.dt)
+        before_end_s = -((1.0 - np.asarray(f, dtype=float))[:, None] * self.scenario.dt)
+        return np.asarray(self.scenario.motion.position_after(self._target_state(), before_end_s))
 
     def target_start(self) -> FloatArray:
         """The predicted target [2] at the legs' start."""
-        v = np.zeros(2) if self.target_velocity_mps is None else self.target_velocity_mps
-        return np.asarray(self.target_xy - self.scenario.dt * np.asarray(v))
+        start = self.scenario.motion.position_after(self._target_state(), -self.scenario.dt)
+        return np.asarray(start)
 
     def sample_clearances_m(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(target [S, M], keep-out [S, M, K], pairs [S, P]): the distances the SCA subproblem

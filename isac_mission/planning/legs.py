@@ -66,14 +66,6 @@ def leg_accel_bound_mps2(
     return np.asarray(np.maximum(np.linalg.norm(a0, axis=-1), np.linalg.norm(a1, axis=-1)))
 
 
-def target_leg_points(
-    target_xy: FloatArray, target_velocity_mps: FloatArray, fractions: FloatArray, dt_s: float
-) -> FloatArray:
-    """The predicted target [S, 2] at the fractions [S] of the slot ending at target_xy [2]."""
-    tau = np.asarray(fractions, dtype=float)[:, None]
-    return np.asarray(target_xy - (1.0 - tau) * dt_s * np.asarray(target_velocity_mps))
-
-
 def segment_distance(a: FloatArray, b: FloatArray) -> FloatArray:
     """Distance [...] from the origin to the segments a -> b ([..., 2] each)."""
     d = b - a

@@ -40,7 +40,6 @@ from isac_mission.planning.legs import (
     leg_accel_bound_mps2,
     leg_fractions,
     sample_clearances_m,
-    target_leg_points,
     uav_leg_points,
 )
 from isac_mission.planning.margins import SafetyMargins, slot_sigma_max_m, target_clearance_m
@@ -50,6 +49,15 @@ from tests.support.independent.constraints import check_constraints
 
 PHI_TAIL = {1.0: 0.15865525393145707, 2.0: 0.022750131948179195}
 """1 - Phi(k), the one-sided normal tail."""
+
+
+def target_leg_points(
+    target_xy: np.ndarray, target_velocity_mps: np.ndarray, fractions: np.ndarray, dt_s: float
+) -> np.ndarray:
+    """The constant-velocity target [S, 2] at the fractions [S] of the slot ending at
+    target_xy [2] (this test's own, independent of the planner's motion model)."""
+    tau = np.asarray(fractions, dtype=float)[:, None]
+    return np.asarray(target_xy - (1.0 - tau) * dt_s * np.asarray(target_velocity_mps))
 
 
 def _with(s: Scenario, **planner: object) -> Scenario:
