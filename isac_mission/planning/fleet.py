@@ -30,6 +30,9 @@ Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
 
 OPERATOR_HOLD_REASON = "operator hold: every vehicle held or landed by an operator"
 
+SOLVER_ERROR = "solver error"
+"""Status and fallback of a plan made after the planner failed (`after_solver_error`)."""
+
 BUILD_AHEAD_BUDGET_S = 10.0
 """Start-up seconds `prepare_fleet` may spend on the fleets with two or more vehicles out (the
 one-out fleet is always built). With the horizon, interpreted: every size at M = 6 (4 s for
@@ -180,25 +183,38 @@ class PlanningJob:
     def fallback_after_error(self, reason: str, solve_s: float) -> SlotPlan:
         """After a planner error: the communication-optimal plan (method "comm") for the active
         vehicles; if that fails too, hold. Status "solver error" either way, with the reason."""
-        try:
-            plan = replace(self, method="comm").run()
-        except Exception as err:  # the fallback must not raise: hold instead
-            return self.hold(
-                f"{reason}; communication-optimal fallback failed too: {err}; hold",
-                "solver error",
-                solve_s,
-            )
-        note = f"{reason}; fell back to the communication-optimal plan"
-        return replace(
-            plan,
-            report=replace(
-                plan.report,
-                status="solver error",
-                reason=note,
-                solve_s=solve_s,
-                fallback="solver error",
-            ),
+        return after_solver_error(
+            reason,
+            solve_s,
+            replace(self, method="comm").run,
+            lambda why: self.hold(why, SOLVER_ERROR, solve_s),
         )
+
+
+def after_solver_error(
+    reason: str,
+    solve_s: float,
+    comm: Callable[[], SlotPlan],
+    hold: Callable[[str], SlotPlan],
+) -> SlotPlan:
+    """The plan after a planner error (both ground loops): comm(), the communication-optimal
+    plan, with status and fallback "solver error", `reason` and the time spent before it
+    (solve_s, s); if comm() raises too, hold(why) (a hold plan with status "solver error")."""
+    try:
+        plan = comm()
+    except Exception as err:  # the fallback must not raise: hold instead
+        return hold(f"{reason}; communication-optimal fallback failed too: {err}; hold")
+    note = f"{reason}; fell back to the communication-optimal plan"
+    return replace(
+        plan,
+        report=replace(
+            plan.report,
+            status=SOLVER_ERROR,
+            reason=note,
+            solve_s=solve_s,
+            fallback=SOLVER_ERROR,
+        ),
+    )
 
 
 def widen_plan(sub: SlotPlan, uav_xy: FloatArray, excluded: tuple[int, ...]) -> SlotPlan:

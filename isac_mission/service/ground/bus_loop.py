@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Protocol
 
 from isac_mission.bus import Subscription, ZenohBus
@@ -24,6 +25,8 @@ from isac_mission.service.ground.exclusion import VehicleWatch
 from isac_mission.service.ground.report import GroundReport
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.service.ground.startup import PlanningGate
+from isac_mission.timebase import SlotTimeline, plan_is_late
+from isac_mission.types import SlotPlan
 from isac_mission.wire import (
     MAX_REASON_CHARS,
     ClockMsg,
@@ -196,6 +199,22 @@ class BusLoop:
             self._publish_health("running")
 
     # ------------------------------------------------------------------ outputs
+
+    def _marked_if_late(self, slot: int, plan: SlotPlan) -> SlotPlan:
+        """`plan`, with fallback "late" when it is published so long after its slot's end that
+        the bridges drop it (timebase.plan_is_late): the vehicles then fly on without it.
+        Counted ("plans late")."""
+        t0 = self.mission_t0_s
+        if t0 is None:
+            return plan
+        end_s = SlotTimeline(t0, self.s.dt).slot_end_s(slot)
+        if not plan_is_late(end_s, self.t_s, self.s.dt):
+            return plan
+        self.report.counters["plans late"] += 1
+        why = f"late: published at {self.t_s:.1f} s, its slot ended at {end_s:.1f} s"
+        reason = f"{why}; {plan.report.reason}" if plan.report.reason else why
+        report = replace(plan.report, reason=reason, fallback=plan.report.fallback or "late")
+        return replace(plan, report=report)
 
     def _publish(self, key: str, encode: Callable[[], bytes]) -> None:
         """Publish encode() on `key`; a message that fails its own validation is counted and

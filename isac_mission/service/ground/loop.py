@@ -14,7 +14,6 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import replace
 
 import numpy as np
 
@@ -32,7 +31,6 @@ from isac_mission.service.ground.report import SLOTS_KEPT, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.service.ground.startup import skip_slot
 from isac_mission.service.ground.tracefile import open_trace
-from isac_mission.timebase import SlotTimeline, plan_is_late
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
 from isac_mission.wire import (
     DetectionMsg,
@@ -299,18 +297,3 @@ class GroundLoop(BusLoop):
             self.report.latencies_s.append(latency)
         if record is not None:
             self._complete_record(record[0], record[1], latency)
-
-    def _marked_if_late(self, slot: int, plan: SlotPlan) -> SlotPlan:
-        """`plan`, with fallback "late" when it is published so long after its slot's end that
-        the bridges drop it (timebase.plan_is_late): the vehicles then fly on without it."""
-        t0 = self.mission_t0_s
-        if t0 is None:
-            return plan
-        end_s = SlotTimeline(t0, self.s.dt).slot_end_s(slot)
-        if not plan_is_late(end_s, self.t_s, self.s.dt):
-            return plan
-        self.report.counters["plans late"] += 1
-        why = f"late: published at {self.t_s:.1f} s, its slot ended at {end_s:.1f} s"
-        reason = f"{why}; {plan.report.reason}" if plan.report.reason else why
-        report = replace(plan.report, reason=reason, fallback=plan.report.fallback or "late")
-        return replace(plan, report=report)

@@ -9,13 +9,15 @@ thread within the time budget. The world's `truth_set` goes into the trace only 
 measurements' origins, for the metrics); the tracker never reads it.
 
 What the single-target loop does and this one does too: plans wait for fresh telemetry at the
-start (startup.py's gate), a plan over budget is a hold (status "timeout"), invalid payloads are
-counted and dropped, operators' requests are answered (control.py; `set` changes R_th from the
-next slot), a vehicle out of the plan holds and the others plan around it (planning/fleet.py's
-kits and widening), and `--resume` continues a trace after its last complete slot: the tracker
-restored from that line (records/multi_target.py `resume_point`), the gate closed until the
-vehicles report, the slots the world ran meanwhile traced `held` or `unobserved`
-(docs/service.md, "Several intruders").
+start (startup.py's gate), a plan over budget is a hold (status "timeout"), a solver error flies
+the communication-optimal plan (a hold only if that fails too: planning/fleet.py
+`after_solver_error`), a plan the bridges would drop is marked "late" (BusLoop._marked_if_late),
+a plan made before a stall is dropped and made again, invalid payloads are counted and dropped,
+operators' requests are answered (control.py; `set` changes R_th from the next slot), a vehicle
+out of the plan holds and the others plan around it (planning/fleet.py's kits and widening), and
+`--resume` continues a trace after its last complete slot: the tracker restored from that line
+(records/multi_target.py `resume_point`), the gate closed until the vehicles report, the slots
+the world ran meanwhile traced `held` or `unobserved` (docs/service.md, "Several intruders").
 """
 
 from __future__ import annotations
@@ -37,7 +39,14 @@ from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError, MessageError
 from isac_mission.model.detections import UavReport
 from isac_mission.planning.fallback import NO_BS, OPERATOR_HOLD
-from isac_mission.planning.fleet import OPERATOR_HOLD_REASON, KitCache, active_part, widen_plan
+from isac_mission.planning.fleet import (
+    OPERATOR_HOLD_REASON,
+    SOLVER_ERROR,
+    KitCache,
+    active_part,
+    after_solver_error,
+    widen_plan,
+)
 from isac_mission.planning.multi_target import (
     KEEP_OUT_CAPACITY,
     check_multi_target_method,
@@ -127,6 +136,11 @@ class MultiTargetMission:
         self.last_plan: SlotPlan | None = None
         self.last_excluded: tuple[int, ...] = ()
         """The vehicles the last committed plan left out (its prev_plan role needs the same)."""
+        self._predicted: tuple[TrackPrediction, ...] | None = None
+        """The tracks predicted to slot + 1 (None: not yet): a plan dropped after a stall is
+        made again from the same prediction."""
+        self._started_at: int | None = None
+        """The slot after which the known targets' tracks were last started."""
 
     @classmethod
     def resumed(
@@ -178,6 +192,9 @@ class MultiTargetMission:
     def start_known_tracks(self) -> None:
         """Start a confirmed track for every known target that enters at the current slot
         (the offline loop's rule: before slot n + 1 is predicted, those of first slot n)."""
+        if self._started_at == self.slot:
+            return  # once per slot (a plan dropped after a stall is made again)
+        self._started_at = self.slot
         s = self._scenario
         for t, spec in enumerate(s.targets):
             if spec.prior_known and spec.first_slot == self.slot:
@@ -187,8 +204,11 @@ class MultiTargetMission:
                 self.tracker.add_confirmed(Gaussian(x=x, P=s.P0.copy()))
 
     def predict(self) -> tuple[TrackPrediction, ...]:
-        """Every track predicted to slot + 1 (call once per slot, before planning it)."""
-        return self.tracker.predict()
+        """Every track predicted to slot + 1 (before planning it); the tracker predicts once
+        per slot, a second call returns the same predictions."""
+        if self._predicted is None:
+            self._predicted = self.tracker.predict()
+        return self._predicted
 
     def plan(
         self,
@@ -197,17 +217,20 @@ class MultiTargetMission:
         uav_v: FloatArray | None,
         excluded: tuple[int, ...],
         operator_held: tuple[int, ...] = (),
+        method: Method | None = None,
     ) -> tuple[int, SlotPlan]:
         """(the ID of the track planned around, the plan of slot + 1): thread-safe (touches only
         its arguments and the kits). The `excluded` vehicles (sorted) are left out: the others
         are planned with them as keep-out points (planning/fleet.py), and they hold; when
         every one of them is `operator_held` (an operator's hold or land), the slot's status is
-        `operator hold`."""
+        `operator hold`. method: the planning method (None: the mission's; "comm" after a
+        planner error)."""
         s = self._scenario
+        method = self.method if method is None else method
         prev = self.last_plan if self.last_excluded == excluded else None
         if not excluded:
             planned = plan_tracks(
-                s, self.method, self.kit, predictions, uav_xy, self.eta, self.assoc, uav_v, prev
+                s, method, self.kit, predictions, uav_xy, self.eta, self.assoc, uav_v, prev
             )
             return planned.planned_for, planned.plan
         active = tuple(m for m in range(s.M) if m not in excluded)
@@ -226,7 +249,7 @@ class MultiTargetMission:
             assoc = None
         planned = plan_tracks(
             kit.scenario,
-            self.method,
+            method,
             kit,
             predictions,
             uav_xy[idx],
@@ -289,6 +312,7 @@ class MultiTargetMission:
         self.eta, self.assoc = pending.plan.bandwidth_share, pending.plan.bs_of_uav
         self.last_plan = pending.plan
         self.pending = None
+        self._predicted = None
         return MultiTargetSlot(
             n,
             self.method,
@@ -321,7 +345,7 @@ class MultiTargetMission:
         s = self._scenario
         if self.pending is None:
             self.start_known_tracks()
-            self.tracker.predict()
+            self.predict()  # unless a plan dropped after a stall did
         known = np.full((s.M, 2), np.nan)
         eta = np.array(self.eta, dtype=float)
         for m, msg in msgs.items():
@@ -643,19 +667,28 @@ class MultiTargetGround(BusLoop):
             plan = _with_status(hold, "timeout", why, time.perf_counter() - t0)
             future.add_done_callback(consume_result)
             st.renew_kits()
-        except Exception as err:  # any planner failure: hold, say why, go on
+        except Exception as err:  # any planner failure: fall back, say why, go on
             self.report.counters["planner errors"] += 1
-            why = f"solver error: {type(err).__name__}: {err}; hold"
-            planned_for = 0
-            hold = hold_without_track(self.s, uav_xy, st.eta, st.assoc)
-            plan = _with_status(hold, "solver error", why, time.perf_counter() - t0)
+            why = f"solver error: {type(err).__name__}: {err}"
+            planned_for, plan = self._fallback_after_error(
+                why, time.perf_counter() - t0, predictions, uav_xy, uav_v, excluded, operator_held
+            )
         self.planning = None
         try:
-            st.commit(n, planned_for, plan, uav_xy, excluded)
-            msg = PlanMsg.from_plan(n, self.t_s, plan)
-            self._publish(self.keys.plan, lambda: encode(msg))
-            if plan.report.status not in ("ok", OPERATOR_HOLD):
-                self.report.last_error = f"slot {n}: {plan.report.reason}"
+            if self.gate.tick() is not None or self.gate.closed:
+                # Made before a stall: never published (startup.py); planned again from the
+                # same prediction once the gate opens, or the slot is traced `held`.
+                self.report.counters["plans dropped after a stall"] += 1
+            else:
+                plan = self._marked_if_late(n, plan)
+                st.commit(n, planned_for, plan, uav_xy, excluded)
+                msg = PlanMsg.from_plan(n, self.t_s, plan)
+                self._publish(self.keys.plan, lambda: encode(msg))
+                if plan.report.status == OPERATOR_HOLD:
+                    log.info("slot %d: %s", n, plan.report.reason)
+                elif plan.report.status != "ok":
+                    self.report.last_error = f"slot {n}: {plan.report.reason}"
+                    log.warning("slot %d: %s", n, plan.report.reason)
             latency = 0.0 if latency_from is None else time.monotonic() - latency_from
             if latency_from is not None:
                 self.report.latencies_s.append(latency)
@@ -664,6 +697,39 @@ class MultiTargetGround(BusLoop):
         except Exception as err:
             self._internal_error(err)
         self._advance_guarded()
+
+    def _fallback_after_error(
+        self,
+        why: str,
+        solve_s: float,
+        predictions: tuple[TrackPrediction, ...],
+        uav_xy: FloatArray,
+        uav_v: FloatArray,
+        excluded: tuple[int, ...],
+        operator_held: tuple[int, ...],
+    ) -> tuple[int, SlotPlan]:
+        """After a planner error, as the single-target loop (planning/fleet.py
+        `after_solver_error`): the communication-optimal plan (method "comm") for the active
+        vehicles, the tracks and the excluded vehicles as keep-out points; if that fails too,
+        every vehicle holds. Status "solver error" either way; (planned_for, plan)."""
+        st = self.state
+        planned_for = 0
+
+        def comm() -> SlotPlan:
+            nonlocal planned_for
+            planned_for, plan = st.plan(
+                predictions, uav_xy, uav_v, excluded, operator_held, method="comm"
+            )
+            return plan
+
+        def hold(reason: str) -> SlotPlan:
+            nonlocal planned_for
+            planned_for = 0
+            held = hold_without_track(self.s, uav_xy, st.eta, st.assoc)
+            return _with_status(held, SOLVER_ERROR, reason, solve_s)
+
+        plan = after_solver_error(why, solve_s, comm, hold)
+        return planned_for, plan
 
     def _complete(self, slot: MultiTargetSlot, latency_s: float) -> None:
         """Slot n is done once plan n+1 is out: trace line, counters, health, on_slot."""
