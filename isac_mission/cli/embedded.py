@@ -207,8 +207,8 @@ def embedded_world(s: Scenario, opts: LiveOptions) -> WorldBeside:
     (logging in as the world role), flies `simulate`'s truth for the seed, and the tracker
     starts where `simulate`'s does."""
     from isac_mission.bus.security import secured_settings
-    from isac_mission.model.run_noise import draw_multi_target_noise, draw_run_noise
     from isac_mission.service.assembly import WorldBeside, ground_endpoint
+    from isac_mission.tracking.factory import initial_errors
     from sim.world import run_world
     from sim.world_options import WorldOptions, parse_outages
 
@@ -220,13 +220,9 @@ def embedded_world(s: Scenario, opts: LiveOptions) -> WorldBeside:
         connect=(ground_endpoint(s, opts),),
         login_from_users_file=True,
     )
-    # The offline twin: the world's target flies `simulate`'s true path for this seed, and the
-    # tracker starts from simulate's estimate x0 + e (sim/world_assembly.make_target).
+    # The offline twin: the world flies `simulate`'s targets and reports for this seed
+    # (sim/world_assembly.py), and each known target's track starts where `simulate`'s does.
     seed = s.seed if opts.seed is None else opts.seed
-    initial_x = s.x0 + draw_run_noise(s, seed).initial_error
-    # On a multi-target scenario the world draws `simulate`'s targets and reports for the seed
-    # (sim/multi_target_scene.py), and each known target's track starts at simulate's estimate.
-    initial_errors = draw_multi_target_noise(s, seed).initial_errors if s.multi_target else None
     world_opts = WorldOptions(
         speed=opts.speed,
         lockstep=opts.lockstep,
@@ -241,7 +237,7 @@ def embedded_world(s: Scenario, opts: LiveOptions) -> WorldBeside:
         link_outages=parse_outages(opts.link_outages, s.M),
         impairment=world_impairment(s, opts.link_impairment),
     )
-    return WorldBeside(lambda stop: run_world(s, world_opts, stop), initial_x, initial_errors)
+    return WorldBeside(lambda stop: run_world(s, world_opts, stop), initial_errors(s, seed))
 
 
 async def run_embedded(

@@ -49,8 +49,9 @@ if TYPE_CHECKING:
 def resolved_method(method: str | None, s: Scenario, out_dir: Path, resume: bool) -> str:
     """--method if given; else, resuming, the method of the one trace in out_dir
     (trace_<method>.jsonl: `serve --resume` continues what was flown), else the live default
-    (`live_default_method`). ValueError when out_dir holds the traces of several methods."""
-    from isac_mission.planning.registry import live_default_method
+    (`planning/multi_target.live_method`). ValueError when out_dir holds the traces of several
+    methods."""
+    from isac_mission.planning.multi_target import live_method
 
     if method is not None:
         return method
@@ -64,15 +65,15 @@ def resolved_method(method: str | None, s: Scenario, out_dir: Path, resume: bool
             )
         if found:
             return found[0]
-    return live_default_method(s.multi_target)
+    return live_method(s)
 
 
 def resume_problem(s: Scenario, trace: Path, method: str) -> str | None:
     """Why `serve --resume` must not continue `trace` for `s` flown with `method` (None: it
     may): the trace is complete (its last slot is N: nothing left to fly), or it does not read;
-    on a multi-target mission also when it is not this mission's, method's and configuration's
-    multi-target trace, or its last slot line lacks what a restart needs
-    (service/ground/multi_target.py `resume_refusal`). Reads the file, never writes it."""
+    or the trace's own refusal (service/ground/tracefile.py `resume_refusal`: a trace of tracks
+    that is not this mission's, method's and configuration's, or whose last slot line lacks what
+    a restart needs). Reads the file, never writes it."""
     from isac_mission.errors import MessageError
     from isac_mission.records.progress import trace_progress
 
@@ -87,15 +88,13 @@ def resume_problem(s: Scenario, trace: Path, method: str) -> str | None:
             f"the trace is complete: {progress.last_slot}/{s.N} slots in {trace}; nothing "
             "to resume (start a new mission without --resume, or in another --out)"
         )
-    if s.multi_target:
-        from isac_mission.service.assembly import LiveOptions, live_trace_limits, planning_scenario
-        from isac_mission.service.ground.multi_target import live_trace_config, resume_refusal
+    from isac_mission.service.assembly import LiveOptions, live_trace_limits, planning_scenario
+    from isac_mission.service.ground.tracefile import live_trace_config, resume_refusal
 
-        # The config line the mission would write: it plans with the live settings.
-        planning = planning_scenario(s, LiveOptions())
-        config = live_trace_config(planning, method, live_trace_limits(s, planning))
-        return resume_refusal(trace, config, s.N)
-    return None
+    # The config line the mission would write: it plans with the live settings.
+    planning = planning_scenario(s, LiveOptions())
+    config = live_trace_config(planning, method, live_trace_limits(s, planning))
+    return resume_refusal(planning, trace, config)
 
 
 @dataclass(frozen=True)
@@ -191,15 +190,12 @@ def _checked_options(command: LiveCommand, s: Scenario) -> tuple[LiveOptions, st
     if method not in METHODS:
         err_console.print(f"--method: unknown {method!r}; choose from {', '.join(METHODS)}")
         raise typer.Exit(2)
-    if s.multi_target:
-        from isac_mission.errors import ConfigError
-        from isac_mission.planning.multi_target import check_multi_target_method
+    from isac_mission.planning.multi_target import method_problem
 
-        try:
-            check_multi_target_method(method)
-        except ConfigError as err:
-            err_console.print(f"--method: {err}", highlight=False)
-            raise typer.Exit(2) from None
+    problem = method_problem(s, method)
+    if problem is not None:
+        err_console.print(f"--method: {problem}", highlight=False)
+        raise typer.Exit(2)
     if command.resume:
         problem = resume_problem(s, out_dir / f"trace_{method}.jsonl", method)
         if problem is not None:
@@ -398,12 +394,13 @@ def compile_problems(
     from isac_mission.config.live_settings import LIVE_SETTINGS
     from isac_mission.nlp_cache import CompiledNlpCache
     from isac_mission.planning.fleet import prepare_fleet
-    from isac_mission.planning.multi_target import KEEP_OUT_CAPACITY
-    from isac_mission.planning.registry import METHODS, live_default_method
+    from isac_mission.planning.multi_target import live_method
+    from isac_mission.planning.registry import METHODS
     from isac_mission.planning.slot import SolverKit
+    from isac_mission.tracking.factory import keep_out_tracks
 
     s = load_or_exit(config)
-    method = method or live_default_method(s.multi_target)
+    method = method or live_method(s)
     if method not in METHODS:
         err_console.print(f"--method: unknown {method!r}; choose from {', '.join(METHODS)}")
         raise typer.Exit(2)
@@ -415,7 +412,7 @@ def compile_problems(
         )
         raise typer.Exit(2)
     planning = LIVE_SETTINGS.apply(s) if live_settings else s
-    n_keep_out = KEEP_OUT_CAPACITY if s.multi_target else 0
+    n_keep_out = keep_out_tracks(s)
     kit = SolverKit(planning, n_keep_out=n_keep_out, ipopt=cache)
     quiet_highs_banner()
     prepare_fleet(kit, method, n_keep_out)

@@ -19,15 +19,26 @@ if TYPE_CHECKING:
 DEFAULT_METHODS = ("proposed", "sd", "aba", "crb", "horizon")
 
 
-def default_methods(several_targets: bool) -> str:
-    """`simulate`'s methods without --methods: DEFAULT_METHODS, on a scenario of several targets
-    those the registry says plan for several (Registered.max_targets)."""
-    return ",".join(m for m in DEFAULT_METHODS if not several_targets or max_targets(m) != 1)
+def default_methods(s: Scenario) -> str:
+    """`simulate`'s methods without --methods: those of DEFAULT_METHODS that can plan for the
+    scenario's tracks (planning/multi_target.method_problem: on a scenario of several targets, those
+    the registry says plan for several, Registered.max_targets)."""
+    from isac_mission.planning.multi_target import method_problem
+
+    return ",".join(m for m in DEFAULT_METHODS if method_problem(s, m) is None)
+
+
+METHODS_HELP_DEFAULT = (
+    f"Default: {','.join(DEFAULT_METHODS)}; on a multi-target scenario "
+    f"{','.join(m for m in DEFAULT_METHODS if max_targets(m) != 1)} (the others plan one target)."
+)
 
 
 @app.command("check-config")
 def check_config(config: ConfigArg) -> None:
     """Validate a scenario and print its derived constants in SI units."""
+    from isac_mission.tracking.factory import detection_description, tracker_description
+
     s = load_or_exit(config)
     table = Table(title=f"{config} (mission {s.mission_id})")
     table.add_column("quantity")
@@ -60,27 +71,14 @@ def check_config(config: ConfigArg) -> None:
     rows += [
         ("kappa (target_motion)", f"{s.kappa:g}", "m^2/s^3"),
         ("a_T (target_motion)", f"{s.a_target:g}", "m/s^2"),
-        ("tracker", _tracker_choice(s), ""),
+        ("tracker", tracker_description(s), ""),
     ]
-    if s.multi_target and s.detection is not None:
-        d = s.detection
-        rows.append(
-            ("detection", f"{d.model}, {d.false_alarms_per_slot:g} false alarms/UAV/slot", "")
-        )
+    detection = detection_description(s)
+    if detection is not None:
+        rows.append(("detection", detection, ""))
     for row in rows:
         table.add_row(*row)
     console.print(table)
-
-
-def _tracker_choice(s: Scenario) -> str:
-    """Which tracker `s` uses and why (tracker.kind; docs/model.md, "Several targets")."""
-    from isac_mission.config import multi_target_reasons
-
-    if not s.multi_target:
-        return f"labelled EKF (kind {s.tracker_kind})"
-    reasons = multi_target_reasons(s)
-    why = f": {', '.join(reasons)}" if s.tracker_kind == "auto" and reasons else ""
-    return f"multi-target {s.multi_tracker.association.upper()} (kind {s.tracker_kind}{why})"
 
 
 @app.command()
@@ -95,10 +93,7 @@ def simulate(
     ] = None,
     methods: Annotated[
         str | None,
-        typer.Option(
-            help=f"Comma-separated: {methods_help()}. Default: {default_methods(False)}; on a "
-            f"multi-target scenario {default_methods(True)} (the others plan one target)."
-        ),
+        typer.Option(help=f"Comma-separated: {methods_help()}. {METHODS_HELP_DEFAULT}"),
     ] = None,
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 2,
     plots: Annotated[bool, typer.Option(help="Write the Fig. 2 / Fig. 3 style PNGs.")] = True,
@@ -113,59 +108,31 @@ def simulate(
 ) -> None:
     """Offline closed loop (Section II-C) for every method, Monte Carlo with common random numbers."""
     from isac_mission.experiment.report import simulate_report
+    from isac_mission.planning.multi_target import method_problem
     from isac_mission.planning.registry import METHODS
 
     s = load_or_exit(config)
     if live_settings:
         s = _with_live_settings(s)
-    default = default_methods(s.multi_target)
-    chosen = [m.strip() for m in (methods or default).split(",") if m.strip()]
+    chosen = [m.strip() for m in (methods or default_methods(s)).split(",") if m.strip()]
     unknown = sorted(set(chosen) - set(METHODS))
     if unknown or not chosen:
         err_console.print(f"--methods: unknown {unknown}; choose from {', '.join(METHODS)}")
         raise typer.Exit(2)
+    problem = next((p for m in chosen if (p := method_problem(s, m)) is not None), None)
+    if problem is not None:
+        err_console.print(f"--methods: {problem}", highlight=False)
+        raise typer.Exit(2)
     quiet_highs_banner()
-    out_dir = out if out is not None else Path("out") / f"simulate-{s.mission_id}"
-    if s.multi_target:
-        _simulate_multi_target(
-            s, chosen, runs, s.seed if seed is None else seed, out_dir, workers, plots
-        )
-        return
     simulate_report(
         s,
         chosen,
         runs=runs,
         seed=s.seed if seed is None else seed,
-        out_dir=out_dir,
+        out_dir=out if out is not None else Path("out") / f"simulate-{s.mission_id}",
         workers=workers,
         plots=plots,
         console=console,
-    )
-
-
-def _simulate_multi_target(
-    s: Scenario, methods: list[str], runs: int, seed: int, out_dir: Path, workers: int, plots: bool
-) -> None:
-    """`simulate` on the multi-target path (experiment/multi_target_report.py)."""
-    from isac_mission.errors import ConfigError
-    from isac_mission.experiment.multi_target_report import multi_target_report
-    from isac_mission.planning.multi_target import check_multi_target_method
-
-    try:
-        for m in methods:
-            check_multi_target_method(m)
-    except ConfigError as err:
-        err_console.print(f"--methods: {err}", highlight=False)
-        raise typer.Exit(2) from None
-    multi_target_report(
-        s,
-        methods,
-        runs=runs,
-        seed=seed,
-        out_dir=out_dir,
-        workers=workers,
-        console=console,
-        plots=plots,
     )
 
 

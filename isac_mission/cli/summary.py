@@ -1,5 +1,6 @@
 """The end of a live mission (`run`, `serve`): what its problems were built as, the verdict, the
-summary table (one target) or the tracking tables (several), the plots and the trace's path."""
+summary table (a labelled target's trace) or the tracking tables (a tracks trace), the plots
+(experiment/plots.save_plots, as `simulate` writes them) and the trace's path."""
 
 from __future__ import annotations
 
@@ -28,8 +29,10 @@ def print_summary(
     for line in [ahead, *events_summary(result.planner_problems)]:
         console.print(f"planner problems: {line}", highlight=False)
     _print_verdict(s, opts, result, last_slot)
-    if s.multi_target:
-        _multi_target_summary(s, opts, result, out_dir)
+    from isac_mission.experiment.plots import is_tracks_trace
+
+    if result.trace_path.is_file() and is_tracks_trace(result.trace_path):
+        _tracks_summary(s, opts, result, out_dir)
         return
     summary = summarize_live(result)
     table = Table(title=f"{s.mission_id}: live mission summary ({opts.method})")
@@ -57,20 +60,9 @@ def print_summary(
         table.add_row(name, value)
     console.print(table)
     if summary.slots:
-        from isac_mission.experiment.plots import (
-            plot_bandwidth,
-            plot_performance,
-            plot_trajectories,
-            save_png,
-        )
-        from isac_mission.records import read_trace
+        from isac_mission.experiment.plots import save_plots
 
-        trace = read_trace(result.trace_path)
-        written = [
-            save_png(plot_trajectories(trace), out_dir / "fig2a_trajectories.png"),
-            save_png(plot_bandwidth(trace), out_dir / "fig2b_bandwidth.png"),
-            save_png(plot_performance({opts.method: [trace]}), out_dir / "fig3_performance.png"),
-        ]
+        written = save_plots({opts.method: [result.trace_path]}, out_dir)
         console.print("plots: " + ", ".join(str(p) for p in written))
     console.print(f"trace: {result.trace_path}")
 
@@ -115,28 +107,19 @@ def _print_verdict(s: Scenario, opts: LiveOptions, result: LiveResult, last_slot
         console.print(line, highlight=False, markup=False)
 
 
-def _multi_target_summary(
-    s: Scenario, opts: LiveOptions, result: LiveResult, out_dir: Path
-) -> None:
-    """A multi-target mission's tracking tables (as `simulate` prints them, over this one run),
-    its counters, and its picture."""
-    from isac_mission.experiment.multi_target_metrics import (
-        run_figures,
-        run_of_slots,
-        summarize_tracking,
-    )
-    from isac_mission.experiment.multi_target_plots import save_tracks_png
-    from isac_mission.experiment.multi_target_report import target_table, tracking_table
+def _tracks_summary(s: Scenario, opts: LiveOptions, result: LiveResult, out_dir: Path) -> None:
+    """A tracks trace's mission: the tracking tables (as `simulate` prints them, over this one
+    run), its counters, and its picture."""
+    from isac_mission.experiment.plots import save_plots
+    from isac_mission.experiment.report import target_table, tracking_table
+    from isac_mission.experiment.track_metrics import summarize_tracking, track_figures
 
-    slots = result.multi_target_slots
+    slots = result.multi_target_slots  # the ground loop's tracked slots (LiveResult's name)
     console.print(f"slots completed: {len(slots)}/{s.N}")
     if slots:
-        seed = s.seed if opts.seed is None else opts.seed
-        figures = run_figures(
-            run_of_slots(opts.method, seed, slots), s.multi_tracker.gospa_cutoff_m
-        )
+        figures = track_figures(slots, s.multi_tracker.gospa_cutoff_m)
         summaries = {opts.method: summarize_tracking([figures])}
-        console.print(tracking_table(s, summaries, f"{s.mission_id}: live mission, tracking"))
+        console.print(tracking_table(summaries, f"{s.mission_id}: live mission, tracking"))
         console.print(target_table(s, summaries))
     counters = Table(title="counters")
     counters.add_column("counter")
@@ -145,6 +128,6 @@ def _multi_target_summary(
         counters.add_row(k, str(v))
     console.print(counters)
     if slots:
-        png = save_tracks_png(result.trace_path, out_dir / f"tracks_{opts.method}.png")
+        (png,) = save_plots({opts.method: [result.trace_path]}, out_dir)
         console.print(f"plot: {png}")
     console.print(f"trace: {result.trace_path}")

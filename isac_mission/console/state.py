@@ -7,16 +7,23 @@ updates to push to the pages as `(topic, data)` pairs (`console.feed`). A bad pa
 by reason (`wire.rejection_reason`) and changes nothing. `snapshot()` is everything a page that
 has just connected needs. All data are JSON-ready (lists, floats, str), SI units.
 
-`track` carries, once known, the truth of its own slot (`truth_of_slot`: the world's next truth
-may reach the page first, and the feed keeps only the latest `truth`). A multi-target mission's
-`track_set` and `truth_set` (docs/bus.md) become the state topics `tracks` and `truths` (the
-latest present targets). `tracks` holds every track with its 2-sigma ellipse and, once the
-slot's truth is known, the targets present then (`truths_of_slot`), each present target's
-distance to the nearest confirmed track (`target_errors`), and per confirmed track its distance
-to the nearest present target (`error_m`) and the target it follows (`target`). Per confirmed
-track, its position bound and its error are kept by slot (`track_series`, in the snapshot; the
-last slots' rows ride with each `tracks` update) for the page's charts. `detection_set` is
-taken as `detection` is.
+Targets are drawn one way whatever their number: as the state topics `tracks` (every track with
+its 2-sigma ellipse) and `truths` (the targets present at the latest truth's slot). A `track_set`
+and a `truth_set` (docs/bus.md) give them directly; a single-target `track` gives the `tracks`
+of a one-entry `track_set` (track id 1, confirmed, `pcrb_position_trace` the position part of
+tr(J^-1)) and `truth` the `truths` of a one-state `truth_set`, unless a `track_set` (a
+`truth_set`) of the same or a later slot has arrived: a ground that publishes both sends its
+lead track as `track` beside the `track_set`, which wins. Once the slot's truth is known,
+`tracks` also holds the targets present then (`truths_of_slot`), each present target's distance
+to the nearest confirmed track (`target_errors`), and per confirmed track its distance to the
+nearest present target (`error_m`) and the target it follows (`target`). Per confirmed track,
+its position bound and its error are kept by slot (`track_series`, in the snapshot; the last
+slots' rows ride with each `tracks` update) for the page's charts.
+
+`track` and `truth` also stay state topics of their own, with the slot series (`series`): tr(PCRB)
+and its position and velocity parts, and |estimate - truth|, of the lead track; `track` carries,
+once known, the truth of its own slot (`truth_of_slot`). `detection_set` is taken as `detection`
+is.
 """
 
 from __future__ import annotations
@@ -40,7 +47,7 @@ TRAIL_STEP_M: Final = 0.5
 SERIES_SLOTS: Final = 20_000
 """Slots of time series kept."""
 TRACK_SERIES_SLOTS: Final = 5_000
-"""Slots of per-track series kept (a multi-target mission's charts)."""
+"""Slots of per-track series kept (the charts per track)."""
 TRACK_ROWS_SENT: Final = 16
 """Slots of per-track series sent with each `tracks` update."""
 DEFAULT_FOLLOW_GATE_M: Final = 10.0
@@ -74,6 +81,9 @@ class MissionView:
         self.truths_by_slot: dict[int, list[dict[str, Any]]] = {}
         self.confirmed_by_slot: dict[int, list[list[float]]] = {}
         self.track_series: dict[int, dict[str, Any]] = {}
+        self.track_set_slot: int | None = None
+        """The latest slot of a `track_set` received (a `track` of it or before draws nothing)."""
+        self.truth_set_slot: int | None = None
         multi = config.get("multi_target")
         gate = multi.get("gospa_cutoff_m") if isinstance(multi, dict) else None
         self.follow_gate_m = (
@@ -143,7 +153,10 @@ class MissionView:
         error = position_error_m(d["x"], self.truth_by_slot.get(n))
         if error is not None:
             point["error_m"] = error
-        return [*self._state("track", d), *self._point(point)]
+        out = [*self._state("track", d), *self._point(point)]
+        if not _covered(self.track_set_slot, n):
+            out += self._tracks(_one_track_set(d), now)
+        return out
 
     def _truth(self, d: dict[str, Any], now: float) -> list[Update]:
         n = int(d["slot"])
@@ -157,9 +170,23 @@ class MissionView:
         error = position_error_m(self.estimate_by_slot.get(n, [float("nan")] * 2), d["target_x"])
         if error is not None:
             out += self._point({"slot": n, "error_m": error})
+        if not _covered(self.truth_set_slot, n):
+            out += self._truths(_one_truth_set(d), now)
         return out
 
     def _track_set(self, d: dict[str, Any], now: float) -> list[Update]:
+        n = int(d["slot"])
+        self.track_set_slot = n if self.track_set_slot is None else max(self.track_set_slot, n)
+        self.track_series.pop(n, None)  # the slot's tracks are these: none drawn from `track`
+        return self._tracks(d, now)
+
+    def _truth_set(self, d: dict[str, Any], now: float) -> list[Update]:
+        n = int(d["slot"])
+        self.truth_set_slot = n if self.truth_set_slot is None else max(self.truth_set_slot, n)
+        return self._truths(d, now)
+
+    def _tracks(self, d: dict[str, Any], now: float) -> list[Update]:
+        """The `tracks` of a `track_set` d (received, or made of a `track`)."""
         n = int(d["slot"])
         for track in d["tracks"]:
             track["ellipse"] = ellipse_2sigma(track["P"])
@@ -175,7 +202,9 @@ class MissionView:
         d["series_rows"] = self._recent_track_rows()
         return self._state("tracks", d)
 
-    def _truth_set(self, d: dict[str, Any], now: float) -> list[Update]:
+    def _truths(self, d: dict[str, Any], now: float) -> list[Update]:
+        """The `truths` of a `truth_set` d (received, or made of a `truth`), and the `tracks` of
+        the same slot again with their errors."""
         n = int(d["slot"])
         present = [{"index": i, "x": list(x)} for i, x in enumerate(d["targets"]) if x is not None]
         self.truths_by_slot[n] = present
@@ -199,7 +228,7 @@ class MissionView:
         n = int(d["slot"])
         row = self.track_series.setdefault(n, {"slot": n})
         for track in d["tracks"]:
-            if track["confirmed"]:
+            if track["confirmed"] and track["pcrb_position_trace"] is not None:
                 row[f"pcrb/{track['id']}"] = float(track["pcrb_position_trace"])
         _trim(self.track_series, n, TRACK_SERIES_SLOTS)
 
@@ -276,7 +305,7 @@ class MissionView:
 
     def snapshot(self) -> dict[str, Any]:
         """Everything a page needs when it connects: config, latest state of each topic,
-        trails [M][k][2], the series (sorted by slot), a multi-target mission's per-track
+        trails [M][k][2], the series (sorted by slot), the per-track
         series (`pcrb/<id>` m^2, `error/<id>` m, sorted by slot), the recent replies, the
         stats."""
         return {
@@ -301,6 +330,44 @@ def _target_errors(
         finite = [e for e in errors if e is not None]
         out.append({"index": truth["index"], "error_m": min(finite) if finite else None})
     return out
+
+
+def _one_track_set(track: dict[str, Any]) -> dict[str, Any]:
+    """The `track_set` of one confirmed track, id 1, that a single-target `track` (as folded in:
+    `pcrb_pos` the position part of tr(J^-1), None when J is singular) stands for."""
+    entry = {
+        "id": 1,
+        "confirmed": True,
+        "x": list(track["x"]),
+        "P": [list(row) for row in track["P"]],
+        "pcrb_position_trace": track["pcrb_pos"],
+    }
+    return {
+        "schema": track["schema"],
+        "type": "track_set",
+        "slot": track["slot"],
+        "t": track["t"],
+        "tracks": [entry],
+        "published_wall_s": track["published_wall_s"],
+    }
+
+
+def _one_truth_set(truth: dict[str, Any]) -> dict[str, Any]:
+    """The `truth_set` of one target that a single-target `truth` stands for."""
+    return {
+        "schema": truth["schema"],
+        "type": "truth_set",
+        "slot": truth["slot"],
+        "t": truth["t"],
+        "targets": [list(truth["target_x"])],
+        "origins": [],
+    }
+
+
+def _covered(set_slot: int | None, slot: int) -> bool:
+    """Whether a `track_set` (`truth_set`) of `set_slot` stands for slot `slot`'s targets: it is
+    of the same or a later slot, so a `track` (`truth`) of `slot` adds no second drawing."""
+    return set_slot is not None and slot <= set_slot
 
 
 def _trim(by_slot: dict[int, Any], newest: int, keep: int = 64) -> None:

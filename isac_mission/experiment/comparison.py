@@ -33,6 +33,7 @@ from isac_mission.experiment.bootstrap import (
     reduction_of_rms,
 )
 from isac_mission.experiment.closed_loop import RunResult
+from isac_mission.experiment.runs import MissionRun, labelled_arrays
 from isac_mission.types import FloatArray
 
 FROM_SLOT = 11
@@ -82,8 +83,10 @@ class Change:
     missing: str | None = None
 
 
-def run_figures(results: Sequence[RunResult]) -> dict[str, FloatArray]:
-    """Per-run figures [R] of one method's runs (keys of FIGURES, see the module docstring)."""
+def run_figures(runs: Sequence[MissionRun | RunResult]) -> dict[str, FloatArray]:
+    """Per-run figures [R] of one method's runs' labelled track (keys of FIGURES, see the module
+    docstring); ValueError for a run without one (runs.labelled_arrays)."""
+    results = [labelled_arrays(r) for r in runs]
     err = np.array([r.est - r.true for r in results])  # [R, N, 4]
     C = np.array([r.pcrb for r in results])  # [R, N, 4, 4]
     tr = np.trace(C, axis1=-2, axis2=-1)  # [R, N]

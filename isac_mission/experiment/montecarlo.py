@@ -1,6 +1,11 @@
-"""Monte Carlo over runs x methods with common random numbers, and the summary table.
+"""Monte Carlo over runs x methods with common random numbers, for any number of targets, and the
+labelled target's summary.
 
-Run r of every method uses the noise drawn from seed + r. Metrics (docs/model.md, "Metrics"):
+Run r of every method uses the noise drawn from seed + r (experiment/runs.py flies, measures
+and traces one run; `run_monte_carlo` runs them all, in one process pool). Every run has its
+tracks' figures (GOSPA and each target's error against its track's bound:
+experiment/track_metrics.py, summed up by `summarize_tracking`); a run with a labelled track has
+its per-slot arrays too, summed up by `summarize`. Metrics of the labelled target (docs/model.md, "Metrics"):
 location RMSE = sqrt(mean over runs and slots 1..N of ||p_hat - p||^2), velocity likewise; mean
 tr(PCRB) position and velocity parts over the same runs and slots (the first slots, where the
 bound is still large, dominate that mean, so the position part over the second half of the
@@ -23,17 +28,30 @@ from pathlib import Path
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.experiment.closed_loop import (
-    RunResult,
-    SlotOutcome,
-    draw_run_noise,
-    run_closed_loop,
-)
+from isac_mission.errors import ConfigError
+from isac_mission.experiment.closed_loop import RunResult
 from isac_mission.experiment.comparison import pooled, run_figures
-from isac_mission.nlp_cache import CompiledNlpCache
-from isac_mission.planning.slot import Method, SolverKit
-from isac_mission.records import SlotRecord, TraceWriter
+from isac_mission.experiment.runs import (
+    MissionRun,
+    fly_run,
+    labelled_arrays,
+    outcome_record,
+    trace_path,
+)
+from isac_mission.planning.multi_target import method_problem
+from isac_mission.planning.slot import Method
 from isac_mission.tracking.gospa import CUTOFF_M, mission_gospa
+
+__all__ = [
+    "PAPER_REDUCTIONS",
+    "MethodSummary",
+    "MissionRun",
+    "outcome_record",
+    "reduction_pct",
+    "run_monte_carlo",
+    "summarize",
+    "trace_path",
+]
 
 # The paper's Section IV: % reduction of the proposed method's location and velocity error
 # against SD, ABA and CRB-criterion.
@@ -80,8 +98,12 @@ class MethodSummary:
         return self.pcrb_pos + self.pcrb_vel
 
 
-def summarize(results: Sequence[RunResult], gospa_cutoff_m: float = CUTOFF_M) -> MethodSummary:
-    """Aggregate the runs of one method (GOSPA with cut-off gospa_cutoff_m, m)."""
+def summarize(
+    runs: Sequence[MissionRun | RunResult], gospa_cutoff_m: float = CUTOFF_M
+) -> MethodSummary:
+    """Aggregate the labelled track of one method's runs (GOSPA with cut-off gospa_cutoff_m, m);
+    ValueError for a run without one (runs.labelled_arrays)."""
+    results = [labelled_arrays(r) for r in runs]
     err = np.array([r.est - r.true for r in results])  # [R, N, 4]
     C = np.array([r.pcrb for r in results])  # [R, N, 4, 4]
     loc_se = np.sum(err[..., :2] ** 2, axis=-1)
@@ -126,74 +148,6 @@ def reduction_pct(proposed: float, benchmark: float) -> float:
     return 100.0 * (benchmark - proposed) / benchmark
 
 
-def outcome_record(o: SlotOutcome) -> SlotRecord:
-    """The trace line of one slot of the labelled target (docs/trace.md)."""
-    rep = o.plan.report
-    inp = o.slot_input
-    assert inp is not None  # the labelled target is planned for in every slot
-    return SlotRecord(
-        slot=o.slot,
-        method=o.method,
-        status=rep.status,
-        uav_xy_m=o.uav_xy,
-        bandwidth_share=o.plan.bandwidth_share,
-        assoc=o.plan.bs_of_uav,
-        target_true=o.target_true,
-        target_est=o.target_est,
-        target_pred=o.target_pred,
-        r_diag=o.r_diag,
-        pcrb_trace=o.bound.trace,
-        solve_ms=rep.solve_s * 1e3,
-        P=o.P,
-        J=o.bound.J,
-        plan_xy=o.plan.uav_xy_m,
-        plan_pcrb_trace=o.plan.pcrb_trace,
-        plan_velocity=o.plan.uav_velocity_mps,
-        reason=rep.reason,
-        fallback=rep.fallback or None,
-        plan_start_xy=inp.prev_xy_m,
-        plan_start_velocity=inp.prev_velocity_mps,
-        extra={
-            "pcrb_pos": o.bound.position_trace,
-            "pcrb_vel": o.bound.velocity_trace,
-            "ao_iterations": rep.ao_iterations,
-            "position_iterations": rep.position_iterations,
-            "bandwidth_iterations": rep.bandwidth_iterations,
-        },
-    )
-
-
-def trace_path(trace_dir: Path, method: str, run: int) -> Path:
-    """Where run `run` of `method` is traced."""
-    return trace_dir / f"{method}_run{run:03d}.jsonl"
-
-
-def _run_one(s: Scenario, method: Method, run: int, seed: int, trace_dir: Path | None) -> RunResult:
-    kit = _kit_for(s)
-    noise = draw_run_noise(s, seed + run)
-    if trace_dir is None:
-        return run_closed_loop(s, method, noise, kit)
-    config = s.trace_config() | {"seed": seed + run, "method": method}
-    with TraceWriter(trace_path(trace_dir, method, run), config) as writer:
-        return run_closed_loop(
-            s, method, noise, kit, lambda o: writer.write_slot(outcome_record(o))
-        )
-
-
-_KITS: dict[int, SolverKit] = {}
-
-
-def _kit_for(s: Scenario) -> SolverKit:
-    """One SolverKit per scenario per process (building one compiles the cvxpy problems); its
-    IPOPT problems compiled where the cache has them (isac_mission/nlp_cache.py: the same
-    numbers, faster; `isac-mission compile CONFIG --scenario-settings` fills it)."""
-    key = id(s)
-    if key not in _KITS:
-        _KITS.clear()
-        _KITS[key] = SolverKit(s, ipopt=CompiledNlpCache(compile="never"))
-    return _KITS[key]
-
-
 def run_monte_carlo(
     s: Scenario,
     methods: Sequence[Method],
@@ -202,24 +156,30 @@ def run_monte_carlo(
     trace_dir: Path | None = None,
     progress: Callable[[str, int], None] | None = None,
     workers: int = 1,
-) -> dict[str, list[RunResult]]:
+) -> dict[str, list[MissionRun]]:
     """Every method on runs 0..runs-1 (noise seed = seed + run); results per method by run.
 
-    progress(method, run) is called as each (method, run) finishes. workers > 1 runs them in
-    separate processes (results are identical: each run's noise depends on its seed only).
+    ConfigError, before any run, for a method that cannot plan for the scenario's tracks
+    (planning/multi_target.method_problem). progress(method, run) is called as each (method, run)
+    finishes. workers > 1 runs them in separate processes (results are identical: each run's
+    noise depends on its seed only).
     """
+    for m in methods:
+        problem = method_problem(s, m)
+        if problem is not None:
+            raise ConfigError(problem)
     if trace_dir is not None:
         trace_dir.mkdir(parents=True, exist_ok=True)
     jobs = [(m, r) for r in range(runs) for m in methods]
-    out: dict[str, dict[int, RunResult]] = {m: {} for m in methods}
+    out: dict[str, dict[int, MissionRun]] = {m: {} for m in methods}
     if workers <= 1:
         for m, r in jobs:
-            out[m][r] = _run_one(s, m, r, seed, trace_dir)
+            out[m][r] = fly_run(s, m, r, seed, trace_dir)
             if progress:
                 progress(m, r)
     else:
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(_run_one, s, m, r, seed, trace_dir): (m, r) for m, r in jobs}
+            futures = {pool.submit(fly_run, s, m, r, seed, trace_dir): (m, r) for m, r in jobs}
             for fut in as_completed(futures):
                 m, r = futures[fut]
                 out[m][r] = fut.result()

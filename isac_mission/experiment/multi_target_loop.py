@@ -1,5 +1,7 @@
-"""A multi-target scenario's run of the one offline loop (`closed_loop.fly_offline`; docs/model.md,
-"Several targets"), its slots as the multi-target trace records them."""
+"""A view of the one offline loop (`closed_loop.fly_offline`; docs/model.md, "Several targets")
+for a scenario of unlabelled detections: its slots as the tracks trace records them
+(`runs.tracks_slot`), with the targets' paths (what `sweep` and the benches read; `simulate`
+flies every scenario through experiment/runs.py)."""
 
 from __future__ import annotations
 
@@ -9,6 +11,7 @@ from dataclasses import dataclass
 from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.experiment.closed_loop import SlotOutcome, fly_offline
+from isac_mission.experiment.runs import tracks_slot as multi_target_slot
 from isac_mission.model.run_noise import MultiTargetNoise
 from isac_mission.model.scene import UnlabelledScene
 from isac_mission.model.targets import TargetPaths
@@ -52,18 +55,3 @@ def run_multi_target(
     outcomes = fly_offline(s, method, scene, tracker_for(s), kit, each)
     slots = tuple(multi_target_slot(o) for o in outcomes)
     return MultiTargetRun(method, noise.seed, scene.paths, slots)
-
-
-def multi_target_slot(o: SlotOutcome) -> MultiTargetSlot:
-    """A slot of the one loop as the multi-target trace records it."""
-    return MultiTargetSlot(
-        o.slot,
-        o.method,
-        o.plan,
-        o.uav_xy,
-        o.eta,
-        o.truth,
-        o.reports,
-        o.tracking.tracks,
-        o.planned_for,
-    )

@@ -1,4 +1,6 @@
-"""Figures in the style of the paper's Fig. 2 (trajectories, bandwidth) and Fig. 3 (bound, RMSE).
+"""Figures in the style of the paper's Fig. 2 (trajectories, bandwidth) and Fig. 3 (bound, RMSE),
+and the tracks picture of a run whose tracks were found from unlabelled reports; `save_plots`,
+the one entry point of `simulate` and of the live summary, writes what the traces hold.
 
 Each plot function draws into the axes it is given (`ax=` / `axes=`, e.g. a notebook's) or, by
 default, into a new `matplotlib.figure.Figure` of a fixed size (the *_SIZE_IN constants, inches)
@@ -7,12 +9,14 @@ with an Agg canvas, and returns the Figure. Nothing here calls pyplot or switche
 Nothing here writes a file unless asked: `save_png(fig, path, dpi=...)` does, at size_in x dpi
 pixels (the CLI's commands call it). Inputs are traces as read by
 `isac_mission.records.read_trace`; the config keys used are bs_xy, d_th, area and
-uav_start_xy (all optional except bs_xy for the trajectory plot).
+uav_start_xy (all optional except bs_xy for the trajectory plot). The tracks picture reads a
+tracks trace (docs/trace.md, "Multi-target traces") with `read_tracks_trace`.
 """
 
 from __future__ import annotations
 
 import math
+from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final, Literal
@@ -24,12 +28,15 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
 
-from isac_mission.records import Trace
+from isac_mission.records import Trace, read_trace
+from isac_mission.records import multi_target as tracks_trace
+from isac_mission.records.jsonlines import loads_line
 from isac_mission.types import FloatArray
 
 TRAJECTORY_SIZE_IN: Final[tuple[float, float]] = (9.5, 6.5)
 BANDWIDTH_SIZE_IN: Final[tuple[float, float]] = (7.0, 3.8)
 PERFORMANCE_SIZE_IN: Final[tuple[float, float]] = (11.0, 5.0)
+TRACKS_SIZE_IN: Final[tuple[float, float]] = (8.0, 7.0)
 DEFAULT_DPI: Final[int] = 120
 
 _UAV_COLOURS: Final[tuple[str, ...]] = (
@@ -348,16 +355,125 @@ def plot_performance(
     return fig
 
 
+def read_tracks_trace(path: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """(config, slot lines) of a tracks trace (its `end` lines left out)."""
+    lines = Path(path).read_text().splitlines()
+    head = loads_line(lines[0])
+    parsed = [dict(loads_line(line)) for line in lines[1:] if line]
+    return dict(head["config"]), [line for line in parsed if "end" not in line]
+
+
+def is_tracks_trace(path: str | Path) -> bool:
+    """Whether the trace at `path` is a tracks trace (its first line's `format`), not the
+    labelled target's slot records; False for a file without a complete first line."""
+    with Path(path).open() as f:
+        first = f.readline()
+    if not first.endswith("\n"):
+        return False
+    head = loads_line(first)
+    return isinstance(head, dict) and head.get("format") == tracks_trace.TRACE_FORMAT
+
+
+def plot_tracks(
+    config: Mapping[str, Any], slots: Sequence[Mapping[str, Any]], ax: Axes | None = None
+) -> Figure:
+    """Draw one run of a tracks trace: the UAVs' paths, the true targets' paths, and every
+    track's estimates by ID (confirmed: dots, tentative: crosses), over the BSs; config and slot
+    lines as `read_tracks_trace` gives them. Into `ax` if given, else a new Figure of
+    TRACKS_SIZE_IN; returns the Figure."""
+    if ax is None:
+        ax = new_figure(TRACKS_SIZE_IN).add_subplot()
+    bs = np.asarray(config.get("bs_xy", []), dtype=float).reshape(-1, 2)
+    ax.scatter(bs[:, 0], bs[:, 1], marker="^", c="black", s=40, label="BS")
+    uav = np.array([s["uav_xy"] for s in slots], dtype=float)  # [N, M, 2]
+    for m in range(uav.shape[1]):
+        ax.plot(uav[:, m, 0], uav[:, m, 1], c="0.55", lw=1, label="UAVs" if m == 0 else None)
+    truth: dict[int, list[list[float]]] = defaultdict(list)
+    for s in slots:
+        for t in s["targets"]:
+            truth[int(t["index"])].append(t["state"][:2])
+    names = [t.get("name", f"target-{i}") for i, t in enumerate(config.get("targets", []))]
+    for i, path in sorted(truth.items()):
+        xy = np.array(path, dtype=float)
+        label = names[i] if i < len(names) else f"target {i}"
+        ax.plot(xy[:, 0], xy[:, 1], c="black", lw=2.2, alpha=0.35)
+        ax.annotate(label, xy[-1], fontsize=8)
+    tracks: dict[int, list[tuple[float, float, bool]]] = defaultdict(list)
+    for s in slots:
+        for t in s["tracks"]:
+            tracks[int(t["id"])].append((t["x"][0], t["x"][1], bool(t["confirmed"])))
+    for k, (track_id, points) in enumerate(sorted(tracks.items())):
+        xy = np.array([(x, y) for x, y, _ in points], dtype=float)
+        confirmed = np.array([c for _, _, c in points], dtype=bool)
+        colour = f"C{k % 10}"
+        ax.scatter(xy[confirmed, 0], xy[confirmed, 1], s=8, c=colour, label=f"track {track_id}")
+        ax.scatter(xy[~confirmed, 0], xy[~confirmed, 1], s=14, c=colour, marker="x")
+    area = config.get("area")
+    if area is not None:
+        ax.set_xlim(0, float(area[0]))
+        ax.set_ylim(0, float(area[1]))
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{config.get('method', '')}: targets (grey), tracks by ID (x: tentative)")
+    ax.legend(fontsize=7, loc="upper right", ncol=2)
+    return figure_of(ax)
+
+
+def save_tracks_png(trace: str | Path, out: str | Path, dpi: int = DEFAULT_DPI) -> Path:
+    """Read a tracks trace and write its picture as a PNG; returns the path."""
+    config, slots = read_tracks_trace(trace)
+    return save_png(plot_tracks(config, slots), out, dpi=dpi)
+
+
+def save_plots(
+    traces: Mapping[str, Sequence[Path]],
+    out_dir: Path,
+    labels: Mapping[str, str] | None = None,
+) -> list[Path]:
+    """Write the plots of each method's traces (runs 0.. in order) under out_dir; returns their
+    paths. Tracks traces: each method's first run's picture, tracks_<method>.png. The labelled
+    target's traces: Fig. 2's trajectories and bandwidth of `proposed`'s first run (else the
+    first method's), fig2a_trajectories.png and fig2b_bandwidth.png, and Fig. 3 over every run,
+    fig3_performance.png, its methods named by `labels` (else by name)."""
+    methods = list(traces)
+    written: list[Path] = []
+    tracks = [m for m in methods if is_tracks_trace(traces[m][0])]
+    for m in tracks:
+        written.append(save_tracks_png(traces[m][0], out_dir / f"tracks_{m}.png"))
+    labelled = [m for m in methods if m not in tracks]
+    if not labelled:
+        return written
+    names = labels or {}
+    first = "proposed" if "proposed" in labelled else labelled[0]
+    run0 = read_trace(traces[first][0])
+    performance = plot_performance(
+        {names.get(m, m): [read_trace(p) for p in traces[m]] for m in labelled}
+    )
+    return [
+        *written,
+        save_png(plot_trajectories(run0), out_dir / "fig2a_trajectories.png"),
+        save_png(plot_bandwidth(run0), out_dir / "fig2b_bandwidth.png"),
+        save_png(performance, out_dir / "fig3_performance.png"),
+    ]
+
+
 __all__ = [
     "BANDWIDTH_SIZE_IN",
     "DEFAULT_DPI",
     "PERFORMANCE_SIZE_IN",
+    "TRACKS_SIZE_IN",
     "TRAJECTORY_SIZE_IN",
     "figure_of",
+    "is_tracks_trace",
     "new_figure",
     "performance_curves",
     "plot_bandwidth",
     "plot_performance",
+    "plot_tracks",
     "plot_trajectories",
+    "read_tracks_trace",
+    "save_plots",
     "save_png",
+    "save_tracks_png",
 ]

@@ -37,6 +37,7 @@ from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord, Trace
 from isac_mission.tracking.cycle import CycleModel, TrackState, predict
 from isac_mission.tracking.pcrb import Bound
+from isac_mission.tracking.tracker import LABELLED_TRACK_ID, TrackPrediction
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
 
 PLANNING_KEYS_REPLACED = {"v_max": "plan_v_max", "r_th": "plan_r_th", "d_safe": "plan_d_safe"}
@@ -208,7 +209,9 @@ def _live_job(
         uav_v=None if rec.plan_start_velocity is None else np.asarray(rec.plan_start_velocity),
         prev_eta=eta,
         prev_assoc=assoc,
-        targets=(predicted.belief(model.motion),),
+        predictions=(
+            TrackPrediction(LABELLED_TRACK_ID, True, predicted.prediction, predicted.prior),
+        ),
         excluded=excluded,
         prev_plan=prev_plan,
     )

@@ -1,6 +1,15 @@
-"""`simulate`'s report: Monte Carlo with a progress bar, the tables, summary.json and the plots.
+"""`simulate`'s report, for any number of targets: Monte Carlo with a progress bar, the tables,
+summary.json and the plots.
 
-Both comparison tables put each method against `proposed` (the reference) as a % change,
+What is reported follows from what the runs measured (experiment/runs.py): runs with a labelled
+track report that target's bound and errors (the summary, GOSPA, paper-benchmark, figures and
+interval tables; summary.json's per-method `MethodSummary`, reductions, changes and per-run
+figures; the Fig. 2 / Fig. 3 plots); runs whose tracks were found from unlabelled reports report
+the tracks (GOSPA and its parts, ID switches, false tracks, confirmation delays, each target's
+error against its track's bound, each method's GOSPA against the first method's; summary.json's
+`TrackingSummary` per method and `against_baseline`; each method's tracks picture).
+
+The labelled target's comparison tables put each method against `proposed` (the reference) as a % change,
 100 (method / proposed - 1) from bootstrap.change_pct: negative = lower (better) than `proposed`.
 Each states it in its title; with one run the interval column's caption says why there is none.
 
@@ -12,17 +21,26 @@ of rich's 80-column default, which cuts cells ("Prop…", "0.02…").
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 from rich.console import Console
 from rich.measure import Measurement
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from isac_mission.config import Scenario
-from isac_mission.experiment.bootstrap import Interval, change_pct
+from isac_mission.experiment.bootstrap import (
+    Interval,
+    change_of_means,
+    change_pct,
+    paired_bootstrap,
+    reduction_of_means,
+)
+from isac_mission.experiment.closed_loop import RunResult
 from isac_mission.experiment.comparison import (
     BASELINE,
     CHANGES,
@@ -36,13 +54,16 @@ from isac_mission.experiment.comparison import (
 from isac_mission.experiment.montecarlo import (
     PAPER_REDUCTIONS,
     MethodSummary,
+    MissionRun,
     reduction_pct,
     run_monte_carlo,
     summarize,
     trace_path,
 )
+from isac_mission.experiment.track_metrics import TrackingSummary, summarize_tracking
 from isac_mission.planning.registry import LABELS
 from isac_mission.planning.slot import Method
+from isac_mission.records.jsonlines import to_jsonable
 from isac_mission.types import FloatArray
 
 TABLE_WIDTH_NOT_TERMINAL = 160
@@ -96,7 +117,7 @@ def summary_table(summaries: Sequence[MethodSummary], title: str) -> Table:
 
 def gospa_table(summaries: Sequence[MethodSummary], cutoff_m: float) -> Table:
     """One row per method: the mission-mean GOSPA and the target's mean position bound, the
-    figures a scenario of several targets reports per target (experiment/multi_target_report.py)."""
+    figures runs of unlabelled tracks report per target (`tracking_table`, `target_table`)."""
     t = Table(title=f"GOSPA (c = {cutoff_m:g} m, p = 2) and the target's bound")
     for col in ("method", "GOSPA m", "tr(PCRB_pos) m²"):
         t.add_column(col, justify="right" if col != "method" else "left")
@@ -306,37 +327,132 @@ def mission_progress(console: Console) -> Progress:
     )
 
 
-def simulate_report(
+def tracking_table(summaries: Mapping[str, TrackingSummary], title: str) -> Table:
+    """Per method: GOSPA and its parts, ID switches, false tracks, confirmation delays."""
+    table = Table(title=title)
+    for col in (
+        "method",
+        "GOSPA (m)",
+        "loc. / missed / false (m^2)",
+        "ID switches / run",
+        "runs w/ false track",
+        "longest false (slots)",
+        "confirm delay median / max",
+        "never confirmed",
+    ):
+        table.add_column(col, justify="right")
+    for m, x in summaries.items():
+        delays = x.confirmation_delays
+        table.add_row(
+            LABELS.get(m, m),
+            f"{x.gospa_m:.3f}",
+            f"{x.localisation_m2:.2f} / {x.missed_m2:.2f} / {x.false_m2:.2f}",
+            f"{x.id_switches:.2f}",
+            f"{100 * x.runs_with_false_tracks:.0f} %",
+            str(x.longest_false_run),
+            f"{np.median(delays):.0f} / {max(delays)}" if delays else "-",
+            str(x.never_confirmed),
+        )
+    return table
+
+
+def target_table(s: Scenario, summaries: Mapping[str, TrackingSummary]) -> Table:
+    """Per method and target: location RMSE, mean tr(PCRB_pos), MSE / tr(PCRB_pos) over every
+    slot a confirmed track followed it, and settled (without each run's first 10 of them)."""
+    table = Table(
+        title="each target, over the slots a confirmed track followed it "
+        "(ratio = MSE / tr(PCRB_pos); settled: from its 11th such slot)"
+    )
+    table.add_column("method")
+    for t in s.targets:
+        table.add_column(
+            f"{t.name}: RMSE (m) / tr(PCRB_pos) (m^2) / ratio / settled", justify="right"
+        )
+    for m, x in summaries.items():
+        cells = [
+            f"{r:.3f} / {b:.3f} / {e:.2f} / {e_s:.2f}"
+            for r, b, e, e_s in zip(
+                x.rmse_m, x.bound_m2, x.efficiency, x.settled_efficiency, strict=True
+            )
+        ]
+        table.add_row(LABELS.get(m, m), *cells)
+    return table
+
+
+def gospa_against_reference(
+    by_method: Mapping[str, Sequence[MissionRun]], reference: str, runs: int, seed: int
+) -> tuple[Table, dict[str, Any]]:
+    """Each method's mission-mean GOSPA against `reference`'s as a % change (change_of_means:
+    negative = lower, better), paired bootstrap 95 % interval over runs (none with one run: the
+    caption says so), and plan time median (ms). Returns the table and summary.json's
+    `against_baseline` rows: `gospa_change_pct` [estimate, low, high] (low, high None with one
+    run) and `gospa_reduction_pct` (the reduction, the opposite sign; None with one run)."""
+    ref = LABELS.get(reference, reference)
+    base = np.array([r.tracking.gospa_m.mean() for r in by_method[reference]])
+    changes: dict[str, Change] = {}
+    rows: dict[str, Any] = {}
+    for m, method_runs in by_method.items():
+        g = np.array([r.tracking.gospa_m.mean() for r in method_runs])
+        reduction: list[float] | None = None
+        if runs >= 2:
+            iv = paired_bootstrap(base, g, change_of_means, seed=seed)
+            c = Change(iv.estimate, iv)
+            red = paired_bootstrap(base, g, reduction_of_means, seed=seed)
+            reduction = [red.estimate, red.low, red.high]
+        else:
+            c = Change(float(change_of_means(base, g)), None, NEEDS_TWO_RUNS)
+        changes[m] = c
+        solve_s = np.concatenate([r.solve_s for r in method_runs])
+        rows[m] = {
+            "gospa_reduction_pct": reduction,
+            "gospa_change_pct": [
+                c.estimate,
+                None if c.interval is None else c.interval.low,
+                None if c.interval is None else c.interval.high,
+            ],
+            "plan_time_median_ms": 1e3 * float(np.median(solve_s)),
+        }
+    others = [c for m, c in changes.items() if m != reference]
+    table = Table(
+        title=f"GOSPA of each method against {ref}: {change_convention(ref)}; "
+        f"paired bootstrap 95% interval over {runs_text(runs)}",
+        caption=missing_caption(others, runs),
+    )
+    table.add_column("method")
+    table.add_column("GOSPA change", justify="right")
+    table.add_column("plan time median (ms)", justify="right")
+    for m, c in changes.items():
+        table.add_row(
+            LABELS.get(m, m),
+            "(reference)" if m == reference else change_cell(c),
+            f"{rows[m]['plan_time_median_ms']:.1f}",
+        )
+    return table, rows
+
+
+def labelled_runs(
+    by_method: Mapping[str, Sequence[MissionRun]],
+) -> dict[str, list[RunResult]] | None:
+    """Every run's labelled track (runs.MissionRun.labelled), None when a run had none."""
+    out: dict[str, list[RunResult]] = {}
+    for m, method_runs in by_method.items():
+        arrays = [r.labelled for r in method_runs]
+        if any(a is None for a in arrays):
+            return None
+        out[m] = [a for a in arrays if a is not None]
+    return out
+
+
+def labelled_report(
     s: Scenario,
-    methods: Sequence[Method],
-    *,
+    results: Mapping[str, Sequence[RunResult]],
     runs: int,
     seed: int,
-    out_dir: Path,
-    workers: int,
-    plots: bool,
     console: Console,
-) -> dict[str, MethodSummary]:
-    """Run the Monte Carlo, print the tables, write traces, summary.json and the plots."""
-    trace_dir = out_dir / "traces"
-    console.print(
-        f"[bold]{s.mission_id}[/]: M={s.M} UAVs, K={s.K} BSs, N={s.N} slots, "
-        f"{runs} runs x {len(methods)} methods, seeds {seed}..{seed + runs - 1}, "
-        f"sensing model {s.sensing_model}"
-    )
-    with mission_progress(console) as bar:
-        task = bar.add_task("missions", total=runs * len(methods))
-        results = run_monte_carlo(
-            s,
-            methods,
-            runs,
-            seed,
-            trace_dir=trace_dir,
-            progress=lambda m, r: bar.advance(task),
-            workers=workers,
-        )
+) -> dict[str, Any]:
+    """The labelled target's tables (module doc) printed; its summary.json returned."""
     cutoff_m = s.multi_tracker.gospa_cutoff_m
-    summaries: dict[str, MethodSummary] = {m: summarize(results[m], cutoff_m) for m in methods}
+    summaries: dict[str, MethodSummary] = {m: summarize(r, cutoff_m) for m, r in results.items()}
     print_table(
         console, summary_table(list(summaries.values()), f"{s.mission_id}: {runs_text(runs)}")
     )
@@ -345,7 +461,7 @@ def simulate_report(
     bench_rows = benchmark_rows(summaries) if BASELINE in summaries else []
     if bench_rows:
         print_table(console, benchmark_table(bench_rows))
-    figures: dict[str, dict[str, FloatArray]] = {m: run_figures(results[m]) for m in methods}
+    figures: dict[str, dict[str, FloatArray]] = {m: run_figures(r) for m, r in results.items()}
     print_table(
         console,
         figures_table(
@@ -356,8 +472,7 @@ def simulate_report(
     if changes:
         print_table(console, against_reference_table(changes, runs))
     against = reductions_against_baseline(figures, seed=seed)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    summary = {
+    return {
         "config": s.trace_config(),
         "runs": runs,
         "seed": seed,
@@ -373,29 +488,80 @@ def simulate_report(
         },
         "per_run": {m: {k: v.tolist() for k, v in f.items()} for m, f in figures.items()},
     }
+
+
+def tracks_report(
+    s: Scenario,
+    by_method: Mapping[str, Sequence[MissionRun]],
+    runs: int,
+    seed: int,
+    console: Console,
+) -> dict[str, Any]:
+    """The tracks' tables (module doc) printed, each method against the first; their
+    summary.json returned."""
+    summaries = {m: summarize_tracking([r.tracking for r in rs]) for m, rs in by_method.items()}
+    n_targets = len(next(iter(by_method.values()))[0].tracking.targets)
+    title = (
+        f"{s.mission_id}: {runs_text(runs)}, {n_targets} targets, seeds {seed}..{seed + runs - 1}"
+    )
+    print_table(console, tracking_table(summaries, title))
+    print_table(console, target_table(s, summaries))
+    against, rows = gospa_against_reference(by_method, next(iter(by_method)), runs, seed)
+    print_table(console, against)
+    summary: dict[str, Any] = to_jsonable(
+        {
+            "scenario": s.mission_id,
+            "runs": runs,
+            "seed": seed,
+            "methods": {m: to_jsonable(vars(x)) for m, x in summaries.items()},
+            "against_baseline": rows,
+        }
+    )
+    return summary
+
+
+def simulate_report(
+    s: Scenario,
+    methods: Sequence[Method],
+    *,
+    runs: int,
+    seed: int,
+    out_dir: Path,
+    workers: int,
+    plots: bool,
+    console: Console,
+) -> dict[str, Any]:
+    """Run the Monte Carlo, print the tables, write traces, summary.json and the plots (module
+    doc); returns the summary (summary.json's content)."""
+    trace_dir = out_dir / "traces"
+    console.print(
+        f"[bold]{s.mission_id}[/]: M={s.M} UAVs, K={s.K} BSs, N={s.N} slots, "
+        f"{runs} runs x {len(methods)} methods, seeds {seed}..{seed + runs - 1}, "
+        f"sensing model {s.sensing_model}"
+    )
+    with mission_progress(console) as bar:
+        task = bar.add_task("missions", total=runs * len(methods))
+        by_method = run_monte_carlo(
+            s,
+            methods,
+            runs,
+            seed,
+            trace_dir=trace_dir,
+            progress=lambda m, r: bar.advance(task),
+            workers=workers,
+        )
+    labelled = labelled_runs(by_method)
+    if labelled is not None:
+        summary = labelled_report(s, labelled, runs, seed, console)
+    else:
+        summary = tracks_report(s, by_method, runs, seed, console)
+    out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     if plots:
-        from isac_mission.experiment.plots import (
-            plot_bandwidth,
-            plot_performance,
-            plot_trajectories,
-            save_png,
-        )
-        from isac_mission.records import read_trace
+        from isac_mission.experiment.plots import save_plots
 
-        first = "proposed" if "proposed" in methods else methods[0]
-        run0 = read_trace(trace_path(trace_dir, first, 0))
-        performance = plot_performance(
-            {
-                LABELS.get(m, m): [read_trace(trace_path(trace_dir, m, r)) for r in range(runs)]
-                for m in methods
-            }
-        )
-        written = [
-            save_png(plot_trajectories(run0), out_dir / "fig2a_trajectories.png"),
-            save_png(plot_bandwidth(run0), out_dir / "fig2b_bandwidth.png"),
-            save_png(performance, out_dir / "fig3_performance.png"),
-        ]
+        traces = {m: [trace_path(trace_dir, m, r) for r in range(runs)] for m in methods}
+        written = save_plots(traces, out_dir, LABELS)
         console.print("plots: " + ", ".join(str(p) for p in written))
     console.print(f"traces: {trace_dir}/  summary: {out_dir / 'summary.json'}")
-    return summaries
+    return summary

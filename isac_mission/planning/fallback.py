@@ -240,9 +240,11 @@ def hold_plan(
         costs = association_costs(uav_xy_m, s.bs_xy, dH=s.dH, rho0=s.rho0, B=s.B)
         assoc = optimal_assignment(costs, s.n_a)
     assoc[out] = NO_BS
-    objective = targets_objective(targets, sensing)
-    with np.errstate(divide="ignore"):
-        pcrb = float(objective.value(uav_xy_m, np.maximum(eta, 1e-12)))
+    pcrb = float("nan")  # no confirmed track: nothing to judge the hold by
+    if targets:
+        objective = targets_objective(targets, sensing)
+        with np.errstate(divide="ignore"):
+            pcrb = float(objective.value(uav_xy_m, np.maximum(eta, 1e-12)))
     return SlotPlan(
         np.array(uav_xy_m, dtype=float),
         assoc,

@@ -21,12 +21,13 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.planning.fallback import NO_BS, OPERATOR_HOLD, hold_plan
+from isac_mission.planning.multi_target import Planner as Planner
+from isac_mission.planning.multi_target import TracksPlan, plan_tracks
 from isac_mission.planning.registry import planner
-from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import Method, SolverKit, plan_slot
 from isac_mission.tracking.beliefs import TargetBelief
+from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, HorizonPlan, IntArray, SlotPlan
-
-Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
 
 OPERATOR_HOLD_REASON = "operator hold: every vehicle held or landed by an operator"
 
@@ -113,11 +114,11 @@ class PlanningJob:
     """Everything needed to plan slot `slot` (arrays over all M vehicles).
 
     uav_xy [M, 2], uav_v [M, 2]: positions and velocities now (m, m/s); prev_eta [M];
-    prev_assoc [M] or None; targets: the tracker's beliefs of the targets at the slot's end
-    (tracking/beliefs.py; at least one); excluded: vehicles
-    outside the plan (sorted); operator_held: those of them an operator's `hold` or `land` took
-    out; prev_plan: last slot's plan of the same active vehicles, over those vehicles only
-    (`active_part`), None when there is none or the active set changed.
+    prev_assoc [M] or None; predictions: the tracker's tracks predicted to the slot's end
+    (tracking/tracker.py; none confirmed: the fleet holds); excluded: vehicles outside the plan
+    (sorted); operator_held: those of them an operator's `hold` or `land` took out; prev_plan:
+    last slot's plan of the same active vehicles, over those vehicles only (`active_part`), None
+    when there is none or the active set changed.
     """
 
     slot: int
@@ -127,7 +128,7 @@ class PlanningJob:
     uav_v: FloatArray | None
     prev_eta: FloatArray
     prev_assoc: IntArray | None
-    targets: tuple[TargetBelief, ...]
+    predictions: tuple[TrackPrediction, ...]
     excluded: tuple[int, ...] = ()
     prev_plan: SlotPlan | None = None
     operator_held: tuple[int, ...] = ()
@@ -137,33 +138,50 @@ class PlanningJob:
         M = self.kits.scenario.M
         return tuple(m for m in range(M) if m not in self.excluded)
 
+    @property
+    def targets(self) -> tuple[TargetBelief, ...]:
+        """The confirmed tracks as the planner takes them (what a hold is judged by)."""
+        motion = self.kits.scenario.motion
+        return tuple(p.belief(motion) for p in self.predictions if p.confirmed)
+
     def run(self, planner: Planner = plan_slot) -> SlotPlan:
-        """Plan the active vehicles and widen the plan to all of them (see the module doc)."""
+        """The plan of `run_tracks`."""
+        return self.run_tracks(planner).plan
+
+    def run_tracks(self, planner: Planner = plan_slot) -> TracksPlan:
+        """Plan the active vehicles for the tracks (planning/multi_target.plan_tracks) and widen
+        the plan to all of them (see the module doc)."""
         active = self.active
         if not active:
             if set(self.excluded) <= set(self.operator_held):
-                return self.hold(OPERATOR_HOLD_REASON, OPERATOR_HOLD)
-            return self.hold("hold: no vehicle can follow a plan (all excluded)", "no vehicles")
+                return TracksPlan(0, None, self.hold(OPERATOR_HOLD_REASON, OPERATOR_HOLD))
+            why = "hold: no vehicle can follow a plan (all excluded)"
+            return TracksPlan(0, None, self.hold(why, "no vehicles"))
         idx = list(active)
         kit = self.kits.for_active(active)
         eta = self.prev_eta[idx]
-        eta = eta / eta.sum() if eta.sum() > 0 else np.full(len(idx), 1.0 / len(idx))
+        if self.excluded or not eta.sum() > 0:  # the sub-fleet's shares, summing to 1
+            eta = eta / eta.sum() if eta.sum() > 0 else np.full(len(idx), 1.0 / len(idx))
         assoc = None if self.prev_assoc is None else self.prev_assoc[idx]
         if assoc is not None and np.any(assoc < 0):
             assoc = None
-        inp = SlotInput(
-            prev_xy_m=self.uav_xy[idx],
-            prev_bandwidth_share=eta,
-            prev_bs_of_uav=assoc,
-            targets=self.targets,
-            prev_velocity_mps=None if self.uav_v is None else self.uav_v[idx],
-            keep_out_xy_m=self.uav_xy[list(self.excluded)] if self.excluded else None,
-            prev_plan=self.prev_plan,
+        planned = plan_tracks(
+            kit.scenario,
+            self.method,
+            kit,
+            self.predictions,
+            self.uav_xy[idx],
+            eta,
+            assoc,
+            None if self.uav_v is None else self.uav_v[idx],
+            self.prev_plan,
+            extra_keep_out_xy=self.uav_xy[list(self.excluded)] if self.excluded else None,
+            keep_out_tracks=self.kits.base_keep_out,
+            planner=planner,
         )
-        plan = planner(inp, kit, self.method)
         if not self.excluded:
-            return plan
-        return widen_plan(plan, self.uav_xy, self.excluded)
+            return planned
+        return replace(planned, plan=widen_plan(planned.plan, self.uav_xy, self.excluded))
 
     def hold(self, reason: str, status: str, solve_s: float = 0.0) -> SlotPlan:
         """Every vehicle holds where it is (planning/fallback.hold_plan)."""
@@ -180,15 +198,24 @@ class PlanningJob:
             solve_s,
         )
 
-    def fallback_after_error(self, reason: str, solve_s: float) -> SlotPlan:
+    def fallback_after_error(self, reason: str, solve_s: float) -> TracksPlan:
         """After a planner error: the communication-optimal plan (method "comm") for the active
         vehicles; if that fails too, hold. Status "solver error" either way, with the reason."""
-        return after_solver_error(
-            reason,
-            solve_s,
-            replace(self, method="comm").run,
-            lambda why: self.hold(why, SOLVER_ERROR, solve_s),
-        )
+        planned_for = 0
+
+        def comm() -> SlotPlan:
+            nonlocal planned_for
+            planned = replace(self, method="comm").run_tracks()
+            planned_for = planned.planned_for
+            return planned.plan
+
+        def hold(why: str) -> SlotPlan:
+            nonlocal planned_for
+            planned_for = 0
+            return self.hold(why, SOLVER_ERROR, solve_s)
+
+        plan = after_solver_error(reason, solve_s, comm, hold)
+        return TracksPlan(planned_for, None, plan)
 
 
 def after_solver_error(
@@ -197,7 +224,7 @@ def after_solver_error(
     comm: Callable[[], SlotPlan],
     hold: Callable[[str], SlotPlan],
 ) -> SlotPlan:
-    """The plan after a planner error (both ground loops): comm(), the communication-optimal
+    """The plan after a planner error: comm(), the communication-optimal
     plan, with status and fallback "solver error", `reason` and the time spent before it
     (solve_s, s); if comm() raises too, hold(why) (a hold plan with status "solver error")."""
     try:

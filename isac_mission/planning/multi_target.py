@@ -10,6 +10,7 @@ point at its predicted position that every UAV keeps D_s from (the nearest
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,15 +18,18 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.planning.association import association_costs, optimal_assignment
-from isac_mission.planning.registry import METHODS, max_targets
+from isac_mission.planning.registry import METHODS, live_default_method, max_targets
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
-from isac_mission.tracking.factory import KEEP_OUT_TRACKS
+from isac_mission.tracking.factory import KEEP_OUT_TRACKS, keep_out_tracks
 from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 
 KEEP_OUT_CAPACITY = KEEP_OUT_TRACKS
 """How many tracks besides the planned-around one every UAV keeps D_s from (the nearest to the
 fleet); the kit's problems are built for this many keep-out points."""
+
+Planner = Callable[[SlotInput, SolverKit, Method], SlotPlan]
+"""A per-slot planning function (plan_slot; replaceable to inject faults)."""
 
 FAR_AWAY_M = -1e6
 """Where the unused keep-out points are (no UAV comes near)."""
@@ -45,6 +49,33 @@ def check_multi_target_method(method: str) -> None:
             f"method {method!r} plans for one target (its NLP is one target's bound); on the "
             f"multi-target path plan with {several}"
         )
+
+
+def method_problem(s: Scenario, method: str) -> str | None:
+    """Why `method` cannot plan for the scenario's tracks (None: it can): the scenario's
+    tracker may hold several tracks (its plans keep other tracks apart:
+    `tracking/factory.keep_out_tracks`) and the method plans for one target (the registry's
+    max_targets)."""
+    if keep_out_tracks(s) == 0:
+        return None
+    try:
+        check_multi_target_method(method)
+    except ConfigError as err:
+        return str(err)
+    return None
+
+
+def live_method(s: Scenario) -> Method:
+    """The live service's default method for the scenario's tracks (the registry's
+    live_default_method: the receding horizon where the tracker has one track)."""
+    return live_default_method(keep_out_tracks(s) > 0)
+
+
+def check_method(s: Scenario, method: str) -> None:
+    """Raise ConfigError with `method_problem`'s reason when there is one."""
+    problem = method_problem(s, method)
+    if problem is not None:
+        raise ConfigError(problem)
 
 
 @dataclass(frozen=True)
@@ -70,6 +101,7 @@ def plan_tracks(
     prev_plan: SlotPlan | None,
     extra_keep_out_xy: FloatArray | None = None,
     keep_out_tracks: int = KEEP_OUT_CAPACITY,
+    planner: Planner = plan_slot,
 ) -> TracksPlan:
     """The slot's plan for the tracks' predictions, from the UAVs at uav_xy [M, 2] (m) with
     velocities [M, 2] (m/s), last slot's shares eta [M] and BSs assoc [M] (None: none yet).
@@ -107,7 +139,7 @@ def plan_tracks(
         keep_out_xy_m=keep_out,
         prev_plan=prev_plan,
     )
-    return TracksPlan(primary.track_id, inp, plan_slot(inp, kit, method))
+    return TracksPlan(primary.track_id, inp, planner(inp, kit, method))
 
 
 def hold_without_track(

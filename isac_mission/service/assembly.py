@@ -4,8 +4,8 @@ the command line parsed (`LiveOptions`).
 `run_mission` opens the ground's Zenoh session, starts the world beside the service when it runs
 in this process (`WorldBeside`: `run`'s simulator, given by the command line), and flies the
 mission on that session (`fly_mission`): the solver kit with its compiled-problem cache, the
-clock, the MAVLink bridges and the ground loop (one target, or several: service/ground/
-multi_target.py). Whoever runs it reaches the mission through two ports: `Progress` (what it
+clock, the MAVLink bridges and the ground loop (service/ground/loop.py, for any number of
+targets). Whoever runs it reaches the mission through two ports: `Progress` (what it
 reports while it flies) and `Stopping` (how it is ended early: the command line's Ctrl-C).
 
 Everything talks over real loopback UDP MAVLink and a real Zenoh session. Mission start
@@ -38,17 +38,16 @@ from isac_mission.mavwire.ports import (
 from isac_mission.mavwire.serial_link import parse_vehicle_links
 from isac_mission.nlp_cache import CompiledNlpCache
 from isac_mission.planning.fleet import prepare_fleet
-from isac_mission.planning.multi_target import KEEP_OUT_CAPACITY
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records.multi_target import MultiTargetSlot
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.ground.loop import GroundLoop
-from isac_mission.service.ground.multi_target import MultiTargetGround
 from isac_mission.service.ground.planner_thread import SOLVE_LOCK
 from isac_mission.service.ground.report import GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.service.mission_result import LiveResult, mirror_signing_counters, record_fleet
+from isac_mission.tracking.factory import keep_out_tracks
 from isac_mission.types import FloatArray
 
 log = logging.getLogger(__name__)
@@ -162,12 +161,10 @@ class Stopping:
 class WorldBeside:
     """A world flown in this process beside the service (the command line's embedded simulator,
     cli/embedded.py). run(stop): the world, until `stop` is set; initial_x [4] (m, m/s): the
-    tracker's initial estimate (None: the scenario's x0); initial_errors [T, 4] (m, m/s): on a
-    multi-target scenario, added to each known target's configured state to start its track
-    (None: none)."""
+    initial_errors [T, 4] (m, m/s): added to each known target's configured state to start its
+    track (the world's draw of the offline twin's x_hat - x; None: the configured state)."""
 
     run: Callable[[asyncio.Event], Coroutine[Any, Any, object]]
-    initial_x: FloatArray | None = None
     initial_errors: FloatArray | None = None
 
 
@@ -242,10 +239,9 @@ async def fly_mission(
     world: WorldBeside | None = None,
 ) -> LiveResult:
     """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere, or
-    `world` beside it (its tracker start is taken). On a multi-target scenario the multi-target
-    ground loop runs instead (service/ground/multi_target.py)."""
+    `world` beside it (its tracker start is taken)."""
     planning = planning_scenario(s, opts)
-    kit, compiled, ahead = await _solver_kit(planning, opts.method, s.multi_target)
+    kit, compiled, ahead = await _solver_kit(planning, opts.method)
     progress.status(f"planner problems built for {planning.M} vehicles and, ahead, for {ahead}")
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(
@@ -281,8 +277,7 @@ async def fly_mission(
                     task.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await task
-            if isinstance(ground, MultiTargetGround):
-                result.multi_target_slots = list(ground.slots)
+            result.multi_target_slots = list(getattr(ground.output, "slots", ()))
             progress.status("landing")
             await _land(fleet, land_budget_s(s.H, opts.speed), stopping, result)
             record_fleet(result, fleet)
@@ -290,11 +285,12 @@ async def fly_mission(
 
 
 async def _solver_kit(
-    planning: Scenario, method: Method, multi_target: bool
+    planning: Scenario, method: Method
 ) -> tuple[SolverKit, CompiledNlpCache, list[int]]:
-    """The planner's kit for `planning`, its compiled-problem cache, and the smaller fleets
-    whose problems were built ahead (prepare_fleet)."""
-    n_keep_out = KEEP_OUT_CAPACITY if multi_target else 0
+    """The planner's kit for `planning` (keep-out points for its tracker's other tracks), its
+    compiled-problem cache, and the smaller fleets whose problems were built ahead
+    (prepare_fleet)."""
+    n_keep_out = keep_out_tracks(planning)
     # IPOPT problems compiled and cached on disk (isac_mission/nlp_cache.py): loaded when there,
     # else interpreted until a background compile has written them.
     compiled = CompiledNlpCache()
@@ -326,9 +322,9 @@ def _ground_loop(
     kit: SolverKit,
     progress: Progress,
     world: WorldBeside | None,
-) -> GroundLoop | MultiTargetGround:
-    """The ground loop for `s` (the multi-target one on a multi-target scenario), planning on
-    `planning` with `kit`, its trace stating the vehicles' real limits beside the planner's."""
+) -> GroundLoop:
+    """The ground loop for `s`, planning on `planning` with `kit`, its trace stating the
+    vehicles' real limits beside the planner's."""
     settings = GroundSettings(
         method=opts.method,
         trace_path=opts.trace_path,
@@ -338,11 +334,10 @@ def _ground_loop(
         wait_for_telemetry=True,  # the bridges publish it (ground/startup.py)
         trace_config=live_trace_limits(s, planning),
     )
-    if s.multi_target:
-        initial_errors = world.initial_errors if world is not None else None
-        return MultiTargetGround(planning, bus, settings, kit, progress.on_tracks, initial_errors)
-    initial_x = world.initial_x if world is not None else None
-    return GroundLoop(planning, bus, settings, kit, progress.on_slot, initial_x)
+    initial_errors = world.initial_errors if world is not None else None
+    return GroundLoop(
+        planning, bus, settings, kit, progress.on_slot, initial_errors, progress.on_tracks
+    )
 
 
 async def _land(

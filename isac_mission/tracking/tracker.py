@@ -101,6 +101,11 @@ class Tracker(Protocol):
         confirmed)."""
         ...
 
+    def saved(self) -> object:
+        """What the tracker carries to the next slot (after `update`), for a restart to
+        continue from (`tracking/factory.restored_tracker`)."""
+        ...
+
     def update(
         self,
         reports: Sequence[FloatArray],
@@ -160,6 +165,10 @@ class LabelledTracker:
             raise ValueError("the labelled tracker follows one target: it has one already")
         self.state = TrackState(belief, Bound.from_covariance(belief.P.copy()))
         return LABELLED_TRACK_ID
+
+    def saved(self) -> TrackState | None:
+        """The one track's belief and bound (None: no track yet)."""
+        return self.state
 
     def predict(self) -> tuple[TrackPrediction, ...]:
         if self.state is None:

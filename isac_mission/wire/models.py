@@ -159,6 +159,13 @@ class DetectionMsg(Message):
         """True when both the range and the radial velocity are present."""
         return math.isfinite(self.range_m) and math.isfinite(self.radial_velocity_mps)
 
+    @property
+    def report(self) -> FloatArray:
+        """The detection as a report of measurements [k, 2] (range m, radial velocity m/s; a
+        NaN where one of the two is missing): k = 1, or 0 when both are missing."""
+        row = np.array([[self.range_m, self.radial_velocity_mps]], dtype=float)
+        return row if np.isfinite(row).any() else np.zeros((0, 2))
+
 
 Measurement = Annotated[
     list[Number],
@@ -206,6 +213,11 @@ class DetectionSetMsg(Message):
     def _few_measurements(cls, value: Any) -> Any:
         return _at_most("detection_set.measurements", value, MAX_MEASUREMENTS)
 
+    @property
+    def report(self) -> FloatArray:
+        """The report: measurements [k, 2] (range m, radial velocity m/s)."""
+        return self.measurements
+
     @field_validator("measurements")
     @classmethod
     def _ranges_non_negative(cls, measurements: FloatArray) -> FloatArray:
@@ -241,6 +253,16 @@ class TruthMsg(Message):
 
     type: Literal["truth"] = carried()
     target_x: Annotated[FloatArray, vector(State4)] = Field(description="[x, y, vx, vy] (m, m/s).")
+
+    @property
+    def target_states(self) -> FloatArray:
+        """[1, 4]: the one target's state, as a truth_set's `states`."""
+        return np.asarray(self.target_x, dtype=float)[None]
+
+    @property
+    def measurement_origins(self) -> tuple[tuple[int, ...], ...]:
+        """() : a labelled detection's origin is its target; not sent."""
+        return ()
 
 
 OriginIndex = Annotated[int, Field(ge=-1, le=MAX_TARGETS - 1)]
@@ -305,6 +327,16 @@ class TruthSetMsg(Message):
             for m, of_uav in enumerate(value):
                 _at_most(f"truth_set.origins[{m}]", of_uav, MAX_MEASUREMENTS)
         return value
+
+    @property
+    def target_states(self) -> FloatArray:
+        """[T, 4]: `states`."""
+        return self.states
+
+    @property
+    def measurement_origins(self) -> tuple[tuple[int, ...], ...]:
+        """`origins`."""
+        return self.origins
 
 
 def _assoc_fits(assoc: list[int], info: ValidationInfo) -> list[int]:

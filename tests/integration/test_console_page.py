@@ -9,6 +9,8 @@ hub on loopback (the console subscribes to it as it subscribes to a ground loop'
   that follows the target shows each waypoint apart from its vehicle;
 - a multi-target mission charts each confirmed track, names its targets 1-based with the track
   that follows each, and places every map label inside the map and apart from the others;
+- a single target is drawn as one track (T1) with its target, its charts per track, and a
+  `track_set` of a slot wins over the `track` of the same slot (one target drawn, not two);
 - landed vehicles read "landed", and each vehicle's share and BS are the plan's (a vehicle out of
   the plan reads "no BS", share 0; a fleet held reads so for every vehicle), and a plan that is
   not the one flown is marked as such;
@@ -390,6 +392,77 @@ async def test_several_targets_are_charted_per_track_and_numbered_one_way() -> N
         assert any(
             i["kind"] == "truth" and i["label"] == "target 3 turning" for i in inset["items"]
         )
+
+
+# ---------------------------------------------------------------- C2: one target, as a track
+
+
+async def test_a_single_target_is_drawn_as_one_track_through_the_tracks_path() -> None:
+    config = load_scenario("paper").trace_config() | {"method": "horizon"}
+    P = np.diag([0.16, 0.0625, 0.5, 0.5])
+    uav_xy = [(1060.0, 1500.0), (960.0, 1545.0), (970.0, 1445.0)]
+
+    def target(n: int) -> list[float]:
+        return [700.0 + 25.0 * n, 1500.0, 25.0, 0.0]
+
+    async with console_page(config) as rig:
+        k = rig.keys
+        rig.put(k.clock, _clock(12, 22.0, 10.0))
+        for m, xy in enumerate(uav_xy):
+            rig.put(k.telemetry(m), _telemetry(m, xy, slot=12, t_s=22.0))
+        rig.put(k.plan, _plan(13, [0, 1, 2], [1 / 3] * 3, [list(xy) for xy in uav_xy]))
+        # An older ground's feed: `truth` and `track` only.
+        for n in range(9, 13):
+            rig.put(k.truth, _envelope("truth", n, float(n), target_x=target(n)))
+            estimate = [target(n)[0] + 0.3, target(n)[1] - 0.4, 25.0, 0.0]
+            rig.put(k.track, _track(n, estimate, P))
+        await rig.until(
+            "S.latest.tracks && S.latest.tracks.slot === 12 && S.trackSeries.size >= 4 && "
+            "M.charts.error && M.charts.error.length === 1 && M.charts.error[0].points >= 4 && "
+            "document.getElementById('mission-table').textContent.includes('T1, 0.50 m')"
+        )
+        drawn = await rig.state("M.tracksDrawn")
+        assert drawn == [{"id": 1, "confirmed": True, "x": 1000.3, "y": 1499.6}]
+        truths = await rig.state("M.truthsDrawn")
+        assert truths == [{"index": 0, "x": 1000.0, "y": 1500.0}]
+        assert len(await rig.state("M.map.estimates")) == 1  # one drawing of the target
+        texts = [label["text"] for label in await rig.state("M.labels")]
+        assert "T1" in texts and "target 1 (T1)" in texts
+        # The charts per track hold what the single target's did: the position bound and the
+        # error per track, and the (lead) track's velocity bound.
+        charts = await rig.state("M.charts")
+        assert [c["label"] for c in charts["pcrb"]] == [
+            "T1",
+            "lead track velocity (m\u00b2/s\u00b2)",
+        ]
+        assert all(c["points"] >= 4 for c in charts["pcrb"]), charts["pcrb"]
+        assert [c["label"] for c in charts["error"]] == ["T1"]
+        table = await rig.page.text_content("#mission-table")
+        assert table is not None and "tr(PCRB)" in table and "(lead track)" not in table
+        assert f"{np.trace(P):.4f}" in table and "1 confirmed, 0 tentative" in table
+        note = await rig.page.text_content("#inset-note")
+        assert note is not None and "T1 follows target 1, 0.50 m off" in note
+        assert await rig.state("document.getElementById('inset-track').hidden") is True
+
+        # A ground that publishes `track_set` beside its lead `track`: the track_set wins, the
+        # track of its slot draws no second target.
+        rig.put(k.truth, _envelope("truth", 13, 13.0, target_x=target(13)))
+        entry = {"id": 4, "confirmed": True, "x": [1025.2, 1500.1, 25.0, 0.0]}
+        entry |= {"P": P.tolist(), "pcrb_position_trace": 0.2}
+        rig.put(k.track, _envelope("track_set", 13, 13.0, tracks=[entry]))
+        rig.put(k.track, _track(13, entry["x"], P))
+        await rig.until(
+            "S.latest.track && S.latest.track.slot === 13 && "
+            "M.tracksDrawn.length && M.tracksDrawn[0].id === 4"
+        )
+        # The frame that drew the track too (it was scheduled when the track came).
+        await rig.page.evaluate(
+            "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))"
+        )
+        assert await rig.state("M.tracksDrawn") == [
+            {"id": 4, "confirmed": True, "x": 1025.2, "y": 1500.1}
+        ]
+        assert len(await rig.state("M.map.estimates")) == 1
 
 
 # ---------------------------------------------------------------- D: vehicles as they are

@@ -16,7 +16,9 @@ from isac_mission.planning.fleet import Planner
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.records import read_trace
 from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.report import GroundReport
 from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.tracking.cycle import TrackState
 from isac_mission.types import SlotPlan
 from isac_mission.wire import HealthMsg, Keys, PlanMsg, TrackMsg, decode
 from sim.world import run_world
@@ -102,13 +104,14 @@ async def test_restarted_ground_loop_resumes_from_the_last_traced_slot(
     first = read_trace(trace_path)
     assert [r.slot for r in first.slots] == [1, 2, 3, 4]
     # A new loop on the same trace continues after slot 4 with the traced P and J.
-    from isac_mission.planning.slot import SolverKit
-    from isac_mission.service.ground.mission import MissionState
+    from isac_mission.service.ground.tracefile import RecordOutput
 
-    state = MissionState.resumed(paper, SolverKit(paper), "proposed", first.slots[-1])
-    assert state.slot == 4
-    np.testing.assert_allclose(state.bound.J, first.slots[-1].J)
-    np.testing.assert_allclose(state.belief.P, first.slots[-1].P)
+    settings = GroundSettings(method="proposed", trace_path=trace_path, resume=True)
+    resume = RecordOutput(paper, settings, GroundReport(), None).open()
+    assert resume is not None and isinstance(resume.saved, TrackState)
+    assert resume.slot == 4
+    np.testing.assert_allclose(resume.saved.bound.J, first.slots[-1].J)
+    np.testing.assert_allclose(resume.saved.belief.P, first.slots[-1].P)
 
 
 async def test_ground_loop_gives_the_planner_the_predicted_covariance_and_last_plan(

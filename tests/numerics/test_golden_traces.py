@@ -18,7 +18,6 @@ import pytest
 
 from isac_mission.config import load_scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo
-from isac_mission.experiment.multi_target_report import run_multi_target_monte_carlo
 
 GOLDEN = Path(__file__).resolve().parents[1] / "unit" / "data" / "golden-0.1"
 WALL_TIME = {"solve_ms"}
@@ -43,10 +42,7 @@ def test_simulate_reproduces_the_recorded_traces(
     name: str, slots: int, methods: tuple[str, ...], tmp_path: Path
 ) -> None:
     s = load_scenario(name).with_changes(N=slots)
-    if name == "paper":
-        run_monte_carlo(s, methods, 1, s.seed, tmp_path)  # type: ignore[arg-type]
-    else:
-        run_multi_target_monte_carlo(s, methods, 1, s.seed, tmp_path)
+    run_monte_carlo(s, methods, 1, s.seed, tmp_path)  # type: ignore[arg-type]
     for method in methods:
         recorded = _lines(GOLDEN / name / f"{method}_run000.jsonl")
         flown = _lines(tmp_path / f"{method}_run000.jsonl")

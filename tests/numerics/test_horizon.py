@@ -41,6 +41,7 @@ from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.records import read_trace
 from isac_mission.tracking.pcrb import SensingParams
 from isac_mission.types import SlotPlan
+from tests.support.ground_steps import predictions_of
 from tests.support.independent.constraints import check_constraints
 from tests.support.independent.pcrb import bound_update, cv_model, jacobian
 
@@ -541,7 +542,7 @@ def test_a_fleet_size_reached_mid_mission_plans_without_a_build_inside_the_plan(
         uav_v=inp.prev_velocity_mps,
         prev_eta=inp.prev_bandwidth_share,
         prev_assoc=inp.prev_bs_of_uav,
-        targets=inp.targets,
+        predictions=predictions_of(inp.targets),
         excluded=excluded,  # vehicles leave the plan (an operator's HOLD, a lost link)
     )
     plan = job.run()

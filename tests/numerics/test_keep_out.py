@@ -14,6 +14,7 @@ from isac_mission.planning.positions import PositionSubproblem
 from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.wire import PlanMsg, decode, encode
+from tests.support.ground_steps import predictions_of
 
 
 def _two_uav(paper: Scenario) -> Scenario:
@@ -92,7 +93,9 @@ def test_a_job_without_a_vehicle_widens_to_all_and_round_trips_the_codec(
         uav_v=None,
         prev_eta=np.full(s.M, 1 / 3),
         prev_assoc=None,
-        targets=(TargetBelief(s.x0.copy(), np.linalg.inv(s.P0), s.motion, s.P0.copy()),),
+        predictions=predictions_of(
+            (TargetBelief(s.x0.copy(), np.linalg.inv(s.P0), s.motion, s.P0.copy()),)
+        ),
         excluded=(1,),
     )
     plan = job.run()
@@ -134,7 +137,9 @@ def test_hold_needs_no_solver_and_keeps_everyone_in_place(paper: Scenario) -> No
         uav_v=None,
         prev_eta=np.array([0.2, 0.3, 0.5]),
         prev_assoc=np.array([0, 1, 2]),
-        targets=(TargetBelief(s.x0.copy(), np.linalg.inv(s.P0), s.motion, s.P0.copy()),),
+        predictions=predictions_of(
+            (TargetBelief(s.x0.copy(), np.linalg.inv(s.P0), s.motion, s.P0.copy()),)
+        ),
         excluded=(2,),
     )
     plan = job.hold("timeout: test", "timeout")

@@ -8,7 +8,7 @@ metrics (experiment/multi_target_metrics.py), each against an independent comput
   confirmed track; the horizon refused by name;
 - the metrics on a hand-made run: GOSPA against tracking/gospa.py, switches, false runs,
   confirmation delays, a far but honest track following its target;
-- the multi-target report's tables and traces from `simulate`'s entry point.
+- the report's tables and traces of several targets from `simulate`'s entry point.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from isac_mission.experiment.multi_target_loop import (
     run_multi_target,
 )
 from isac_mission.experiment.multi_target_metrics import follow, run_figures
-from isac_mission.experiment.multi_target_report import TRACE_FORMAT, multi_target_report
+from isac_mission.experiment.report import simulate_report
 from isac_mission.model.detections import CLUTTER, UavReport
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.radar import SensingParams
@@ -38,6 +38,7 @@ from isac_mission.model.run_noise import draw_multi_target_noise
 from isac_mission.model.targets import TargetPaths
 from isac_mission.planning.multi_target import multi_target_kit
 from isac_mission.planning.problem import SlotInput, build_slot_problem
+from isac_mission.records.multi_target import TRACE_FORMAT
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.gospa import UNASSIGNED, gospa
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, SumObjective, predict_information
@@ -211,8 +212,15 @@ def test_a_far_track_follows_its_target_when_its_gate_holds_it() -> None:
 def test_the_report_prints_its_tables_and_writes_traces(scenario: Scenario, tmp_path: Path) -> None:
     s = scenario.with_changes(N=8)
     printed = io.StringIO()
-    summary = multi_target_report(
-        s, ["sd", "aba"], runs=2, seed=3, out_dir=tmp_path, workers=1, console=Console(file=printed)
+    summary = simulate_report(
+        s,
+        ["sd", "aba"],
+        runs=2,
+        seed=3,
+        out_dir=tmp_path,
+        workers=1,
+        plots=True,
+        console=Console(file=printed),
     )
     text = printed.getvalue()
     for label in ("GOSPA (m)", "ID switches / run", "known: RMSE", "GOSPA change", "ABA"):

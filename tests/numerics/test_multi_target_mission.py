@@ -1,4 +1,4 @@
-"""The live ground loop's multi-target state (service/ground/multi_target.py), fed the simulated
+"""The live ground loop's mission state (service/ground/mission.py) on several targets, fed the simulated
 world's reports (sim/multi_target_scene.py) with no network between, is `simulate`'s run: the
 same targets, the same reports, the same plans and tracks, slot by slot. What the live service
 adds (waiting, vehicles that trail their plans) is then all that can make live differ."""
@@ -18,9 +18,10 @@ from isac_mission.planning.multi_target import (
     plan_tracks,
 )
 from isac_mission.records.multi_target import MultiTargetSlot, slot_line
-from isac_mission.service.ground.multi_target import MultiTargetMission
+from isac_mission.service.ground.mission import MissionState
 from isac_mission.wire import DetectionSetMsg, TruthSetMsg
 from sim.multi_target_scene import MultiTargetScene
+from tests.support.ground_steps import plan_slot_of, processed
 from tests.support.live_cli import ROOT
 
 SLOTS = 8
@@ -46,13 +47,11 @@ def _fly_the_mission_state(s: Scenario) -> list[MultiTargetSlot]:
     offline loop's UAVs are) with the plans' shares."""
     scene = MultiTargetScene(s, SEED)
     errors = draw_multi_target_noise(s, SEED).initial_errors
-    mission = MultiTargetMission(s, multi_target_kit(s), "proposed", errors)
+    mission = MissionState(s, multi_target_kit(s), "proposed", errors)
     uav_xy, velocity = s.uav_start_xy.copy(), np.zeros((s.M, 2))
     out = []
     for n in range(1, s.N + 1):
-        mission.start_known_tracks()
-        planned_for, plan = mission.plan(mission.predict(), uav_xy, velocity, ())
-        mission.commit(n, planned_for, plan, uav_xy)
+        _, plan = plan_slot_of(mission, uav_xy, velocity)
         velocity = (
             plan.uav_velocity_mps
             if plan.uav_velocity_mps is not None
@@ -66,7 +65,7 @@ def _fly_the_mission_state(s: Scenario) -> list[MultiTargetSlot]:
         }
         origins = tuple(tuple(int(o) for o in r.origin) for r in reports)
         truth = TruthSetMsg(n, 0.0, scene.truth(n), origins)
-        out.append(mission.process(n, msgs, truth, uav_xy))
+        out.append(processed(mission, n, msgs, truth, uav_xy))
     assert mission.done
     return out
 
@@ -93,17 +92,15 @@ def test_a_missing_report_contributes_nothing_and_its_origins_are_unknown(
 ) -> None:
     s = scenario
     scene = MultiTargetScene(s, SEED)
-    mission = MultiTargetMission(s, multi_target_kit(s), "sd")
-    mission.start_known_tracks()
-    planned_for, plan = mission.plan(mission.predict(), s.uav_start_xy, None, ())
-    mission.commit(1, planned_for, plan, s.uav_start_xy)
+    mission = MissionState(s, multi_target_kit(s), "sd")
+    _, plan = plan_slot_of(mission, s.uav_start_xy)
     reports = scene.reports(1, plan.uav_xy_m, plan.bandwidth_share)
     msgs = {
         m: DetectionSetMsg(1, 0.0, m, r.measurements, plan.uav_xy_m[m], plan.bandwidth_share[m])
         for m, r in enumerate(reports)
         if m != 2
     }
-    slot = mission.process(1, msgs, None, plan.uav_xy_m)
+    slot = processed(mission, 1, msgs, None, plan.uav_xy_m)
     assert slot.bandwidth_share[2] == 0.0  # UAV 2 sensed nothing as far as the tracker knows
     assert len(slot.reports[2].measurements) == 0
     assert all(np.all(r.origin == -2) for r in slot.reports)  # no truth: origins unknown
@@ -112,12 +109,11 @@ def test_a_missing_report_contributes_nothing_and_its_origins_are_unknown(
 
 def test_an_excluded_vehicle_holds_and_the_others_plan_around_it(scenario: Scenario) -> None:
     s = scenario
-    mission = MultiTargetMission(s, multi_target_kit(s), "proposed")
-    mission.start_known_tracks()
+    mission = MissionState(s, multi_target_kit(s), "proposed")
     predictions = mission.predict()
     xy = s.uav_start_xy.copy()
     xy[4] = xy[1] + np.array([40.0, 0.0])  # vehicle 4 lost 40 m from vehicle 1
-    planned_for, plan = mission.plan(predictions, xy, None, (4,))
+    planned_for, plan = plan_slot_of(mission, xy, None, (4,), commit=False)
     assert planned_for == 1
     assert plan.report.status == "ok" and "vehicles [4] excluded" in plan.report.reason
     np.testing.assert_array_equal(plan.uav_xy_m[4], xy[4])  # it holds where it was seen
@@ -140,4 +136,4 @@ def test_an_excluded_vehicle_holds_and_the_others_plan_around_it(scenario: Scena
 
 def test_a_one_target_planner_is_refused_by_name(scenario: Scenario) -> None:
     with pytest.raises(ConfigError, match="'horizon' plans for one target"):
-        MultiTargetMission(scenario, multi_target_kit(scenario), "horizon")
+        MissionState(scenario, multi_target_kit(scenario), "horizon")

@@ -21,16 +21,19 @@ from isac_mission.planning.multi_target import multi_target_kit
 from isac_mission.records.jsonlines import loads_line
 from isac_mission.records.multi_target import (
     MultiTargetSlot,
+    ResumePoint,
     resume_fields,
     resume_point,
     slot_line,
 )
-from isac_mission.service.ground.multi_target import MultiTargetMission
+from isac_mission.service.ground.mission import MissionState
+from isac_mission.tracking.factory import restored_tracker
 from isac_mission.tracking.multi_target import MultiTargetTracker, TrackerSettings
 from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, SlotPlan
 from isac_mission.wire import DetectionSetMsg, TruthSetMsg
 from sim.multi_target_scene import MultiTargetScene
+from tests.support.ground_steps import commit_plan, plan_slot_of, processed
 from tests.support.live_cli import ROOT
 
 SLOTS = 24  # the entering target comes in at slot 20: candidates, tentative tracks, confirmations
@@ -74,14 +77,12 @@ def flown(scenario: Scenario) -> list[Flown]:
     s = scenario
     scene = MultiTargetScene(s, SEED)
     errors = draw_multi_target_noise(s, SEED).initial_errors
-    mission = MultiTargetMission(s, multi_target_kit(s), METHOD, errors)
+    mission = MissionState(s, multi_target_kit(s), METHOD, errors)
     uav_xy, velocity = s.uav_start_xy.copy(), np.zeros((s.M, 2))
     out = []
     for n in range(1, s.N + 1):
-        mission.start_known_tracks()
         predictions = mission.predict()
-        planned_for, plan = mission.plan(predictions, uav_xy, velocity, ())
-        mission.commit(n, planned_for, plan, uav_xy)
+        planned_for, plan = plan_slot_of(mission, uav_xy, velocity)
         start_xy, start_v = uav_xy, velocity
         velocity = (
             plan.uav_velocity_mps
@@ -98,7 +99,7 @@ def flown(scenario: Scenario) -> list[Flown]:
         }
         origins = tuple(tuple(int(o) for o in r.origin) for r in reports)
         truth = TruthSetMsg(n, 0.0, scene.truth(n), origins)
-        o = mission.process(n, msgs, truth, uav_xy)
+        o = processed(mission, n, msgs, truth, uav_xy)
         out.append(
             Flown(
                 predictions, planned_for, plan, start_xy, start_v, msgs, truth, uav_xy, o, _line(o)
@@ -131,13 +132,12 @@ def test_a_tracker_restored_from_slot_k_goes_on_exactly(
     before = MultiTargetTracker.restored(TrackerSettings.from_scenario(s), point.tracker)
     _assert_same_state(before, flown[k - 1].slot)
     errors = draw_multi_target_noise(s, SEED).initial_errors
-    mission = MultiTargetMission.resumed(s, multi_target_kit(s), METHOD, point, errors)
+    mission = _resumed(s, point, errors)
     assert mission.slot == k and mission.last_plan is None and not mission.done
     np.testing.assert_array_equal(mission.eta, flown[k - 1].plan.bandwidth_share)
     np.testing.assert_array_equal(mission.assoc, flown[k - 1].plan.bs_of_uav)
     for f in flown[k:]:
         n = f.slot.slot
-        mission.start_known_tracks()
         predictions = mission.predict()
         assert [(p.track_id, p.confirmed) for p in predictions] == [
             (p.track_id, p.confirmed) for p in f.predictions
@@ -146,11 +146,19 @@ def test_a_tracker_restored_from_slot_k_goes_on_exactly(
             np.testing.assert_array_equal(got.prediction.x, want.prediction.x)
             np.testing.assert_array_equal(got.prediction.P, want.prediction.P)
             np.testing.assert_array_equal(got.prior_information, want.prior_information)
-        mission.commit(n, f.planned_for, f.plan, f.start_xy)
-        o = mission.process(n, f.msgs, f.truth, f.uav_xy)
+        commit_plan(mission, f.planned_for, f.plan, f.start_xy)
+        o = processed(mission, n, f.msgs, f.truth, f.uav_xy)
         # The whole line: tracks (IDs, confirmed, x, P, bound, weight) and what the tracker
         # carries on (J, hits, misses, refutations, candidates, the next ID), bit for bit.
         assert _line(o) == f.line, f"resumed after slot {k}: slot {n} differs"
+
+
+def _resumed(s: Scenario, point: ResumePoint, errors: FloatArray | None = None) -> MissionState:
+    """The mission state a resume from `point` continues with."""
+    tracker = restored_tracker(s, point.tracker)
+    return MissionState.resumed(
+        s, multi_target_kit(s), METHOD, tracker, point.slot, point.plan_eta, point.assoc, errors
+    )
 
 
 def _assert_same_state(tracker: MultiTargetTracker, o: MultiTargetSlot) -> None:
@@ -184,10 +192,9 @@ def test_the_resumed_mission_plans_the_next_slot_as_the_uninterrupted_one(
     plans one target and is refused on this path)."""
     s = scenario
     point = resume_point(loads_line(flown[k - 1].line))
-    mission = MultiTargetMission.resumed(s, multi_target_kit(s), METHOD, point)
-    mission.start_known_tracks()
+    mission = _resumed(s, point)
     nxt = flown[k]
-    planned_for, plan = mission.plan(mission.predict(), nxt.start_xy, nxt.velocity, ())
+    planned_for, plan = plan_slot_of(mission, nxt.start_xy, nxt.velocity, commit=False)
     assert planned_for == nxt.planned_for
     np.testing.assert_allclose(plan.uav_xy_m, nxt.plan.uav_xy_m, atol=1e-6)
     np.testing.assert_allclose(plan.bandwidth_share, nxt.plan.bandwidth_share, atol=1e-9)

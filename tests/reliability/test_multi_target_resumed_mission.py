@@ -22,7 +22,7 @@ import yaml
 
 from isac_mission.bus import tcp_loopback
 from isac_mission.experiment.multi_target_metrics import follow
-from isac_mission.experiment.multi_target_plots import read_multi_target_trace
+from isac_mission.experiment.plots import read_tracks_trace
 from isac_mission.records.multi_target import TRACE_FORMAT
 from isac_mission.records.progress import TraceProgress, trace_progress
 from isac_mission.tracking.gospa import UNASSIGNED
@@ -137,7 +137,7 @@ def test_serve_killed_mid_mission_resumes_every_track_with_its_id(tmp_path: Path
     assert [d["slot"] for d in slots] == list(range(1, SLOTS + 1))
     assert [d for d in lines if "end" in d] == [lines[-1]]
     assert lines[-1] == {"end": {"status": "complete", "last_slot": SLOTS, "N": SLOTS}}
-    config_line, read = read_multi_target_trace(path)
+    config_line, read = read_tracks_trace(path)
     assert len(read) == SLOTS and config_line["N"] == SLOTS
     assert trace_progress(path).last_slot == SLOTS
 

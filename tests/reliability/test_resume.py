@@ -35,6 +35,8 @@ from isac_mission.planning.slot import SolverKit
 from isac_mission.records import SlotRecord, Trace, TraceWriter, read_trace
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.service.ground.tracefile import RecordOutput
+from isac_mission.tracking.cycle import TrackState
 from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.independent.constraints import check_constraints
@@ -155,14 +157,15 @@ def test_resumed_ground_loop_starts_from_the_last_complete_slot(
         last = records[-1]
         st = loop.state
         assert st.slot == 7 and st.pending is None and not st.done
-        np.testing.assert_array_equal(st.belief.x, last.target_est)
-        np.testing.assert_array_equal(st.belief.P, last.P)
-        np.testing.assert_allclose(st.bound.J, last.J, rtol=1e-12)
+        track = st.tracker.saved()
+        assert isinstance(track, TrackState)
+        np.testing.assert_array_equal(track.belief.x, last.target_est)
+        np.testing.assert_array_equal(track.belief.P, last.P)
+        np.testing.assert_allclose(track.bound.J, last.J, rtol=1e-12)
         np.testing.assert_array_equal(st.eta, last.bandwidth_share)
         np.testing.assert_array_equal(st.assoc, last.assoc)
     finally:
-        assert loop.writer is not None
-        loop.writer.close()
+        _writer(loop).close()
     assert path.stat().st_size < size_torn
     assert [r.slot for r in read_trace(path).slots] == list(range(1, 8))
     _strict_json_lines(path)
@@ -182,11 +185,11 @@ def test_resumed_ground_loop_fsyncs_every_slot(
     loop._open_trace()
     synced: list[int] = []
     monkeypatch.setattr(trace_mod.os, "fsync", lambda fd: synced.append(fd))
-    assert loop.writer is not None
+    writer = _writer(loop)
     try:
-        loop.writer.write_slot(dataclasses.replace(records[-1], slot=4))
+        writer.write_slot(dataclasses.replace(records[-1], slot=4))
     finally:
-        loop.writer.close()
+        writer.close()
     assert synced, "the slot written after the resume was not fsynced"
 
 
@@ -342,9 +345,9 @@ def test_resume_of_a_trace_killed_before_its_config_line_starts_afresh(
     path = tmp_path / "trace_proposed.jsonl"
     path.write_bytes(torn_header)
     loop = _resumed_loop(paper, path)
-    assert loop.writer is not None
-    loop.writer.write_slot(slot_record(1))
-    loop.writer.close()
+    writer = _writer(loop)
+    writer.write_slot(slot_record(1))
+    writer.close()
     assert loop.state.slot == 0
     trace = read_trace(path)
     assert trace.config["method"] == "proposed" and [r.slot for r in trace.slots] == [1]
@@ -352,6 +355,12 @@ def test_resume_of_a_trace_killed_before_its_config_line_starts_afresh(
     path.write_bytes(b"not json\n")
     with pytest.raises(MessageError):
         _resumed_loop(paper, path)
+
+
+def _writer(loop: GroundLoop) -> TraceWriter:
+    """The loop's trace writer (a labelled target's trace)."""
+    assert isinstance(loop.output, RecordOutput) and loop.output.writer is not None
+    return loop.output.writer
 
 
 def _resumed_loop(s: Scenario, path: Path) -> GroundLoop:

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-import isac_mission.experiment.multi_target_report as multi_target_report_module
 import isac_mission.experiment.report as report_module
 from isac_mission.config import Scenario, load_scenario, parse_scenario
 from isac_mission.experiment.bootstrap import (
@@ -36,8 +35,6 @@ from isac_mission.experiment.comparison import (
     run_figures,
 )
 from isac_mission.experiment.montecarlo import summarize
-from isac_mission.experiment.multi_target_metrics import RunFigures
-from isac_mission.experiment.multi_target_report import MethodRuns, multi_target_report
 from isac_mission.experiment.report import (
     against_reference_table,
     change_cell,
@@ -46,6 +43,8 @@ from isac_mission.experiment.report import (
     print_table,
     simulate_report,
 )
+from isac_mission.experiment.runs import MissionRun
+from isac_mission.experiment.track_metrics import RunFigures
 
 CONVENTION = "negative = lower (better) than Proposed"
 """What every comparison table of `simulate` states in its title."""
@@ -236,19 +235,25 @@ def test_simulate_report_writes_the_intervals_and_per_run_figures(tmp_path: Path
     assert interval_cell(shown) in out.getvalue()
 
 
+def _labelled(run: RunResult) -> MissionRun:
+    """A run whose one labelled track is `run` (its tracks' figures left empty)."""
+    z = np.zeros(len(run.status))
+    return MissionRun(run.method, run.seed, run.solve_s, RunFigures(z, z, z, z, (), ()), run)
+
+
 def _fake_monte_carlo(
     scales: dict[str, float],
-) -> Callable[..., dict[str, list[RunResult]]]:
+) -> Callable[..., dict[str, list[MissionRun]]]:
     """A stand-in for run_monte_carlo: each method's runs are proposed's (per-run bound and error
     differing from run to run) times scales[method], bound and errors alike."""
     base = ((1.0, 1.0), (5.0, 4.0), (2.0, 0.5), (9.0, 2.0))
 
     def fake(
         s: Scenario, methods: Sequence[str], runs: int, seed: int, **_: object
-    ) -> dict[str, list[RunResult]]:
+    ) -> dict[str, list[MissionRun]]:
         return {
             m: [
-                _run(m, seed + r, 30, scales[m] * base[r][0], scales[m] * base[r][1])
+                _labelled(_run(m, seed + r, 30, scales[m] * base[r][0], scales[m] * base[r][1]))
                 for r in range(runs)
             ]
             for m in methods
@@ -328,11 +333,13 @@ def test_one_run_prints_the_estimates_and_says_why_there_is_no_interval(
     )
 
 
-def _gospa_runs(gospa_m: Sequence[float], method: str) -> MethodRuns:
+def _gospa_runs(gospa_m: Sequence[float], method: str) -> list[MissionRun]:
     """A method's runs with the given mission-mean GOSPA (m), no targets followed."""
     z = np.zeros(5)
-    figures = tuple(RunFigures(np.full(5, g), z, z, z, (), ()) for g in gospa_m)
-    return MethodRuns(method, figures, (0.01,) * 5)
+    return [
+        MissionRun(method, r, np.full(5, 0.01), RunFigures(np.full(5, g), z, z, z, (), ()), None)
+        for r, g in enumerate(gospa_m)
+    ]
 
 
 @pytest.mark.parametrize("runs", [1, 3])
@@ -346,20 +353,18 @@ def test_the_multi_target_gospa_table_keeps_the_convention(
         "proposed": _gospa_runs(base, "proposed"),
         "aba": _gospa_runs([0.8 * g for g in base], "aba"),
     }
-    monkeypatch.setattr(
-        multi_target_report_module, "run_multi_target_monte_carlo", lambda *a, **k: by_method
-    )
+    monkeypatch.setattr(report_module, "run_monte_carlo", lambda *a, **k: by_method)
     s = load_scenario("multi-target")
     out = io.StringIO()
-    summary = multi_target_report(
+    summary = simulate_report(
         s,
         list(by_method),
         runs=runs,
         seed=1,
         out_dir=tmp_path,
         workers=1,
-        console=Console(file=out),
         plots=False,
+        console=Console(file=out),
     )
     text = out.getvalue()
     flat = " ".join(text.split())

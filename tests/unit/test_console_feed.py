@@ -305,19 +305,23 @@ def test_bad_multi_target_payloads_are_counted_and_change_nothing() -> None:
     assert view.last_rejection.startswith("isac/paper/truth: truth_set.targets")
 
 
-def test_a_single_target_mission_gives_the_updates_it_always_gave() -> None:
+def test_a_single_target_mission_keeps_its_track_truth_and_series_updates() -> None:
+    """`track` and `truth` keep their own topics and slot series (the lead track's numbers),
+    followed by the `tracks` and `truths` every mission is drawn from."""
     view = _view()
     det = DetectionMsg(6, 6.0, 0, 120.0, 1.5, np.zeros(2), 1 / 3)
     assert view.ingest("isac/paper/detections/0", encode(det)) == []
     truth = TruthMsg(6, 6.0, np.array([100.0, 200.0, 1.0, 0.0]))
-    assert view.ingest("isac/paper/truth", encode(truth)) == [("truth", json.loads(encode(truth)))]
+    updates = view.ingest("isac/paper/truth", encode(truth))
+    assert updates[0] == ("truth", json.loads(encode(truth)))
+    assert [t for t, _ in updates] == ["truth", "truths"]
     J = np.diag([2.0, 4.0, 10.0, 20.0])
     track = TrackMsg(6, 6.0, np.array([103.0, 204.0, 1.0, 0.0]), P_TRACK, J, 0.9)
     updates = view.ingest("isac/paper/track", encode(track))
-    assert [t for t, _ in updates] == ["track", "series"]
+    assert [t for t, _ in updates] == ["track", "series", "tracks"]
     assert updates[1][1] == pytest.approx(
         {"slot": 6, "pcrb_trace": 0.9, "pcrb_pos": 0.75, "pcrb_vel": 0.15, "error_m": 5.0}
     )
-    assert sorted(view.latest) == ["track", "truth"]
+    assert sorted(view.latest) == ["track", "tracks", "truth", "truths"]
     assert view.detection_wall_s == {6: 1000.0}
     assert view.received == {"detection": 1, "truth": 1, "track": 1}

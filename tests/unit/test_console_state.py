@@ -32,18 +32,18 @@ def test_a_track_carries_the_truth_of_its_own_slot_not_the_latest() -> None:
     view = MissionView(load_scenario("paper").trace_config(), clock=lambda: 1000.0)
     view.ingest("isac/paper/truth", _truth(12, 100.0))
     view.ingest("isac/paper/truth", _truth(13, 130.0))  # the next slot's, 30 m on, first
-    (_, track), _ = view.ingest("isac/paper/track", _track(12, 100.5))
+    (_, track), *_ = view.ingest("isac/paper/track", _track(12, 100.5))
     assert track["truth_of_slot"] == [100.0, 200.0, 30.0, 0.0]
     # A track whose slot's truth is not known yet carries none, and gets it when it comes.
-    (_, later), _ = view.ingest("isac/paper/track", _track(14, 160.0))
+    (_, later), *_ = view.ingest("isac/paper/track", _track(14, 160.0))
     assert later["truth_of_slot"] is None
     updates = view.ingest("isac/paper/truth", _truth(14, 160.4))
-    assert [t for t, _ in updates] == ["truth", "track", "series"]
+    assert [t for t, _ in updates] == ["truth", "track", "series", "truths", "tracks"]
     assert updates[1][1]["slot"] == 14
     assert updates[1][1]["truth_of_slot"] == [160.4, 200.0, 30.0, 0.0]
     assert updates[2][1]["error_m"] == pytest.approx(0.4)
     # Another slot's truth leaves the track alone.
-    assert [t for t, _ in view.ingest("isac/paper/truth", _truth(15, 190.0))] == ["truth"]
+    assert [t for t, _ in view.ingest("isac/paper/truth", _truth(15, 190.0))] == ["truth", "truths"]
 
 
 TARGETS = np.array(

@@ -17,6 +17,7 @@ from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
 from isac_mission.records import SlotRecord, read_trace
 from isac_mission.service.ground.report import MissionTotals
 from isac_mission.tracking.beliefs import TargetBelief
+from tests.support.ground_steps import predictions_of
 
 
 def unreachable_rate(s: Scenario) -> Scenario:
@@ -79,14 +80,16 @@ def planning_job(s: Scenario) -> PlanningJob:
         uav_v=None,
         prev_eta=np.full(s.M, 1.0 / s.M),
         prev_assoc=None,
-        targets=(TargetBelief(s.x0, np.asarray(np.linalg.inv(s.P0), dtype=float), s.motion, s.P0),),
+        predictions=predictions_of(
+            (TargetBelief(s.x0, np.asarray(np.linalg.inv(s.P0), dtype=float), s.motion, s.P0),)
+        ),
     )
 
 
 def test_the_ground_loops_plans_name_theirs_and_the_totals_count_them(paper: Scenario) -> None:
     job = planning_job(paper)
     assert job.hold("timeout: ...", "timeout").report.fallback == "timeout"
-    assert job.fallback_after_error("solver error: x", 0.1).report.fallback == "solver error"
+    assert job.fallback_after_error("solver error: x", 0.1).plan.report.fallback == "solver error"
     totals = MissionTotals()
     for name in ("timeout", "timeout", "late", None):
         rec = read_like(paper, name)

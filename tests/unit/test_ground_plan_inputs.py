@@ -15,7 +15,9 @@ from isac_mission.planning.association import associate
 from isac_mission.planning.fleet import NO_BS, active_part
 from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
 from isac_mission.service.ground.mission import MissionState
+from isac_mission.tracking.cycle import TrackState
 from isac_mission.types import Detections, Gaussian, HorizonPlan, SlotPlan
+from isac_mission.wire import detection_messages
 
 
 class Recorder:
@@ -49,24 +51,33 @@ def _detections(s: Scenario, n: int, plan: SlotPlan, x_true: np.ndarray) -> Dete
     )
 
 
+def _belief_cov(state: MissionState) -> np.ndarray:
+    """The covariance of the mission's one track."""
+    saved = state.tracker.saved()
+    assert isinstance(saved, TrackState)
+    return saved.belief.P.copy()
+
+
 def _fly(
     s: Scenario, excluded_by_slot: list[tuple[int, ...]]
 ) -> tuple[Recorder, list[SlotPlan], list[np.ndarray]]:
     """Plan and process len(excluded_by_slot) slots; the P of every belief before each plan."""
-    state = MissionState(s, SolverKit(s), "proposed", Gaussian(s.x0.copy(), s.P0.copy()))
+    state = MissionState.from_prior(s, SolverKit(s), "proposed", Gaussian(s.x0.copy(), s.P0.copy()))
     rec = Recorder()
     plans: list[SlotPlan] = []
     beliefs_P: list[np.ndarray] = []
     xy = s.uav_start_xy.copy()
     F = transition_matrix(s.dt)
     for n, excluded in enumerate(excluded_by_slot, start=1):
-        beliefs_P.append(state.belief.P.copy())
+        beliefs_P.append(_belief_cov(state))
         job = state.next_job(xy, np.zeros((s.M, 2)), excluded)
         plan = job.run(rec)
         state.commit(job, plan)
         plans.append(plan)
         x_true = np.linalg.matrix_power(F, n) @ s.x0
-        state.process(_detections(s, n, plan, x_true), plan.bandwidth_share, plan.uav_xy_m)
+        det = _detections(s, n, plan, x_true)
+        msgs = {m.uav: m for m in detection_messages(det, float(n), plan.bandwidth_share)}
+        state.process(n, msgs, None, plan.uav_xy_m)
         xy = plan.uav_xy_m
     return rec, plans, beliefs_P
 
@@ -120,18 +131,11 @@ def test_widened_plan_holds_the_excluded_vehicle_in_every_field(paper: Scenario)
 
 def test_a_skipped_slot_leaves_no_previous_plan(paper: Scenario) -> None:
     s = paper
-    state = MissionState(s, SolverKit(s), "proposed", Gaussian(s.x0.copy(), s.P0.copy()))
+    state = MissionState.from_prior(s, SolverKit(s), "proposed", Gaussian(s.x0.copy(), s.P0.copy()))
     job = state.next_job(s.uav_start_xy, None)
     state.commit(job, job.run())
     assert state.last_plan is not None
-    nan = np.full(s.M, np.nan)
-    state.skip(
-        Detections(1, nan, nan, s.uav_start_xy.copy()),
-        np.full(s.M, 1 / s.M),
-        s.uav_start_xy.copy(),
-        "no plan",
-        "test",
-    )
+    state.skip(1, {}, None, s.uav_start_xy.copy(), "test")
     assert state.next_job(s.uav_start_xy, None).prev_plan is None
 
 
@@ -154,7 +158,7 @@ def test_a_hold_at_the_first_slot_serves_every_planned_vehicle(
     """A plan timed out at slot 1 (no last association): each vehicle that measures (share > 0)
     has a BS (14f/g), as the planner's own association would give from the same positions."""
     s = paper
-    state = MissionState(s, SolverKit(s), "proposed", Gaussian(s.x0.copy(), s.P0.copy()))
+    state = MissionState.from_prior(s, SolverKit(s), "proposed", Gaussian(s.x0.copy(), s.P0.copy()))
     job = state.next_job(s.uav_start_xy, None, excluded)
     plan = job.hold("timeout: test", "timeout")
     kit = SolverKit(s)

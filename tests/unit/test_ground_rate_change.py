@@ -15,13 +15,12 @@ from isac_mission.planning.nlp_model import NlpSolver, plain_ipopt
 from isac_mission.planning.per_slot import polish_nlp
 from isac_mission.planning.slot import SolverKit
 from isac_mission.service.ground.mission import MissionState
-from isac_mission.service.ground.multi_target import MultiTargetMission
 from isac_mission.types import Gaussian
 
 
 def test_a_new_r_th_keeps_the_ipopt_problems_of_every_fleet_size() -> None:
     s = load_scenario("paper")
-    state = MissionState(s, SolverKit(s), "horizon", Gaussian(s.x0.copy(), s.P0.copy()))
+    state = MissionState.from_prior(s, SolverKit(s), "horizon", Gaussian(s.x0.copy(), s.P0.copy()))
     prepare_fleet(state.kit, "horizon", 0)
     full, one_out = horizon_nlp(state.kit), horizon_nlp(state.kits.for_active((0, 2)))
     state.set_scenario(s.with_changes(r_th=2 * s.r_th))
@@ -42,7 +41,7 @@ def test_a_new_r_th_on_a_multi_target_mission_keeps_the_solve_lock_and_the_probl
 
     base = multi_target_kit(s)
     kit = SolverKit(s, n_keep_out=base.n_keep_out, solve_lock=lock, ipopt=factory)
-    mission = MultiTargetMission(s, kit, "proposed")
+    mission = MissionState(s, kit, "proposed")
     polish = polish_nlp(mission.kit)
     mission.set_scenario(s.with_changes(r_th=2 * s.r_th))
     assert mission.kit.scenario.r_th == 2 * s.r_th

@@ -15,7 +15,8 @@ from isac_mission.service.ground.exclusion import VehicleWatch
 from isac_mission.service.ground.mission import MissionState
 from isac_mission.service.ground.report import GroundReport
 from isac_mission.service.ground.settings import GroundSettings
-from isac_mission.service.ground.startup import PlanningGate, skip_slot
+from isac_mission.service.ground.startup import PlanningGate
+from isac_mission.service.ground.tracefile import slot_record
 from isac_mission.timebase import plan_is_late
 from isac_mission.types import Gaussian
 from isac_mission.wire import DetectionMsg, TelemetryMsg
@@ -146,12 +147,13 @@ def test_without_telemetry_to_wait_for_the_gate_stays_open() -> None:
 def test_slots_run_without_a_plan_are_held_with_real_positions_or_unobserved_with_none(
     paper: Scenario, wall: FakeWall
 ) -> None:
-    state = MissionState(paper, SolverKit(paper), "proposed", Gaussian(paper.x0, paper.P0))
-    gate, _ = _rig(wall)
+    state = MissionState.from_prior(
+        paper, SolverKit(paper), "proposed", Gaussian(paper.x0, paper.P0)
+    )
     t0 = 10.0
-    assert list(gate.slots_to_skip(state, t0 + 2.0 * paper.dt, t0)) == [1, 2]
+    assert list(state.slots_to_skip(t0 + 2.0 * paper.dt, t0)) == [1, 2]
     compute_xy = paper.uav_start_xy
-    rec1 = skip_slot(state, 1, {}, compute_xy, "resume")
+    rec1 = slot_record(state.skip(1, {}, None, compute_xy, "resume"), {})
     assert rec1.status == "unobserved" and np.isnan(np.asarray(rec1.uav_xy_m)).all()
     assert np.isnan(np.asarray(rec1.r_diag)).all()
     where = np.array([1234.0, 987.0])
@@ -164,7 +166,7 @@ def test_slots_run_without_a_plan_are_held_with_real_positions_or_unobserved_wit
         radial_velocity_mps=1.0,
         bandwidth_share=0.5,
     )
-    rec2 = skip_slot(state, 2, {1: det}, compute_xy, "resume")
+    rec2 = slot_record(state.skip(2, {1: det}, None, compute_xy, "resume"), {})
     xy = np.asarray(rec2.uav_xy_m)
     assert rec2.status == "held" and state.slot == 2
     np.testing.assert_array_equal(xy[1], where)

@@ -13,6 +13,7 @@ from isac_mission.config import Scenario
 from isac_mission.planning.slot import SolverKit
 from isac_mission.service.ground.mission import LEG_CHAIN_WITHIN_M, MissionState, leg_start_state
 from isac_mission.types import Detections, Gaussian, SlotPlan, SolveReport
+from isac_mission.wire import detection_messages
 
 PLAN_XY = np.array([[100.0, 100.0], [200.0, 100.0], [300.0, 100.0]])
 PLAN_V = np.array([[10.0, 0.0], [0.0, 10.0], [-5.0, 5.0]])
@@ -78,7 +79,7 @@ def test_the_ground_plans_the_next_slot_from_the_committed_plans_end_state(
     s = dataclasses.replace(
         paper, N=5, planner=paper.planner.model_copy(update={"vehicle_model": True})
     )
-    state = MissionState(s, SolverKit(s), "proposed", Gaussian(s.x0.copy(), s.P0.copy()))
+    state = MissionState.from_prior(s, SolverKit(s), "proposed", Gaussian(s.x0.copy(), s.P0.copy()))
     first = state.plan_next(s.uav_start_xy, np.zeros((s.M, 2)))
     assert first.plan.uav_velocity_mps is not None
     behind = first.plan.uav_xy_m - 1.0  # each vehicle 1.4 m short of its waypoint
@@ -88,7 +89,8 @@ def test_the_ground_plans_the_next_slot_from_the_committed_plans_end_state(
         range_m=np.linalg.norm(behind - s.x0[:2], axis=1),
         radial_velocity_mps=np.zeros(s.M),
     )
-    state.process(det, first.plan.bandwidth_share, behind)
+    msgs = {msg.uav: msg for msg in detection_messages(det, 1.0, first.plan.bandwidth_share)}
+    state.process(1, msgs, None, behind)
     job = state.next_job(behind, np.zeros((s.M, 2)), boundary_xy=behind)
     np.testing.assert_array_equal(job.uav_xy, first.plan.uav_xy_m)
     np.testing.assert_array_equal(job.uav_v, first.plan.uav_velocity_mps)

@@ -1,4 +1,4 @@
-"""The several-target ground loop (service/ground/multi_target.py `MultiTargetGround`) handles a
+"""The ground loop (service/ground/loop.py) on a scenario of several targets handles a
 late plan, a plan made before a stall and a solver error as the single-target loop does
 (loop.py; tests/unit/test_fallbacks.py, tests/reliability/test_solver_faults.py): a plan the
 bridges would drop is marked "late" and counted; a plan made before a stall is dropped, counted,
@@ -15,13 +15,14 @@ import numpy as np
 import pytest
 
 from isac_mission.config import Scenario, load_scenario
+from isac_mission.planning import fleet
 from isac_mission.planning import multi_target as mt_planning
 from isac_mission.planning.multi_target import multi_target_kit
-from isac_mission.service.ground import multi_target as mt_ground
-from isac_mission.service.ground.multi_target import MultiTargetGround
+from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.wire import PlanMsg, decode
+from tests.support.ground_steps import plan_slot_of
 
 
 class RecordingBus:
@@ -34,7 +35,7 @@ class RecordingBus:
         self.published.append((key, payload))
 
 
-class PlanningStep(MultiTargetGround):
+class PlanningStep(GroundLoop):
     """The loop's planning step alone: nothing is processed after it (no slot machine)."""
 
     def _advance(self) -> None:
@@ -46,7 +47,7 @@ def scenario() -> Scenario:
     return load_scenario("multi-target").with_changes(N=5)
 
 
-def ground(s: Scenario, **settings: Any) -> tuple[MultiTargetGround, RecordingBus]:
+def ground(s: Scenario, **settings: Any) -> tuple[GroundLoop, RecordingBus]:
     bus = RecordingBus()
     loop = PlanningStep(
         s,
@@ -57,18 +58,15 @@ def ground(s: Scenario, **settings: Any) -> tuple[MultiTargetGround, RecordingBu
     return loop, bus
 
 
-def plan_slot_1(loop: MultiTargetGround) -> tuple[TrackPrediction, ...]:
+def plan_slot_1(loop: GroundLoop) -> tuple[TrackPrediction, ...]:
     """Plan slot 1 from the start points as `_advance` does (no slot completed by it)."""
-    st = loop.state
-    st.start_known_tracks()
-    predictions = st.predict()
     xy = loop.s.uav_start_xy.copy()
-    v = np.zeros_like(xy)
-    asyncio.run(loop._plan(1, predictions, xy, v, (), (), None, None))
-    return predictions
+    job = loop.state.next_job(xy, np.zeros_like(xy))
+    asyncio.run(loop._plan(job, None, None))
+    return job.predictions
 
 
-def plans_published(loop: MultiTargetGround, bus: RecordingBus) -> list[PlanMsg]:
+def plans_published(loop: GroundLoop, bus: RecordingBus) -> list[PlanMsg]:
     return [
         decode(PlanMsg, payload, n_uavs=loop.s.M)
         for key, payload in bus.published
@@ -136,7 +134,7 @@ def _failing_unless(monkeypatch: pytest.MonkeyPatch, allowed: tuple[str, ...]) -
             raise RuntimeError(f"{method} broke")
         return original(s, method, *args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(mt_ground, "plan_tracks", plan_tracks)
+    monkeypatch.setattr(fleet, "plan_tracks", plan_tracks)
     return asked
 
 
@@ -158,7 +156,8 @@ def test_after_a_solver_error_the_communication_optimal_plan_is_flown(
     assert loop.report.counters["planner errors"] == 1
     # The tracks' communication-optimal plan (the other tracks kept out), not a hold.
     xy = s.uav_start_xy.copy()
-    planned_for, comm = loop.state.plan(predictions, xy, np.zeros_like(xy), (), method="comm")
+    planned_for, comm = plan_slot_of(loop.state, xy, np.zeros_like(xy), method="comm", commit=False)
+    assert loop.state.next_job(xy).predictions is predictions
     assert pending.planned_for == planned_for != 0
     np.testing.assert_array_equal(pending.plan.uav_xy_m, comm.uav_xy_m)
     np.testing.assert_array_equal(pending.plan.bandwidth_share, comm.bandwidth_share)

@@ -25,14 +25,13 @@ from isac_mission.records.jsonlines import dumps_line, loads_line, to_jsonable
 from isac_mission.records.multi_target import header_line, resume_fields, slot_line
 from isac_mission.records.progress import trace_progress
 from isac_mission.service.assembly import LiveOptions, live_trace_limits, planning_scenario
-from isac_mission.service.ground.multi_target import (
-    MultiTargetGround,
-    MultiTargetMission,
-    live_trace_config,
-)
+from isac_mission.service.ground.loop import GroundLoop
+from isac_mission.service.ground.mission import MissionState
 from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.service.ground.tracefile import live_trace_config
 from isac_mission.wire import DetectionSetMsg
 from sim.multi_target_scene import MultiTargetScene
+from tests.support.ground_steps import plan_slot_of, processed
 from tests.support.trace_files import write_multi_target_trace, write_single_target_trace
 
 SCENARIO = "multi-target"
@@ -54,18 +53,16 @@ def _lines(s: Scenario, slots: int) -> list[str]:
     """The slot lines of a mission of `s` flown `slots` slots (method sd: the fleet parks),
     with what a restart needs (records/multi_target.py `resume_fields`)."""
     scene = MultiTargetScene(s, 1)
-    mission = MultiTargetMission(s, multi_target_kit(s), "sd")
+    mission = MissionState(s, multi_target_kit(s), "sd")
     out = []
     for n in range(1, slots + 1):
-        mission.start_known_tracks()
-        planned_for, plan = mission.plan(mission.predict(), s.uav_start_xy, None, ())
-        mission.commit(n, planned_for, plan, s.uav_start_xy)
+        _, plan = plan_slot_of(mission, s.uav_start_xy)
         reports = scene.reports(n, plan.uav_xy_m, plan.bandwidth_share)
         msgs = {
             m: DetectionSetMsg(n, 0.0, m, r.measurements, plan.uav_xy_m[m], plan.bandwidth_share[m])
             for m, r in enumerate(reports)
         }
-        o = mission.process(n, msgs, None, plan.uav_xy_m)
+        o = processed(mission, n, msgs, None, plan.uav_xy_m)
         out.append(slot_line(o, {"latency_ms": 1.0, **resume_fields(o)}))
     return out
 
@@ -134,7 +131,7 @@ def test_the_trace_serve_writes_may_be_resumed(multi: Scenario, tmp_path: Path) 
 # --------------------------------------------------------------------------- the ground loop
 
 
-def _loop(s: Scenario, path: Path) -> MultiTargetGround:
+def _loop(s: Scenario, path: Path) -> GroundLoop:
     """The serve's multi-target ground loop with `--resume` on `path`, its trace opened (no bus:
     opening the trace does not use it)."""
     planning = planning_scenario(s, LiveOptions())
@@ -145,7 +142,7 @@ def _loop(s: Scenario, path: Path) -> MultiTargetGround:
         trace_config=live_trace_limits(s, planning),
     )
     kit = multi_target_kit(planning)
-    loop = MultiTargetGround(planning, None, settings, kit)  # type: ignore[arg-type]
+    loop = GroundLoop(planning, None, settings, kit)  # type: ignore[arg-type]
     loop._open_trace()
     return loop
 

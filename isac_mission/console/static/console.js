@@ -19,6 +19,7 @@ window.consoleState = { S, M };
 let pendingTelemetry = [];
 const TRACK_SERIES_SLOTS = 5000;
 const CHARTED_TRACKS = 8;
+const LEAD_VELOCITY_COLOUR = "#37474f";
 
 // ------------------------------------------------------------------------- the mission's phase
 
@@ -81,7 +82,7 @@ function targetNames(c) { return c && Array.isArray(c.targets) ? c.targets.map((
 function onGround(t) { return !!t && (t.landed || !t.armed); }
 
 function liveScene(ph) {
-  const c = S.config, plan = S.latest.plan, track = S.latest.track;
+  const c = S.config, plan = S.latest.plan;
   const before = ph.phase === "starting" || ph.phase === "take-off";
   const uavs = [];
   for (let m = 0; m < (c ? c.M : 0); m++) {
@@ -93,18 +94,16 @@ function liveScene(ph) {
       landed: onGround(t) && (!!S.airborne[m] || ph.phase === "landing" || ph.phase === "done"),
     });
   }
+  // Any number of targets, one way: the tracks (a single target's is track 1) and the targets
+  // present at the tracks' slot (the world's next truth may already have arrived).
   const tracks = S.latest.tracks;
-  // the truth of the estimate's slot (the world's next truth may already have arrived)
-  const truth = track ? track.truth_of_slot || null : S.latest.truth ? S.latest.truth.target_x : null;
-  const truths = tracks ? tracks.truths_of_slot || undefined : S.latest.truths ? S.latest.truths.present : undefined;
+  const truths = tracks ? tracks.truths_of_slot || [] : S.latest.truths ? S.latest.truths.present : [];
   return {
     config: c, follow: S.follow, targetNames: targetNames(c),
     layers: [{
       label: "live", colour: colourOf(0), uavs,
-      target: track ? { xy: track.x, ellipse: track.ellipse } : null,
-      truth,
-      cues: before && !track && !tracks ? cuesOf(c) : [],
-      tracks: tracks ? tracks.tracks : undefined,
+      cues: before && !tracks ? cuesOf(c) : [],
+      tracks: tracks ? tracks.tracks : [],
       truths,
     }],
   };
@@ -120,46 +119,47 @@ function replayScene() {
       for (let j = 0; j <= k; j++) trail.push(run.frames[j].uav_xy[m]);
       uavs.push({ m, xy: f.uav_xy[m], trail, wp: f.plan_xy ? f.plan_xy[m] : null, eta: f.eta[m], bs: f.assoc[m], mode: null, link: null });
     }
+    // a trace's estimate and truth, drawn as a track and a target are (named by the trace)
+    const est = f && f.target_est && f.target_est[0] != null ? [{ id: 1, confirmed: true, x: f.target_est, ellipse: f.ellipse }] : [];
     return {
       label: run.label, colour: colourOf(i), uavs,
-      target: f ? { xy: f.target_est, ellipse: f.ellipse } : null, truth: f ? f.target_true : null,
+      tracks: est, truths: f && f.target_true ? [{ index: 0, x: f.target_true }] : [],
     };
   });
   M.replayDrawn = layers.map((L) => ({ label: L.label, uavs: L.uavs.map((u) => u.xy) }));
-  return { config: S.config, follow: S.follow, layers };
+  return { config: S.config, follow: S.follow, replay: true, layers };
 }
 
-// What the close-up shows: the estimate (or the chosen track, or the cue before the start), its
-// 2-sigma ellipse, the truth of its slot, and the vehicles and waypoints that fall in the window.
+// What the close-up shows: the chosen track (a replay: each trace's estimate; before the start:
+// the cue), its 2-sigma ellipse, the target of its slot it follows (else the nearest one), and
+// the vehicles, waypoints and other tracks that fall in the window.
 function insetFocus(scene, ph) {
   const L0 = scene.layers[0];
   if (!L0) return null;
   const items = [];
   let centre = null, note = "";
+  const chosen = S.mode === "replay" ? null : chooseTrack(L0.tracks);
   if (S.mode === "replay") {
-    scene.layers.forEach((L, i) => {
-      if (!L.target || !L.target.xy || L.target.xy[0] == null) return;
-      if (!centre) centre = L.target.xy;
-      items.push({ kind: "estimate", xy: L.target.xy, ellipse: L.target.ellipse, colour: scene.layers.length > 1 ? L.colour : ESTIMATE_COLOUR, label: scene.layers.length > 1 ? L.label : "" });
+    scene.layers.forEach((L) => {
+      const t = L.tracks[0];
+      if (!t) return;
+      if (!centre) centre = t.x;
+      items.push({ kind: "estimate", xy: t.x, ellipse: t.ellipse, colour: scene.layers.length > 1 ? L.colour : ESTIMATE_COLOUR, label: scene.layers.length > 1 ? L.label : "" });
     });
-    if (L0.truth) items.push({ kind: "truth", xy: L0.truth, label: "truth" });
-  } else if (L0.tracks) {
-    const chosen = chooseTrack(L0.tracks);
-    if (chosen) {
-      centre = chosen.x;
-      items.push({ kind: "estimate", xy: chosen.x, ellipse: chosen.ellipse, label: "T" + chosen.id, dashed: !chosen.confirmed });
-      for (const t of L0.tracks) if (t !== chosen) items.push({ kind: "estimate", xy: t.x, ellipse: t.ellipse, label: "T" + t.id, dashed: !t.confirmed, far: true });
-      const target = (L0.truths || []).find((t) => t.index === chosen.target);
-      if (target) items.push({ kind: "truth", xy: target.x, label: targetName(scene, target.index) });
-      note = "T" + chosen.id + (target ? " follows " + targetName(scene, target.index) + ", " + fmtMetres(Math.hypot(chosen.x[0] - target.x[0], chosen.x[1] - target.x[1])) + " off" : "");
-    }
-  } else if (L0.target && L0.target.xy) {
-    centre = L0.target.xy;
-    items.push({ kind: "estimate", xy: L0.target.xy, ellipse: L0.target.ellipse, label: "estimate" });
-    if (L0.truth) {
-      items.push({ kind: "truth", xy: L0.truth, label: "truth" });
-      note = "error " + fmtMetres(Math.hypot(L0.target.xy[0] - L0.truth[0], L0.target.xy[1] - L0.truth[1]));
-    }
+    if (L0.truths.length) items.push({ kind: "truth", xy: L0.truths[0].x, label: "truth" });
+  } else if (chosen) {
+    // the chosen track, the target it follows (else the nearest present one) and the other
+    // tracks where they fall in the window
+    centre = chosen.x;
+    items.push({ kind: "estimate", xy: chosen.x, ellipse: chosen.ellipse, label: "T" + chosen.id, dashed: !chosen.confirmed });
+    for (const t of L0.tracks) if (t !== chosen) items.push({ kind: "estimate", xy: t.x, ellipse: t.ellipse, label: "T" + t.id, dashed: !t.confirmed, far: true });
+    const off = (t) => Math.hypot(chosen.x[0] - t.x[0], chosen.x[1] - t.x[1]);
+    const followed = L0.truths.find((t) => chosen.target != null && t.index === chosen.target);
+    const target = followed || L0.truths.slice().sort((a, b) => off(a) - off(b))[0];
+    if (target) items.push({ kind: "truth", xy: target.x, label: targetName(scene, target.index) });
+    note = "T" + chosen.id + (!target ? ""
+      : followed ? " follows " + targetName(scene, target.index) + ", " + fmtMetres(off(target)) + " off"
+        : " follows no target: " + targetName(scene, target.index) + " " + fmtMetres(off(target)) + " off");
   } else if (L0.cues && L0.cues.length) {
     centre = L0.cues[0].xy;
     items.push({ kind: "estimate", xy: centre, ellipse: L0.cues[0].ellipse, label: "cue", dashed: true });
@@ -208,10 +208,10 @@ function render() {
   M.inset = drawInset(inset, focus);
   $("inset-note").textContent = focus ? focus.note : "";
   $("map-scale").textContent = M.map.s ? (M.map.follow ? "following the target: " : "whole area: ") + "100 px = " + fmtMetres(100 / M.map.s) : "";
-  if (S.mode !== "replay") {  // a multi-target mission's tracks and targets, as drawn
+  if (S.mode !== "replay") {  // the tracks and targets, as drawn
     const L = scene.layers[0];
-    M.tracksDrawn = (L.tracks || []).map((t) => ({ id: t.id, confirmed: t.confirmed, x: t.x[0], y: t.x[1] }));
-    M.truthsDrawn = (L.truths || []).map((t) => ({ index: t.index, x: t.x[0], y: t.x[1] }));
+    M.tracksDrawn = L.tracks.map((t) => ({ id: t.id, confirmed: t.confirmed, x: t.x[0], y: t.x[1] }));
+    M.truthsDrawn = L.truths.map((t) => ({ index: t.index, x: t.x[0], y: t.x[1] }));
     M.cuesDrawn = (L.cues || []).map((q) => ({ x: q.xy[0], y: q.xy[1], label: q.label }));
     showPhase(ph);
   }
@@ -295,13 +295,13 @@ function renderPanels(ph) {
   rows($("mission-table"), [
     ["phase", phaseText],
     ["plan slot", plan ? String(plan.slot) + (age ? " (" + age + ")" : "") : "-", age ? "stale" : ""],
-    ["tr(PCRB)", track ? fmt(track.pcrb_trace, 4) : "-"],
+    [leadName("tr(PCRB)"), track ? fmt(track.pcrb_trace, 4) : "-"],
     ["  position / velocity", track ? fmt(track.pcrb_pos, 4) + " / " + fmt(track.pcrb_vel, 4) : "-"],
     ["plan objective", plan ? fmt(plan.objective, 4) : "-"],
     ["solve time", plan ? fmt(plan.solve_s * 1e3, 1) + " ms" : "-"],
     ["sim time", clock ? fmt(clock.t, 1) + " s (x" + fmt(clock.speed, 1) + ")" : "-"],
     ["service", health ? health.status : "-"],
-  ].concat(severalTargetsRows(S.latest.tracks)));
+  ].concat(tracksRows(S.latest.tracks)));
   const veh = health ? health.vehicles || {} : {};
   const vrows = [];
   const nowMs = Date.now();
@@ -330,11 +330,17 @@ function renderPanels(ph) {
   renderInsetChoice();
 }
 
-// A multi-target mission's tracks (how many of each kind) and, once the slot's truth is known,
-// each present target (1-based, in the scenario's order) with the track that follows it (the
-// nearest confirmed track within the follow gate) and its distance to the nearest confirmed
-// track; nothing on a single-target mission.
-function severalTargetsRows(tracks) {
+// The ground loop's lead track (its `track` message: tr(PCRB) and its parts) is named so when it
+// is one of several tracks.
+function leadName(text) {
+  const tracks = S.latest.tracks;
+  return tracks && tracks.tracks.length > 1 ? text + " (lead track)" : text;
+}
+
+// The tracks (how many of each kind) and, once the slot's truth is known, each present target
+// (1-based, in the scenario's order) with the track that follows it (the nearest confirmed track
+// within the follow gate) and its distance to the nearest confirmed track.
+function tracksRows(tracks) {
   if (!tracks) return [];
   const confirmed = tracks.tracks.filter((t) => t.confirmed);
   const out = [
@@ -354,7 +360,7 @@ function severalTargetsRows(tracks) {
 
 function renderInsetChoice() {
   const sel = $("inset-track"), tracks = S.latest.tracks;
-  sel.hidden = !tracks;
+  sel.hidden = !tracks || (tracks.tracks.length < 2 && S.insetTrack === "");  // a choice of one: none
   if (!tracks) return;
   const want = ["", ...tracks.tracks.map((t) => String(t.id))];
   const have = [...sel.options].map((o) => o.value);
@@ -416,23 +422,23 @@ function trackSeries(kind) {
 function renderCharts() {
   if (S.mode === "replay") {
     const per = (key) => S.runs.map((r, i) => ({ label: r.label, colour: colourOf(i), points: r.frames.map((f) => [f.slot, f[key]]) }));
+    $("caption-pcrb").textContent = "tr(PCRB) per trace (m\u00b2 + m\u00b2/s\u00b2), log scale";
+    $("caption-error").textContent = "per trace: position error (m)";
     M.charts.pcrb = drawChart($("chart-pcrb"), per("pcrb_trace"), { log: true, cursor: S.frame });
     M.charts.error = drawChart($("chart-error"), per("error_m"), { cursor: S.frame });
     M.charts.time = drawChart($("chart-time"), per("solve_ms"), { cursor: S.frame });
     return;
   }
-  if (S.latest.tracks || S.trackSeries.size) {  // several targets: one line per confirmed track
-    $("caption-pcrb").textContent = "position bound per confirmed track (m\u00b2), log scale";
-    $("caption-error").textContent = "per confirmed track: distance to the nearest target (m)";
-    M.charts.pcrb = drawChart($("chart-pcrb"), trackSeries("pcrb"), { log: true, empty: "no confirmed track yet" });
-    M.charts.error = drawChart($("chart-error"), trackSeries("error"), { empty: S.latest.truths ? "no confirmed track yet" : "no truth from the world" });
-  } else {
-    M.charts.pcrb = drawChart($("chart-pcrb"), [
-      { label: "position", colour: "#1565c0", points: seriesPoints("pcrb_pos") },
-      { label: "velocity", colour: "#c62828", points: seriesPoints("pcrb_vel") },
-    ], { log: true });
-    M.charts.error = drawChart($("chart-error"), [{ label: "|estimate - truth|", colour: "#2e7d32", points: seriesPoints("error_m") }]);
-  }
+  // One line per confirmed track (a single target's is T1): its position bound and its error;
+  // with the lead track's velocity bound (its `track` message), dashed, when the ground sends it.
+  const bounds = trackSeries("pcrb");
+  const velocity = seriesPoints("pcrb_vel");
+  const withVelocity = velocity.some(([, v]) => v != null && isFinite(v));
+  if (withVelocity) bounds.push({ label: "lead track velocity (m\u00b2/s\u00b2)", colour: LEAD_VELOCITY_COLOUR, dashed: true, points: velocity });
+  $("caption-pcrb").textContent = "position bound per confirmed track (m\u00b2)" + (withVelocity ? ", lead track's velocity bound dashed (m\u00b2/s\u00b2)" : "") + ", log scale";
+  M.charts.pcrb = drawChart($("chart-pcrb"), bounds, { log: true, empty: "no confirmed track yet" });
+  $("caption-error").textContent = "per confirmed track: distance to the nearest target (m)";
+  M.charts.error = drawChart($("chart-error"), trackSeries("error"), { empty: S.latest.truths ? "no confirmed track yet" : "no truth from the world" });
   M.charts.time = drawChart($("chart-time"), [
     { label: "solve", colour: "#6a1b9a", points: seriesPoints("solve_ms") },
     { label: "detection to plan", colour: "#ef6c00", points: seriesPoints("det_to_plan_ms") },
@@ -484,8 +490,8 @@ function apply(u) {
   }
 }
 
-// A multi-target mission's per-track series (its charts), from the tracks as they arrive (the
-// snapshot brings the history).
+// The per-track series (the charts), from the tracks as they arrive (the snapshot brings the
+// history); a slot's row replaces the one kept.
 function keepBySlot(topic, data) {
   if (topic === "tracks") {
     for (const row of data.series_rows || []) bounded(S.trackSeries, row.slot, row, TRACK_SERIES_SLOTS);

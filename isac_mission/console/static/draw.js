@@ -203,11 +203,13 @@ function drawEstimate(ctx, x, y, ellipse, s, colour, opts) {
 
 // ------------------------------------------------------------------------- the map
 
-// scene: {config, follow, targetNames, layers: [{label, colour,
-//          uavs: [{m, xy, trail, wp, mode, link, eta, bs, landed}],
-//          target: {xy, ellipse} | null, truth: [x, y] | null, cues: [{xy, ellipse, label}],
-//          tracks: [{id, confirmed, x, ellipse, target}] | undefined (a multi-target mission's),
-//          truths: [{index, x}] | undefined (its present targets)}]}
+// scene: {config, follow, targetNames, replay, layers: [{label, colour,
+//          uavs: [{m, xy, trail, wp, mode, link, eta, bs, landed}], cues: [{xy, ellipse, label}],
+//          tracks: [{id, confirmed, x, ellipse, target}] (any number of targets; a single
+//          target's is track 1; a replay: each trace's estimate),
+//          truths: [{index, x}] (the targets present at the tracks' slot)}]}
+// Live, tracks are labelled T<id> and targets "target k <name> (T<id>)"; a replay labels its
+// estimates by trace (several traces) or "target" (one).
 // Returns what it drew: {s (px/m), follow, box, labels, uavs, waypoints, estimates, truths,
 // ellipses} in canvas px.
 function drawMap(canvas, scene) {
@@ -217,7 +219,7 @@ function drawMap(canvas, scene) {
   const info = { s: null, follow: false, box: null, labels: [], uavs: [], waypoints: [], estimates: [], truths: [], ellipses: [] };
   if (!c) return info;
   const multi = scene.layers.length > 1;
-  const several = scene.layers.some((L) => L.tracks || L.truths);
+  const several = !scene.replay && scene.layers.some((L) => L.tracks.length || L.truths.length);
   const cueing = scene.layers.some((L) => L.cues && L.cues.length);
   // legend first: its lines set the height left for the map
   const legendItems = ["\u25a0 BS", "\u25cf UAV (hollow: link lost)", "\u00d7 waypoint", "+ estimate (2\u03c3 ellipse)", "\u25c6 truth"];
@@ -231,10 +233,8 @@ function drawMap(canvas, scene) {
   if (scene.follow) {
     const pts = [];
     for (const L of scene.layers) {
-      if (L.target && L.target.xy) pts.push(L.target.xy);
-      if (L.truth) pts.push(L.truth);
-      for (const t of L.tracks || []) if (t.confirmed) pts.push(t.x);
-      for (const t of L.truths || []) pts.push(t.x);
+      for (const t of L.tracks) if (t.confirmed) pts.push(t.x);
+      for (const t of L.truths) pts.push(t.x);
       for (const q of L.cues || []) pts.push(q.xy);
       for (const u of L.uavs) { if (u.xy) pts.push(u.xy); if (u.wp) pts.push(u.wp); }
     }
@@ -288,7 +288,8 @@ function drawMap(canvas, scene) {
     ctx.fillStyle = "#37474f"; ctx.fillRect(x - 6, y - 6, 12, 12);
     labels.mark(x, y, 6);
   });
-  // the tracker's cue before the start, the target estimates, the truths
+  // the tracker's cue before the start, the tracks (a cross and its 2-sigma ellipse; a
+  // tentative one fainter and dashed), the targets (diamonds)
   for (const L of scene.layers) {
     const col = multi ? L.colour : ESTIMATE_COLOUR;
     for (const q of L.cues || []) {
@@ -296,22 +297,13 @@ function drawMap(canvas, scene) {
       drawEstimate(ctx, x, y, q.ellipse, T.s, col, { dashed: true, alpha: 0.6, fillAlpha: 0.05, width: 1.5 });
       labels.mark(x, y, 7);
     }
-    if (L.target && L.target.xy) {
-      const x = T.px(L.target.xy[0]), y = T.py(L.target.xy[1]);
-      const px = drawEstimate(ctx, x, y, L.target.ellipse, T.s, col);
+    for (const tr of L.tracks) {
+      const x = T.px(tr.x[0]), y = T.py(tr.x[1]);
+      const px = drawEstimate(ctx, x, y, tr.ellipse, T.s, col, tr.confirmed ? {} : { dashed: true, alpha: 0.45, fillAlpha: 0.08, width: 1.5 });
       info.estimates.push([x, y]); info.ellipses.push(px);
       labels.mark(x, y, 7);
     }
-    if (L.truth) {
-      const x = T.px(L.truth[0]), y = T.py(L.truth[1]);
-      drawDiamond(ctx, x, y); info.truths.push([x, y]); labels.mark(x, y, 6);
-    }
-    for (const tr of L.tracks || []) {
-      const x = T.px(tr.x[0]), y = T.py(tr.x[1]);
-      drawEstimate(ctx, x, y, tr.ellipse, T.s, col, tr.confirmed ? {} : { dashed: true, alpha: 0.45, fillAlpha: 0.08, width: 1.5 });
-      labels.mark(x, y, 7);
-    }
-    for (const t of L.truths || []) {
+    for (const t of L.truths) {
       const x = T.px(t.x[0]), y = T.py(t.x[1]);
       drawDiamond(ctx, x, y); info.truths.push([x, y]); labels.mark(x, y, 6);
     }
@@ -358,12 +350,13 @@ function drawMap(canvas, scene) {
   }
   for (const L of scene.layers) {
     const col = multi ? L.colour : ESTIMATE_COLOUR;
-    for (const tr of L.tracks || []) {
+    if (scene.replay) continue;  // a trace's estimate: below
+    for (const tr of L.tracks) {
       labels.add("T" + tr.id, T.px(tr.x[0]), T.py(tr.x[1]), { colour: col, font: (tr.confirmed ? "bold " : "") + LABEL_FONT });
     }
     const follower = new Map();
-    for (const tr of L.tracks || []) if (tr.confirmed && tr.target != null) follower.set(tr.target, tr.id);
-    for (const t of L.truths || []) {
+    for (const tr of L.tracks) if (tr.confirmed && tr.target != null) follower.set(tr.target, tr.id);
+    for (const t of L.truths) {
       const id = follower.get(t.index);
       labels.add(targetName(scene, t.index) + (id != null ? " (T" + id + ")" : " (no track)"), T.px(t.x[0]), T.py(t.x[1]), { colour: "#333" });
     }
@@ -374,8 +367,8 @@ function drawMap(canvas, scene) {
     for (const L of scene.layers) for (const u of L.uavs) if (u.bs === k) served.push((multi ? L.label + ":" : "") + "U" + u.m);
     labels.add(`BS${k}` + (served.length ? " \u2192 " + served.join(", ") : ""), T.px(b[0]), T.py(b[1]), { font: "12px system-ui", size: 12, colour: "#263238" });
   });
-  for (const L of scene.layers) {
-    if (L.target && L.target.xy && !multi) labels.add("target", T.px(L.target.xy[0]), T.py(L.target.xy[1]), { colour: ESTIMATE_COLOUR });
+  if (scene.replay && !multi) {  // one trace: its estimate reads "target"; beside others, nothing
+    for (const tr of scene.layers[0].tracks) labels.add("target", T.px(tr.x[0]), T.py(tr.x[1]), { colour: ESTIMATE_COLOUR });
   }
   if (!info.follow) labels.add(`${c.area[0]} m x ${c.area[1]} m`, T.px(0), T.py(0), { colour: "#8a93a0", r: 2 });
   // scale bar, bottom right: the longest 1-2-5 length within 120 px
@@ -458,8 +451,8 @@ function drawInset(canvas, focus) {
 
 // ------------------------------------------------------------------------- charts
 
-// One chart: series [{label, colour, points: [[slot, value], ...]}], optional log scale and
-// cursor; the legend wraps. Returns [{label, points: number of finite points}].
+// One chart: series [{label, colour, dashed?, points: [[slot, value], ...]}], optional log scale
+// and cursor; the legend wraps. Returns [{label, points: number of finite points}].
 function drawChart(canvas, series, opts) {
   const ctx = canvas.getContext("2d");
   const W = canvas.width, H = canvas.height, L = 46, R = 8, B = 20;
@@ -500,14 +493,14 @@ function drawChart(canvas, series, opts) {
   ctx.fillText(lab(ymax), 2, Tp + 8); ctx.fillText(lab(ymin), 2, H - B);
   ctx.fillText("slot " + xmin, L, H - 6); ctx.fillText(String(xmax), W - R - 24, H - 6);
   for (const s of series) {
-    ctx.strokeStyle = s.colour; ctx.lineWidth = 1.5; ctx.beginPath();
+    ctx.strokeStyle = s.colour; ctx.lineWidth = 1.5; ctx.setLineDash(s.dashed ? [5, 3] : []); ctx.beginPath();
     let started = false, last = null;
     for (const [x, y] of s.points) {
       if (y == null || !isFinite(y)) { started = false; continue; }
       if (!started) { ctx.moveTo(px(x), py(y)); started = true; } else ctx.lineTo(px(x), py(y));
       last = [px(x), py(y)];
     }
-    ctx.stroke(); ctx.lineWidth = 1;
+    ctx.stroke(); ctx.lineWidth = 1; ctx.setLineDash([]);
     if (last) { ctx.fillStyle = s.colour; ctx.fillRect(last[0] - 1.5, last[1] - 1.5, 3, 3); }  // a lone point shows
   }
   rowsOf.forEach((row, i) => {

@@ -16,7 +16,7 @@ from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.timebase import SlotTimeline, reached
 from isac_mission.wire import DetectionMsg, DetectionSetMsg
 
-Report = TypeVar("Report", DetectionMsg, DetectionSetMsg)
+Report = TypeVar("Report", bound=DetectionMsg | DetectionSetMsg)
 """A UAV's report of a slot: one detection, or an unlabelled set (multi-target missions)."""
 
 

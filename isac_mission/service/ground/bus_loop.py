@@ -1,10 +1,10 @@
-"""What both ground loops (loop.py: one target; multi_target.py: several) do on the bus.
+"""What the ground loop (loop.py) does on the bus, apart from its slot machine.
 
 One subscription to everything of the mission (so that each publisher's order is kept: the
 world publishes a slot's truth before its detections), dispatched by the key's first part;
 a wall ticker that lets wall-clock deadlines pass without traffic; `clock`, `telemetry` and
 `control` handled alike; invalid payloads counted by reason and dropped; a bug in the slot
-machine counted and logged while the loop goes on; `health` published on every change. A loop
+machine counted and logged while the loop goes on; `health` published on every change. The loop
 adds its own handlers (`truth`, `detections`), its trace, and its slot machine (`_advance`).
 """
 

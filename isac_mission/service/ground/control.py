@@ -43,7 +43,7 @@ log = logging.getLogger(__name__)
 
 class ControlledMission(Protocol):
     """What a request needs of the loop's mission state (service/ground/mission.py's
-    MissionState, multi_target.py's MultiTargetMission): the last processed slot, the scenario
+    MissionState): the last processed slot, the scenario
     planned with, and a way to plan with another from the next slot on."""
 
     @property

@@ -1,60 +1,133 @@
-"""The ground loop's state, without I/O: belief, bound, and the plan for the next slot.
+"""The ground loop's state, without I/O: the tracks, and the plan for the next slot.
 
 Slot convention (as sim/world.py and wire/codec.py): plan n carries the waypoints flown during
-(n-1, n] and the shares used for slot n's detections; after the detections of slot n are folded in,
-the ground plans slot n+1. `MissionState` runs the slot recursion of `tracking/cycle.py`, as
-`experiment/closed_loop.py` does offline, split at the points where the live service waits for the
-network: `next_job` predicts (the plan is made on the planner's thread), `process` updates.
+(n-1, n] and the shares used for slot n's reports; after the reports of slot n are folded in,
+the ground plans slot n+1. `MissionState` runs the slot recursion of the offline loop
+(`experiment/closed_loop.fly_offline`) on the scenario's tracker (`tracking/factory.py`: the
+paper's labelled EKF and PCRB, or the tracker of several targets), split at the points where the
+live service waits for the network: `next_job` predicts (the plan is made on the planner's
+thread), `commit` adopts the plan, `process` updates, `skip` traces a slot the world ran without
+a plan of this loop.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.model.detections import UavReport
 from isac_mission.planning.fleet import KitCache, PlanningJob, active_part
+from isac_mission.planning.multi_target import TracksPlan, check_method
 from isac_mission.planning.slot import Method, SolverKit
-from isac_mission.records import SlotRecord
-from isac_mission.tracking.cycle import CycleModel, SlotPrediction, TrackState, predict, update
-from isac_mission.tracking.pcrb import Bound
-from isac_mission.types import (
-    Detections,
-    FloatArray,
-    Gaussian,
-    IntArray,
-    SlotPlan,
-    SolveReport,
-)
+from isac_mission.timebase import SlotTimeline
+from isac_mission.tracking.factory import keep_out_tracks, tracker_for
+from isac_mission.tracking.tracker import SlotTracking, Tracker, TrackPrediction
+from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan, SolveReport
+
+NO_ORIGIN = -2
+"""A measurement's origin when the world's truth did not say (no truth for the slot)."""
+
+HELD = "held"
+"""Status of a slot the world ran without a plan of this loop, with reports."""
+UNOBSERVED = "unobserved"
+"""Status of such a slot with no report: positions unknown (null), prediction only."""
 
 
-def job_prediction(job: PlanningJob) -> SlotPrediction:
-    """The slot prediction a planning job was made from: its one target's belief."""
-    (target,) = job.targets
-    assert target.cov_pred is not None
-    return SlotPrediction(Gaussian(target.state_pred, target.cov_pred), target.prior_information)
+class ArrivedReport(Protocol):
+    """One UAV's report of a slot as it arrived (a `detection` or a `detection_set`)."""
+
+    @property
+    def uav_xy_m(self) -> FloatArray:
+        """[2] where the UAV measured (m)."""
+        ...
+
+    @property
+    def bandwidth_share(self) -> float:
+        """The share eta it measured with."""
+        ...
+
+    @property
+    def report(self) -> FloatArray:
+        """[k, 2] its measurements (range m, radial velocity m/s)."""
+        ...
+
+
+class ArrivedTruth(Protocol):
+    """The world's truth of a slot (a `truth` or a `truth_set`): evaluation only."""
+
+    @property
+    def target_states(self) -> FloatArray:
+        """[T, 4] every target's state (m, m/s); NaN rows: not in the scene."""
+        ...
+
+    @property
+    def measurement_origins(self) -> tuple[tuple[int, ...], ...]:
+        """Per UAV, the target of each measurement (-1: a false alarm); () when not given."""
+        ...
 
 
 @dataclass(frozen=True)
 class PendingSlot:
-    """What was decided for slot n before its measurements: prediction and plan."""
+    """What was decided for slot n before its reports: the tracks' predictions and the plan."""
 
     slot: int
-    predicted: SlotPrediction
+    predictions: tuple[TrackPrediction, ...]
     plan: SlotPlan
+    planned_for: int = 0
+    """The ID of the track the plan's safety rule followed (0: none, the fleet held)."""
     start_xy: FloatArray | None = None
     """[M, 2] m: where the planner planned from (None: no plan of this loop)."""
     start_velocity: FloatArray | None = None
     """[M, 2] m/s: the velocities it was given (None: none)."""
     planned_around: tuple[int, ...] = ()
     """The vehicles the plan left out (PlanningJob.excluded)."""
+    skipped: bool = False
+    """The world ran the slot without a plan of this loop (`MissionState.skip`)."""
+
+
+@dataclass(frozen=True)
+class GroundSlot:
+    """One slot as the ground loop processed it.
+
+    plan: the plan flown (a skipped slot's: its status and the shares); uav_xy [M, 2]: where the
+    reports were taken (a UAV without a report: where it was last seen; `known_xy` has NaN
+    there); eta [M]: the shares they were taken with (a UAV without a report: its plan's);
+    assoc [M]: the BS of each UAV while measuring; truth [T, 4] (NaN: not known); reports [M]
+    (with the world's origins, NO_ORIGIN where not known); predictions: the tracks' predictions
+    the plan was made from; tracking: the tracks after the update; received: the reports that
+    arrived; saved: the tracker's state after the update (`Tracker.saved`: what a resume
+    continues from).
+    """
+
+    slot: int
+    method: str
+    pending: PendingSlot
+    uav_xy: FloatArray
+    known_xy: FloatArray
+    eta: FloatArray
+    assoc: IntArray
+    truth: FloatArray
+    truth_known: bool
+    reports: tuple[UavReport, ...]
+    tracking: SlotTracking
+    received: int
+    saved: object
 
     @property
-    def prediction(self) -> Gaussian:
-        """The EKF prediction of the slot."""
-        return self.predicted.prediction
+    def plan(self) -> SlotPlan:
+        return self.pending.plan
+
+    @property
+    def predictions(self) -> tuple[TrackPrediction, ...]:
+        return self.pending.predictions
+
+    @property
+    def planned_for(self) -> int:
+        return self.pending.planned_for
 
 
 LEG_CHAIN_WITHIN_M = 3.0
@@ -96,37 +169,109 @@ def leg_start_state(
 
 
 class MissionState:
-    """Belief and bound after the last processed slot, and the pending plan of the next one."""
+    """The tracks after the last processed slot, and the pending plan of the next one.
 
-    def __init__(self, s: Scenario, kit: SolverKit, method: Method, initial: Gaussian) -> None:
+    tracker: the scenario's (`tracker_for`) with no track yet; the known targets' tracks are
+    started as the offline loop starts them (`start_known_tracks`). initial_errors [T, 4]: added
+    to each known target's configured state to start its track (the offline twin's x_hat - x;
+    None: start at the configured state, the cue)."""
+
+    def __init__(
+        self,
+        s: Scenario,
+        kit: SolverKit,
+        method: Method,
+        initial_errors: FloatArray | None = None,
+        tracker: Tracker | None = None,
+    ) -> None:
+        check_method(s, method)
         self.scenario = s
         self.kit = kit
         self.method: Method = method
-        self.model = CycleModel.from_scenario(s)
-        self.belief = initial
-        self.bound = Bound.from_covariance(initial.P.copy())
+        self.tracker: Tracker = tracker_for(s) if tracker is None else tracker
+        self.initial_errors = initial_errors
         self.slot = 0
         self.eta: FloatArray = np.full(s.M, 1.0 / s.M)
         self.assoc: IntArray | None = None
         self.pending: PendingSlot | None = None
-        self.kits = KitCache(kit, method)
+        self.kits = KitCache(kit, method, keep_out_tracks(s))
+        """Kits for the fleet without the excluded vehicles (their positions keep-out points
+        beside the other tracks')."""
         self.last_plan: tuple[int, tuple[int, ...], SlotPlan] | None = None
         """(slot, active vehicles, plan) of the last committed plan: the next job's prev_plan
         when the next slot follows it with the same active vehicles."""
+        self._predicted: tuple[TrackPrediction, ...] | None = None
+        """The tracks predicted to slot + 1 (None: not yet): a plan dropped after a stall is
+        made again from the same prediction."""
+        self._started_at: int | None = None
+        """The slot after which the known targets' tracks were last started."""
 
     @classmethod
-    def resumed(cls, s: Scenario, kit: SolverKit, method: Method, last: SlotRecord) -> MissionState:
-        """Continue after a trace's last complete slot (its P, J, estimate, shares, association)."""
-        state = cls(s, kit, method, Gaussian(np.asarray(last.target_est), np.asarray(last.P)))
-        state.bound = Bound.from_information(np.asarray(last.J))
-        state.slot = last.slot
-        state.eta = np.asarray(last.bandwidth_share, dtype=float)
-        state.assoc = np.asarray(last.assoc, dtype=np.int64)
+    def from_prior(
+        cls, s: Scenario, kit: SolverKit, method: Method, prior: Gaussian
+    ) -> MissionState:
+        """A mission whose one known target's track starts from `prior` (x [4], P [4, 4])."""
+        state = cls(s, kit, method)
+        state.tracker.add_confirmed(prior)
+        state._started_at = 0
+        return state
+
+    @classmethod
+    def resumed(
+        cls,
+        s: Scenario,
+        kit: SolverKit,
+        method: Method,
+        tracker: Tracker,
+        slot: int,
+        eta: FloatArray,
+        assoc: IntArray,
+        initial_errors: FloatArray | None = None,
+    ) -> MissionState:
+        """Continue after a trace's slot line: the tracker as it was after `slot`'s update, the
+        shares eta [M] and BSs assoc [M] of that slot's plan; no last plan (the vehicles were
+        not flying this loop's plan). ValueError when the line does not fit `s`."""
+        if slot >= s.N:
+            raise ValueError(f"slot {slot} is the mission's last ({s.N}): nothing to resume")
+        eta, assoc = np.array(eta, dtype=float), np.array(assoc, dtype=np.int64)
+        if eta.shape != (s.M,) or assoc.shape != (s.M,):
+            raise ValueError(f"slot {slot}'s line is not for {s.M} UAVs")
+        state = cls(s, kit, method, initial_errors, tracker)
+        state.slot, state.eta, state.assoc = slot, eta, assoc
         return state
 
     @property
     def done(self) -> bool:
         return self.slot >= self.scenario.N
+
+    def slots_to_skip(self, t_s: float, t0_s: float) -> range:
+        """The slots after the last processed one that the world has already run at t_s
+        (mission start t0_s): they flew no plan of this loop."""
+        world_slot = SlotTimeline(t0_s, self.scenario.dt).slot_of(t_s)
+        return range(self.slot + 1, min(world_slot, self.scenario.N) + 1)
+
+    def start_known_tracks(self) -> None:
+        """Start a confirmed track for every known target that enters at the current slot
+        (the offline loop's rule: before slot n + 1 is predicted, those of first slot n); once
+        per slot (a plan dropped after a stall is made again)."""
+        if self._started_at == self.slot:
+            return
+        self._started_at = self.slot
+        s = self.scenario
+        for t, spec in enumerate(s.targets):
+            if spec.prior_known and spec.first_slot == self.slot:
+                x = np.array(spec.x0, dtype=np.float64)
+                if self.initial_errors is not None:
+                    x = x + self.initial_errors[t]
+                self.tracker.add_confirmed(Gaussian(x=x, P=s.P0.copy()))
+
+    def predict(self) -> tuple[TrackPrediction, ...]:
+        """Every track predicted to slot + 1 (the known targets' tracks started first); the
+        tracker predicts once per slot, a second call returns the same predictions."""
+        if self._predicted is None:
+            self.start_known_tracks()
+            self._predicted = self.tracker.predict()
+        return self._predicted
 
     def next_job(
         self,
@@ -139,12 +284,12 @@ class MissionState:
         """Predict slot n+1: the planning job from the UAVs' current positions uav_xy [M, 2]
         (and velocities uav_v [M, 2], for a dynamics-aware planner), planning without the
         `excluded` vehicles (planning/fleet.py; `operator_held`: those an operator took out).
-        Nothing changes until `commit`. A vehicle that
-        follows last slot's plan starts from that plan's end state (`leg_start_state`; where
-        the vehicles were at the slot boundary: boundary_xy [M, 2], NaN = unknown). The
-        job carries the planner's prev_plan: last slot's plan when the active vehicles are the
-        same (over them only), else None."""
-        predicted = predict(self.model, TrackState(self.belief, self.bound))
+        Nothing but the prediction changes until `commit`. A vehicle that follows last slot's
+        plan starts from that plan's end state (`leg_start_state`; where the vehicles were at
+        the slot boundary: boundary_xy [M, 2], NaN = unknown). The job carries the planner's
+        prev_plan: last slot's plan when the active vehicles are the same (over them only),
+        else None."""
+        predictions = self.predict()
         excluded = tuple(sorted(excluded))
         active = tuple(m for m in range(self.scenario.M) if m not in excluded)
         xy = np.asarray(uav_xy, dtype=float)
@@ -165,19 +310,29 @@ class MissionState:
             uav_v=v,
             prev_eta=self.eta,
             prev_assoc=self.assoc,
-            targets=(predicted.belief(self.model.motion),),
+            predictions=predictions,
             excluded=excluded,
             prev_plan=prev_plan,
             operator_held=tuple(sorted(operator_held)),
         )
 
-    def commit(self, job: PlanningJob, plan: SlotPlan) -> PendingSlot:
-        """Adopt `plan` (from job.run(), or a fallback) as the plan of slot n+1."""
+    def commit(self, job: PlanningJob, planned: TracksPlan | SlotPlan) -> PendingSlot:
+        """Adopt the plan (from job.run_tracks() or job.run(), or a fallback) as the plan of
+        slot n+1."""
         if job.slot != self.slot + 1:
             raise ValueError(f"job for slot {job.slot}, but the next slot is {self.slot + 1}")
-        predicted = job_prediction(job)
-        self.pending = PendingSlot(job.slot, predicted, plan, job.uav_xy, job.uav_v, job.excluded)
-        self.last_plan = (job.slot, job.active, plan)
+        if isinstance(planned, SlotPlan):
+            planned = TracksPlan(_primary_id(job.predictions), None, planned)
+        self.pending = PendingSlot(
+            job.slot,
+            job.predictions,
+            planned.plan,
+            planned.planned_for,
+            job.uav_xy,
+            job.uav_v,
+            job.excluded,
+        )
+        self.last_plan = (job.slot, job.active, planned.plan)
         return self.pending
 
     def plan_next(
@@ -185,108 +340,137 @@ class MissionState:
     ) -> PendingSlot:
         """next_job, run and commit in one call."""
         job = self.next_job(uav_xy, uav_v, excluded)
-        return self.commit(job, job.run())
+        return self.commit(job, job.run_tracks())
 
     def renew_kits(self) -> None:
         """Plan on fresh solver kits, for the current scenario, from now on (a timed-out
-        planner thread keeps the old); the IPOPT problems are kept (SolverKit.renewed)."""
+        planner thread keeps the old); the IPOPT problems, the solve lock and the compiled
+        cache are kept (SolverKit.renewed)."""
         self.kit = self.kit.renewed(self.scenario)
-        self.kits = KitCache(self.kit, self.method)
+        self.kits = KitCache(self.kit, self.method, keep_out_tracks(self.scenario))
 
     def set_scenario(self, s: Scenario) -> None:
         """Plan from now on with `s` (e.g. an operator's new R_th); same M and geometry."""
         if s.M != self.scenario.M:
             raise ValueError(f"the new scenario has M = {s.M}, the mission {self.scenario.M}")
         self.scenario = s
-        self.model = CycleModel.from_scenario(s)
         self.renew_kits()
 
     def skip(
         self,
-        det: Detections,
-        eta_used: FloatArray,
+        n: int,
+        msgs: Mapping[int, ArrivedReport],
+        truth: ArrivedTruth | None,
         compute_xy: FloatArray,
-        status: str,
-        reason: str,
-    ) -> SlotRecord:
-        """Slot n = slot + 1 ran without a plan of this loop (startup.py): drop the pending plan,
-        predict, fold in what arrived (det, NaN = missing) as `process` does, and record status
-        and reason. A UAV without a detection gets a null position in the record: compute_xy
-        [M, 2] (finite) is used for the computation only, where it contributes nothing."""
-        n = self.slot + 1
-        if det.slot != n:
-            raise ValueError(f"slot {det.slot} is not the next slot {n}")
-        predicted = predict(self.model, TrackState(self.belief, self.bound))
-        self.last_plan = None  # this slot had no plan of ours: the next one starts afresh
-        known = np.isfinite(det.uav_xy_m)
-        xy = np.where(known, det.uav_xy_m, np.nan)
-        assoc = self.assoc if self.assoc is not None else np.full(self.scenario.M, -1)
+        why: str,
+    ) -> GroundSlot:
+        """Slot n = slot + 1 ran without a plan of this loop (after a resume or a stall:
+        startup.py): its pending plan, if any, is dropped; the tracks are predicted (unless the
+        pending plan's prediction already did) and take the reports that arrived, with the
+        shares they were measured with. Status `held`, or `unobserved` when nothing arrived; a
+        UAV without a report has a NaN `known_xy` (compute_xy [M, 2], finite, is used for the
+        computation only, where it contributes nothing)."""
+        s = self.scenario
+        if n != self.slot + 1:
+            raise ValueError(f"slot {n} is not the next slot {self.slot + 1}")
+        predictions = self.predict()
+        known = np.full((s.M, 2), np.nan)
+        eta = np.array(self.eta, dtype=float)
+        for m, msg in msgs.items():
+            known[m] = msg.uav_xy_m
+            eta[m] = msg.bandwidth_share
+        status = HELD if msgs else UNOBSERVED
+        reason = (
+            f"{status}: no plan of the ground loop for this slot ({why}); "
+            f"{len(msgs)} of {s.M} reports"
+        )
+        assoc = self.assoc if self.assoc is not None else np.full(s.M, -1, dtype=np.int64)
         plan = SlotPlan(
-            xy, assoc, eta_used, float("nan"), SolveReport(status, reason, fallback=status)
+            known, assoc, eta, float("nan"), SolveReport(status, reason, fallback=status)
         )
-        self.pending = PendingSlot(n, predicted, plan)
-        record = self.process(det, eta_used, np.asarray(compute_xy, dtype=float))
-        return SlotRecord.from_dict(record.to_dict() | {"uav_xy": xy.tolist(), "plan_xy": None})
+        self.pending = PendingSlot(n, predictions, plan, skipped=True)
+        out = self.process(n, msgs, truth, np.asarray(compute_xy, dtype=float))
+        self.last_plan = None  # this slot had no plan of ours: the next one starts afresh
+        return out
 
-    def process(self, det: Detections, eta_used: FloatArray, fallback_xy: FloatArray) -> SlotRecord:
-        """Fold in slot n's detections (NaN = missing: a partial update) and advance the bound.
-
-        eta_used [M]: the shares the measurements were taken with; fallback_xy [M, 2]: where a UAV
-        was when its detection (which carries the position) did not arrive.
-        """
+    def process(
+        self,
+        n: int,
+        msgs: Mapping[int, ArrivedReport],
+        truth: ArrivedTruth | None,
+        fallback_xy: FloatArray,
+    ) -> GroundSlot:
+        """Fold in slot n's reports (a UAV whose report did not arrive contributes nothing:
+        share 0 for the tracker; fallback_xy [M, 2] is where it was) and advance to slot n."""
         pending = self.pending
-        if pending is None or det.slot != pending.slot:
-            raise ValueError(f"slot {det.slot} is not the planned slot {self.slot + 1}")
-        uav_xy = np.where(np.isfinite(det.uav_xy_m), det.uav_xy_m, fallback_xy)
-        pred = pending.prediction
-        z = np.concatenate([det.range_m, det.radial_velocity_mps])
-        updated = update(
-            self.model,
-            TrackState(self.belief, self.bound),
-            pending.predicted,
-            self.kit.sensing,
-            z,
-            uav_xy,
-            eta_used,
-        )
-        self.belief, self.bound = updated.state.belief, updated.state.bound
-        r_used = updated.r_used
-        self.slot = det.slot
+        if pending is None or n != pending.slot:
+            raise ValueError(f"slot {n} is not the planned slot {self.slot + 1}")
+        s = self.scenario
         plan = pending.plan
+        eta_used = np.array(plan.bandwidth_share, dtype=float)
+        sensing_eta = np.zeros(s.M)
+        uav_xy = np.array(fallback_xy, dtype=float)
+        known = np.full((s.M, 2), np.nan)
+        measurements: list[FloatArray] = []
+        for m in range(s.M):
+            msg = msgs.get(m)
+            if msg is None:
+                measurements.append(np.zeros((0, 2)))
+                continue
+            eta_used[m] = sensing_eta[m] = msg.bandwidth_share
+            uav_xy[m] = known[m] = msg.uav_xy_m
+            measurements.append(np.asarray(msg.report, dtype=float).reshape(-1, 2))
+        tracking = self.tracker.update(measurements, uav_xy, sensing_eta, self.kit.sensing)
+        origins = () if truth is None else truth.measurement_origins
+        reports = tuple(
+            UavReport(z, _origins(origins, m, len(z))) for m, z in enumerate(measurements)
+        )
+        T = len(s.targets)
+        states = np.full((T, 4), np.nan) if truth is None else truth.target_states
         # A UAV measured with a share although this plan had it out (BS -1): the world was still
         # on an earlier plan (this one came late), whose association goes with those shares.
         assoc = plan.bs_of_uav
         if self.assoc is not None:
-            assoc = np.where((assoc < 0) & (np.asarray(eta_used) > 0), self.assoc, assoc)
+            assoc = np.where((assoc < 0) & (eta_used > 0), self.assoc, assoc)
+        self.slot = n
         self.eta, self.assoc = plan.bandwidth_share, plan.bs_of_uav
         self.pending = None
-        rep = plan.report
-        return SlotRecord(
-            slot=det.slot,
+        self._predicted = None
+        return GroundSlot(
+            slot=n,
             method=self.method,
-            status=rep.status,
-            uav_xy_m=uav_xy,
-            bandwidth_share=np.asarray(eta_used, dtype=float),
-            assoc=assoc,
-            target_true=None,
-            target_est=self.belief.x,
-            target_pred=pred.x,
-            r_diag=r_used,
-            pcrb_trace=self.bound.trace,
-            solve_ms=rep.solve_s * 1e3,
-            P=self.belief.P,
-            J=self.bound.J,
-            plan_xy=plan.uav_xy_m,
-            plan_pcrb_trace=plan.pcrb_trace,
-            plan_velocity=plan.uav_velocity_mps,
-            reason=rep.reason or None,
-            fallback=rep.fallback or None,
-            plan_start_xy=pending.start_xy,
-            plan_start_velocity=pending.start_velocity,
-            extra={
-                "pcrb_pos": self.bound.position_trace,
-                "pcrb_vel": self.bound.velocity_trace,
-                "received": int(np.count_nonzero(det.received)),
-            }
-            | ({"planned_around": list(pending.planned_around)} if pending.planned_around else {}),
+            pending=pending,
+            uav_xy=uav_xy,
+            known_xy=known,
+            eta=eta_used,
+            assoc=np.asarray(assoc, dtype=np.int64),
+            truth=np.asarray(states, dtype=float),
+            truth_known=truth is not None,
+            reports=reports,
+            tracking=tracking,
+            received=len(msgs),
+            saved=self.tracker.saved(),
         )
+
+
+def _primary_id(predictions: tuple[TrackPrediction, ...]) -> int:
+    """The ID of the first confirmed track (0: none): the track a plan made outside
+    `plan_tracks` (a hold) is recorded for."""
+    return next((p.track_id for p in predictions if p.confirmed), 0)
+
+
+def _origins(origins: tuple[tuple[int, ...], ...], m: int, k: int) -> IntArray:
+    """[k] the origins of UAV m's k measurements, as the world's truth gave them."""
+    if m < len(origins) and len(origins[m]) == k:
+        return np.asarray(origins[m], dtype=np.int64)
+    return np.full(k, NO_ORIGIN, dtype=np.int64)
+
+
+__all__ = [
+    "HELD",
+    "UNOBSERVED",
+    "GroundSlot",
+    "MissionState",
+    "PendingSlot",
+    "leg_start_state",
+]

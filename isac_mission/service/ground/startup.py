@@ -13,7 +13,7 @@ offboard-loss hold meanwhile, so the loop waits for telemetry that arrived at le
 published after it.
 
 When the gate opens, every slot the world has already run without a plan from this loop (the
-slots up to the world's clock) is traced without one (`skip_slot`): `held` when its detections
+slots up to the world's clock) is traced without one (`MissionState.skip`): `held` when its reports
 arrived (they carry where the vehicles really were), `unobserved` when none did (positions
 unknown: null, prediction only). Never a plan's positions as a record of where the vehicles were.
 Times: wall seconds from time.monotonic; simulation seconds from the world's clock.
@@ -26,22 +26,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import numpy as np
-
-from isac_mission.records import SlotRecord
 from isac_mission.service.ground.exclusion import VehicleWatch
-from isac_mission.service.ground.mission import MissionState
 from isac_mission.service.ground.settings import GroundSettings
-from isac_mission.timebase import SlotTimeline
-from isac_mission.types import FloatArray
-from isac_mission.wire import DetectionMsg, collect_detections
 
 log = logging.getLogger(__name__)
-
-HELD = "held"
-"""Status of a slot the world ran without a plan of this loop, with its detections."""
-UNOBSERVED = "unobserved"
-"""Status of such a slot with no detection: positions unknown (null), prediction only."""
 
 
 @dataclass(frozen=True)
@@ -137,33 +125,3 @@ class PlanningGate:
                 ready,
             )
         return True
-
-    def slots_to_skip(self, state: MissionState, t_s: float, t0_s: float) -> range:
-        """The slots after the last processed one that the world has already run at t_s
-        (mission start t0_s): they flew no plan of this loop."""
-        world_slot = SlotTimeline(t0_s, state.scenario.dt).slot_of(t_s)
-        return range(state.slot + 1, min(world_slot, state.scenario.N) + 1)
-
-
-def skip_slot(
-    state: MissionState,
-    n: int,
-    msgs: dict[int, DetectionMsg],
-    compute_xy: FloatArray,
-    why: str,
-) -> SlotRecord:
-    """Slot n traced without a plan of this loop (the caller's pending plan is dropped): the
-    detections that arrived are folded in (shares as they were measured with), a UAV without
-    one gets a null position; status `held`, or `unobserved` when nothing arrived.
-    compute_xy [M, 2]: finite positions for the computation only (a UAV without a measurement
-    contributes nothing to the update or the bound). Returns the SlotRecord."""
-    det = collect_detections(n, msgs.values(), state.scenario.M)
-    eta = np.array(state.eta, dtype=float)
-    for m, msg in msgs.items():
-        eta[m] = msg.bandwidth_share
-    status = HELD if msgs else UNOBSERVED
-    reason = (
-        f"{status}: no plan of the ground loop for this slot ({why}); "
-        f"{len(msgs)} of {state.scenario.M} detections"
-    )
-    return state.skip(det, eta, compute_xy, status, reason)

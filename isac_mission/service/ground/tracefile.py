@@ -1,45 +1,416 @@
-"""The ground loop's trace file (docs/trace.md): a new trace, or the continuation of one.
+"""The ground loop's trace file (docs/trace.md), its track message, and what it reports per slot.
 
-The loop writes through `isac_mission.records.TraceWriter` with an fsync per slot, as the
-offline experiment writes its traces; on a resume, the last complete slot tells the loop where
-to pick up.
+The loop writes every slot through one `SlotOutput`, made for the scenario's tracker by
+`slot_output`: the labelled target's trace (`records.TraceWriter`, `SlotRecord` lines, the
+`track` message; a resume continues from the last complete slot's estimate, covariance and
+bound) or the trace of tracks (`records/multi_target.py` lines, the `track_set` message; a
+resume restores the tracker from the last complete slot line). Both write and fsync slot by
+slot, continue a resumed trace after its last complete slot (a torn last line is cut off), start
+afresh when the file has no complete line, and end each run with an `end` line.
 """
 
 from __future__ import annotations
 
 import logging
+import os
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any, Protocol
+
+import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.records import SlotRecord, TraceWriter, read_trace
+from isac_mission.errors import ConfigError, MessageError
+from isac_mission.records import MissionEnd, SlotRecord, TraceWriter, read_trace
+from isac_mission.records.multi_target import (
+    MultiTargetSlot,
+    config_differences,
+    end_line,
+    header_line,
+    resume_fields,
+    resume_point,
+    slot_line,
+)
+from isac_mission.records.progress import trace_progress
+from isac_mission.service.ground.mission import GroundSlot
+from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
+from isac_mission.tracking.cycle import TrackState
+from isac_mission.tracking.factory import labelled
+from isac_mission.tracking.pcrb import Bound
+from isac_mission.types import FloatArray, Gaussian, IntArray
+from isac_mission.wire import (
+    DetectionMsg,
+    DetectionSetMsg,
+    Message,
+    TrackEntry,
+    TrackMsg,
+    TrackSetMsg,
+    TruthMsg,
+    TruthSetMsg,
+)
 
 log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class OpenedTrace:
-    """writer: None when the settings name no trace; last: the last complete slot of a resumed
-    trace (None: start at slot 1)."""
+class ResumeFrom:
+    """Where a resumed trace goes on: after `slot`, with the tracker's saved state (for
+    `tracking/factory.restored_tracker`), and that slot's plan's shares eta [M] and BSs
+    assoc [M]."""
 
-    writer: TraceWriter | None
-    last: SlotRecord | None = None
+    slot: int
+    saved: object
+    eta: FloatArray
+    assoc: IntArray
 
 
-def open_trace(s: Scenario, settings: GroundSettings) -> OpenedTrace:
-    """Create `settings.trace_path` with its config line, or (settings.resume) reopen it after
-    its last complete slot. A trace killed before its config line was complete starts afresh.
-    Raises MessageError for a corrupt trace."""
-    path = settings.trace_path
-    if path is None:
-        return OpenedTrace(None)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if settings.resume and path.exists() and b"\n" not in path.read_bytes():
-        # Killed before its config line was complete: no slot to lose, start afresh.
-        log.warning("%s has no complete line; starting a new trace", path)
-    elif settings.resume and path.exists():
-        trace = read_trace(path)
-        writer = TraceWriter.resume(path, fsync=True)
-        return OpenedTrace(writer, trace.slots[-1] if trace.slots else None)
-    config = s.trace_config() | {"seed": s.seed, "method": settings.method} | settings.trace_config
-    return OpenedTrace(TraceWriter(path, config, fsync=True))
+class SlotOutput(Protocol):
+    """What the bus carries for the scenario's tracker (the message types of a UAV's report and
+    of the world's truth), and where each processed slot goes: the trace, the report, the track
+    message."""
+
+    last_traced: int
+
+    @property
+    def report_type(self) -> type[DetectionMsg] | type[DetectionSetMsg]:
+        """The message type of a UAV's report."""
+        ...
+
+    @property
+    def truth_type(self) -> type[TruthMsg] | type[TruthSetMsg]:
+        """The message type of the world's truth."""
+        ...
+
+    """The last slot in the trace (a resumed trace's last slot before this run's)."""
+
+    def open(self) -> ResumeFrom | None:
+        """Create the trace, or (settings.resume) reopen it after its last complete slot;
+        returns where a resume goes on (None: slot 1). ConfigError when it must not be
+        continued."""
+        ...
+
+    def close(self, end: Callable[[int], MissionEnd]) -> None:
+        """End the trace with the `end` line of the run (end(last traced slot))."""
+        ...
+
+    def track_message(self, g: GroundSlot, t_s: float) -> Message:
+        """The slot's tracks as the bus carries them."""
+        ...
+
+    def complete(
+        self, g: GroundSlot, extra: dict[str, Any], latency_s: float, links: dict[int, str]
+    ) -> None:
+        """Write the slot's line (with `extra` fields), keep it in the report and tell the
+        caller's progress callback."""
+        ...
+
+
+def slot_output(
+    s: Scenario,
+    settings: GroundSettings,
+    report: GroundReport,
+    on_slot: Callable[[SlotEvent], None] | None,
+    on_tracks: Callable[[MultiTargetSlot, float], None] | None,
+) -> SlotOutput:
+    """The output of the scenario's tracker (module doc)."""
+    if labelled(s):
+        return RecordOutput(s, settings, report, on_slot)
+    return TrackSetOutput(s, settings, on_tracks)
+
+
+def live_trace_config(
+    planning: Scenario, method: str, limits: Mapping[str, object]
+) -> dict[str, object]:
+    """The config line of a live trace: the planning scenario's config, its seed and the method,
+    and `limits` over them (GroundSettings.trace_config: the vehicles' real limits beside the
+    planner's, service/assembly.py `live_trace_limits`)."""
+    return planning.trace_config() | {"seed": planning.seed, "method": method} | dict(limits)
+
+
+class RecordOutput:
+    """The labelled target's trace: one `SlotRecord` per slot (docs/trace.md)."""
+
+    report_type = DetectionMsg
+    truth_type = TruthMsg
+
+    def __init__(
+        self,
+        s: Scenario,
+        settings: GroundSettings,
+        report: GroundReport,
+        on_slot: Callable[[SlotEvent], None] | None,
+    ) -> None:
+        self.s, self.settings, self.report, self.on_slot = s, settings, report, on_slot
+        self.writer: TraceWriter | None = None
+        self.last_traced = 0
+
+    def open(self) -> ResumeFrom | None:
+        path = self.settings.trace_path
+        if path is None:
+            return None
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if self.settings.resume and path.exists() and b"\n" not in path.read_bytes():
+            # Killed before its config line was complete: no slot to lose, start afresh.
+            log.warning("%s has no complete line; starting a new trace", path)
+        elif self.settings.resume and path.exists():
+            trace = read_trace(path)
+            self.writer = TraceWriter.resume(path, fsync=True)
+            if not trace.slots:
+                return None
+            last = trace.slots[-1]
+            self.last_traced = last.slot
+            belief = Gaussian(np.asarray(last.target_est), np.asarray(last.P))
+            saved = TrackState(belief, Bound.from_information(np.asarray(last.J)))
+            return ResumeFrom(
+                last.slot,
+                saved,
+                np.asarray(last.bandwidth_share, dtype=float),
+                np.asarray(last.assoc, dtype=np.int64),
+            )
+        config = live_trace_config(self.s, self.settings.method, self.settings.trace_config)
+        self.writer = TraceWriter(path, config, fsync=True)
+        return None
+
+    def close(self, end: Callable[[int], MissionEnd]) -> None:
+        if self.writer is not None:
+            last = self.writer.last_record
+            self.writer.write_end(end(0 if last is None else last.slot))
+            self.writer.close()
+
+    def track_message(self, g: GroundSlot, t_s: float) -> Message:
+        (track,) = g.tracking.tracks
+        return TrackMsg(
+            slot=g.slot,
+            t_s=t_s,
+            x=track.belief.x,
+            P=track.belief.P,
+            J=track.bound.J,
+            pcrb_trace=track.bound.trace,
+            published_wall_s=time.time(),
+        )
+
+    def complete(
+        self, g: GroundSlot, extra: dict[str, Any], latency_s: float, links: dict[int, str]
+    ) -> None:
+        record = slot_record(g, extra)
+        if self.writer is not None:
+            self.writer.write_slot(record)
+        self.last_traced = g.slot
+        self.report.records.append(record)
+        self.report.totals.add(record)
+        if self.on_slot is not None:
+            truth = record.target_true
+            err = None
+            if truth is not None:
+                err = float(np.linalg.norm(np.asarray(record.target_est)[:2] - truth[:2]))
+            self.on_slot(SlotEvent(record, err, latency_s, links))
+
+
+def slot_record(g: GroundSlot, extra: Mapping[str, Any]) -> SlotRecord:
+    """The labelled target's trace line of a slot (docs/trace.md), with `extra` fields."""
+    (track,) = g.tracking.tracks
+    (prediction,) = g.predictions
+    pending, plan = g.pending, g.plan
+    rep = plan.report
+    bound = track.bound
+    received = sum(
+        1 for r in g.reports if len(r.measurements) and np.isfinite(r.measurements).all()
+    )
+    record = SlotRecord(
+        slot=g.slot,
+        method=g.method,
+        status=rep.status,
+        uav_xy_m=g.known_xy if pending.skipped else g.uav_xy,
+        bandwidth_share=g.eta,
+        assoc=g.assoc,
+        target_true=g.truth[0] if g.truth_known else None,
+        target_est=track.belief.x,
+        target_pred=prediction.prediction.x,
+        r_diag=_labelled(track.variances),
+        pcrb_trace=bound.trace,
+        solve_ms=rep.solve_s * 1e3,
+        P=track.belief.P,
+        J=bound.J,
+        plan_xy=None if pending.skipped else plan.uav_xy_m,
+        plan_pcrb_trace=plan.pcrb_trace,
+        plan_velocity=plan.uav_velocity_mps,
+        reason=rep.reason or None,
+        fallback=rep.fallback or None,
+        plan_start_xy=pending.start_xy,
+        plan_start_velocity=pending.start_velocity,
+        extra={
+            "pcrb_pos": bound.position_trace,
+            "pcrb_vel": bound.velocity_trace,
+            "received": received,
+        }
+        | ({"planned_around": list(pending.planned_around)} if pending.planned_around else {})
+        | dict(extra),
+    )
+    return record
+
+
+def _labelled(variances: FloatArray | None) -> FloatArray:
+    if variances is None:
+        raise ValueError("the labelled target's track carries its measurement variances")
+    return variances
+
+
+def track_set_slot(g: GroundSlot) -> MultiTargetSlot:
+    """The trace-of-tracks line of a slot (records/multi_target.py): `eta` 0 for a UAV whose
+    report did not arrive (the tracker took nothing from it); a skipped slot's positions where
+    its reports said (NaN: none)."""
+    arrived = np.isfinite(g.known_xy[:, 0])
+    return MultiTargetSlot(
+        g.slot,
+        g.method,
+        g.plan,
+        g.known_xy if g.pending.skipped else g.uav_xy,
+        np.where(arrived, g.eta, 0.0),
+        g.truth,
+        g.reports,
+        g.tracking.tracks,
+        g.planned_for,
+        g.saved,  # type: ignore[arg-type]  # the tracker of tracks' TrackerState
+    )
+
+
+class TrackSetOutput:
+    """The trace of tracks (docs/trace.md, "Multi-target traces")."""
+
+    report_type = DetectionSetMsg
+    truth_type = TruthSetMsg
+
+    def __init__(
+        self,
+        s: Scenario,
+        settings: GroundSettings,
+        on_tracks: Callable[[MultiTargetSlot, float], None] | None,
+    ) -> None:
+        self.s, self.settings, self.on_tracks = s, settings, on_tracks
+        self.slots: deque[MultiTargetSlot] = deque(maxlen=SLOTS_KEPT)
+        """The last SLOTS_KEPT slots (the trace keeps every one)."""
+        self._trace: IO[str] | None = None
+        self.last_traced = 0
+
+    def config(self) -> dict[str, object]:
+        """The config line this output writes (docs/trace.md)."""
+        return live_trace_config(self.s, self.settings.method, self.settings.trace_config)
+
+    def open(self) -> ResumeFrom | None:
+        path = self.settings.trace_path
+        if path is None:
+            return None
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        if self.settings.resume and path.exists() and b"\n" in path.read_bytes():
+            return self._resume(path)
+        if self.settings.resume and path.exists():
+            log.warning("%s has no complete line; starting a new trace", path)
+        self._trace = open(path, "w", encoding="utf-8")  # noqa: SIM115 (closed in close)
+        self._write_line(header_line(self.config()))
+        return None
+
+    def _resume(self, path: Path) -> ResumeFrom | None:
+        refusal = track_set_refusal(path, self.config(), self.s.N)
+        if refusal is not None:
+            raise ConfigError(f"--resume: {refusal}")
+        progress = trace_progress(path)
+        out = None
+        if progress.last_line is not None:
+            point = resume_point(progress.last_line)
+            self.last_traced = point.slot
+            out = ResumeFrom(point.slot, point.tracker, point.plan_eta, point.assoc)
+        data = path.read_bytes()
+        with path.open("r+b") as raw:  # a torn last line (killed inside write) is cut off
+            raw.truncate(data.rfind(b"\n") + 1)
+            raw.flush()
+            os.fsync(raw.fileno())
+        self._trace = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed in close)
+        return out
+
+    def close(self, end: Callable[[int], MissionEnd]) -> None:
+        if self._trace is not None:
+            self._write_line(end_line(end(self.last_traced)))
+            self._trace.close()
+
+    def _write_line(self, line: str) -> None:
+        f = self._trace
+        if f is None:
+            return
+        f.write(line + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+    def track_message(self, g: GroundSlot, t_s: float) -> Message:
+        entries = tuple(
+            TrackEntry(
+                track_id=t.track_id,
+                confirmed=t.confirmed,
+                x=t.belief.x,
+                P=t.belief.P,
+                pcrb_position_trace=float(np.trace(t.bound.C[:2, :2])),
+            )
+            for t in g.tracking.tracks
+        )
+        return TrackSetMsg(slot=g.slot, t_s=t_s, tracks=entries, published_wall_s=time.time())
+
+    def complete(
+        self, g: GroundSlot, extra: dict[str, Any], latency_s: float, links: dict[int, str]
+    ) -> None:
+        slot = track_set_slot(g)
+        fields = {"latency_ms": extra["latency_ms"], **resume_fields(slot)}
+        self._write_line(slot_line(slot, fields))
+        self.last_traced = g.slot
+        self.slots.append(slot)
+        if self.on_tracks is not None:
+            self.on_tracks(slot, latency_s)
+
+
+def resume_refusal(s: Scenario, path: Path, config: Mapping[str, object]) -> str | None:
+    """Why the trace at `path` must not be continued by the mission of `s` that writes `config`
+    as its config line (None: it may). A labelled target's trace is continued from its last
+    complete slot (`RecordOutput.open`); a trace of tracks is refused as `track_set_refusal`
+    says."""
+    return None if labelled(s) else track_set_refusal(path, config, s.N)
+
+
+def track_set_refusal(path: Path, config: Mapping[str, object], n_slots: int) -> str | None:
+    """Why the trace of tracks at `path` must not be continued by a mission that writes
+    `config` as its config line (None: it may): it does not read, it is a single-target trace,
+    it is complete (slot N = n_slots traced), it is another mission's, method's or config's, or
+    its last slot line lacks what a restart needs (a trace written before resume existed).
+    Reads the file, never writes it."""
+    try:
+        progress = trace_progress(path)
+    except MessageError as err:
+        return f"cannot continue {path}: {err}"
+    if not progress.config:
+        return None  # killed before its config line was complete: a new trace is started
+    if not progress.multi_target:
+        return f"{path} is a single-target trace, not a multi-target mission's"
+    if progress.last_slot >= n_slots:
+        return (
+            f"the trace is complete: {progress.last_slot}/{n_slots} slots in {path}; nothing "
+            "to resume (start a new mission without --resume, or in another --out)"
+        )
+    fresh = "start a new mission without --resume, or in another --out"
+    theirs = progress.config
+    for key, what in (("mission_id", "mission"), ("method", "method")):
+        if theirs.get(key) != config.get(key):
+            return (
+                f"{path} is a trace of {what} {theirs.get(key)!r}, not {config.get(key)!r}; "
+                + fresh
+            )
+    if progress.last_line is not None:
+        try:
+            resume_point(progress.last_line)
+        except MessageError as err:
+            return f"cannot continue {path}: {err}"
+    differ = config_differences(theirs, config)
+    if differ:
+        shown = ", ".join(differ[:6]) + (f" and {len(differ) - 6} more" if len(differ) > 6 else "")
+        return f"{path} was flown with another configuration (it differs in {shown}); {fresh}"
+    return None

@@ -1,0 +1,190 @@
+"""One offline run of one method, for any number of targets: flown by the one loop
+(`closed_loop.fly_offline`) on the scenario's scene and tracker (`tracking/factory.py`), measured,
+and traced.
+
+What a run carries comes from what it flew, not from asking how many targets the scenario has:
+every run has its tracks' figures (`track_metrics`: GOSPA, each target's error against its
+track's bound); a run whose one track is labelled (a single track in every slot, updated with
+its own measurement variances: `TrackEstimate.variances`) also has that track's per-slot arrays
+(`closed_loop.RunResult`), and its trace is the slot records of docs/trace.md. A run whose
+tracks are found and followed from unlabelled reports is traced as docs/trace.md, "Multi-target
+traces", describes (records/multi_target.py).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from isac_mission.config import Scenario
+from isac_mission.experiment.closed_loop import RunResult, SlotOutcome, fly_offline
+from isac_mission.experiment.track_metrics import RunFigures, track_figures
+from isac_mission.nlp_cache import CompiledNlpCache
+from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.records import SlotRecord, TraceWriter
+from isac_mission.records import multi_target as tracks_trace
+from isac_mission.tracking.factory import draw_noise, keep_out_tracks, scene_for, tracker_for
+from isac_mission.types import FloatArray
+
+
+@dataclass(frozen=True)
+class MissionRun:
+    """One run of one method: solve_s [N] the plan times (s) of slots 1..N; tracking: its tracks'
+    figures (any number of targets); labelled: the labelled track's per-slot arrays when the run
+    had one (None: its tracks were found from unlabelled reports)."""
+
+    method: str
+    seed: int
+    solve_s: FloatArray
+    tracking: RunFigures
+    labelled: RunResult | None
+
+
+def labelled_arrays(run: MissionRun | RunResult) -> RunResult:
+    """The labelled track's arrays of a run (a RunResult is one already); ValueError for a run
+    that had no labelled track."""
+    if isinstance(run, RunResult):
+        return run
+    if run.labelled is None:
+        raise ValueError(f"run {run.seed} of {run.method} has no labelled track")
+    return run.labelled
+
+
+def has_labelled_track(outcomes: Sequence[SlotOutcome]) -> bool:
+    """Whether every slot had one track, updated with its own measurement variances (the
+    labelled tracker's) and planned for."""
+    return all(
+        len(o.tracking.tracks) == 1
+        and o.tracking.tracks[0].variances is not None
+        and o.slot_input is not None
+        for o in outcomes
+    )
+
+
+def labelled_result(method: str, seed: int, outcomes: Sequence[SlotOutcome]) -> RunResult:
+    """The per-slot arrays of a run's labelled track (as `closed_loop.run_closed_loop` gives)."""
+    return RunResult(
+        method=method,
+        seed=seed,
+        est=np.array([o.target_est for o in outcomes]),
+        true=np.array([o.target_true for o in outcomes]),
+        pcrb=np.array([o.bound.C for o in outcomes]),
+        solve_s=np.array([o.plan.report.solve_s for o in outcomes], dtype=float),
+        status=[o.plan.report.status for o in outcomes],
+        fallback=[o.plan.report.fallback for o in outcomes],
+        uav_xy=np.array([o.uav_xy for o in outcomes]),
+        eta=np.array([o.eta for o in outcomes]),
+        assoc=np.array([o.plan.bs_of_uav for o in outcomes], dtype=np.int64),
+    )
+
+
+def outcome_record(o: SlotOutcome) -> SlotRecord:
+    """The trace line of one slot of the labelled target (docs/trace.md)."""
+    rep = o.plan.report
+    inp = o.slot_input
+    assert inp is not None  # the labelled target is planned for in every slot
+    return SlotRecord(
+        slot=o.slot,
+        method=o.method,
+        status=rep.status,
+        uav_xy_m=o.uav_xy,
+        bandwidth_share=o.plan.bandwidth_share,
+        assoc=o.plan.bs_of_uav,
+        target_true=o.target_true,
+        target_est=o.target_est,
+        target_pred=o.target_pred,
+        r_diag=o.r_diag,
+        pcrb_trace=o.bound.trace,
+        solve_ms=rep.solve_s * 1e3,
+        P=o.P,
+        J=o.bound.J,
+        plan_xy=o.plan.uav_xy_m,
+        plan_pcrb_trace=o.plan.pcrb_trace,
+        plan_velocity=o.plan.uav_velocity_mps,
+        reason=rep.reason,
+        fallback=rep.fallback or None,
+        plan_start_xy=inp.prev_xy_m,
+        plan_start_velocity=inp.prev_velocity_mps,
+        extra={
+            "pcrb_pos": o.bound.position_trace,
+            "pcrb_vel": o.bound.velocity_trace,
+            "ao_iterations": rep.ao_iterations,
+            "position_iterations": rep.position_iterations,
+            "bandwidth_iterations": rep.bandwidth_iterations,
+        },
+    )
+
+
+def tracks_slot(o: SlotOutcome) -> tracks_trace.MultiTargetSlot:
+    """A slot as the tracks trace records it (records/multi_target.py)."""
+    return tracks_trace.MultiTargetSlot(
+        o.slot,
+        o.method,
+        o.plan,
+        o.uav_xy,
+        o.eta,
+        o.truth,
+        o.reports,
+        o.tracking.tracks,
+        o.planned_for,
+    )
+
+
+def trace_path(trace_dir: Path, method: str, run: int) -> Path:
+    """Where run `run` of `method` is traced."""
+    return trace_dir / f"{method}_run{run:03d}.jsonl"
+
+
+def write_trace(path: Path, config: dict[str, Any], outcomes: Sequence[SlotOutcome]) -> None:
+    """The run's trace: the labelled track's slot records, or the tracks trace (module doc)."""
+    if has_labelled_track(outcomes):
+        with TraceWriter(path, config) as writer:
+            for o in outcomes:
+                writer.write_slot(outcome_record(o))
+        return
+    lines = [
+        tracks_trace.header_line(config),
+        *(tracks_trace.slot_line(tracks_slot(o)) for o in outcomes),
+    ]
+    path.write_text("\n".join(lines) + "\n")
+
+
+_KITS: dict[int, SolverKit] = {}
+
+
+def kit_for(s: Scenario) -> SolverKit:
+    """One SolverKit per scenario per process (building one compiles the cvxpy problems), with
+    the keep-out points its tracker needs (`factory.keep_out_tracks`); its IPOPT problems
+    compiled where the cache has them (isac_mission/nlp_cache.py: the same numbers, faster;
+    `isac-mission compile CONFIG --scenario-settings` fills it)."""
+    key = id(s)
+    if key not in _KITS:
+        _KITS.clear()
+        _KITS[key] = SolverKit(
+            s, n_keep_out=keep_out_tracks(s), ipopt=CompiledNlpCache(compile="never")
+        )
+    return _KITS[key]
+
+
+def fly_run(s: Scenario, method: Method, run: int, seed: int, trace_dir: Path | None) -> MissionRun:
+    """Run `run` of `method` (noise seed = seed + run), traced under trace_dir when given."""
+    kit = kit_for(s)
+    noise = draw_noise(s, seed + run)
+    scene = scene_for(s, noise)
+    outcomes = fly_offline(s, method, scene, tracker_for(s), kit)
+    if trace_dir is not None:
+        config = s.trace_config() | {"seed": seed + run, "method": method}
+        write_trace(trace_path(trace_dir, method, run), config, outcomes)
+    return MissionRun(
+        method=method,
+        seed=noise.seed,
+        solve_s=np.array([o.plan.report.solve_s for o in outcomes], dtype=float),
+        tracking=track_figures([tracks_slot(o) for o in outcomes], s.multi_tracker.gospa_cutoff_m),
+        labelled=(
+            labelled_result(method, noise.seed, outcomes) if has_labelled_track(outcomes) else None
+        ),
+    )
