@@ -48,7 +48,7 @@ from isac_mission.experiment.multi_target_metrics import (  # noqa: E402
 from isac_mission.model.run_noise import draw_multi_target_noise  # noqa: E402
 from isac_mission.planning.multi_target import multi_target_kit  # noqa: E402
 from isac_mission.quiet import quiet_highs_banner  # noqa: E402
-from isac_mission.records.multi_target import MultiTargetSlot  # noqa: E402
+from isac_mission.records.tracks import TracksSlot  # noqa: E402
 from isac_mission.service.assembly import LiveOptions, planning_scenario  # noqa: E402
 from tests.support.ports import free_port_block, sitl_ports  # noqa: E402
 
@@ -63,7 +63,7 @@ def parse_seeds(text: str) -> list[int]:
     return [int(x) for x in text.split(",") if x.strip()]
 
 
-def fly_live(s: Scenario, method: str, seed: int, speed: float, out: Path) -> list[MultiTargetSlot]:
+def fly_live(s: Scenario, method: str, seed: int, speed: float, out: Path) -> list[TracksSlot]:
     """One live mission in this process; its slots (empty when it failed: printed)."""
     opts = LiveOptions(
         speed=speed,
@@ -84,16 +84,14 @@ def fly_live(s: Scenario, method: str, seed: int, speed: float, out: Path) -> li
     return result.multi_target_slots
 
 
-def fly_offline(s: Scenario, method: str, seed: int) -> list[MultiTargetSlot]:
+def fly_offline(s: Scenario, method: str, seed: int) -> list[TracksSlot]:
     """The offline twin: the live settings, the same seed."""
     planning = planning_scenario(s, LiveOptions())
     noise = draw_multi_target_noise(planning, seed)
     return list(run_multi_target(planning, method, noise, multi_target_kit(planning)).slots)  # type: ignore[arg-type]
 
 
-def phase_figures(
-    s: Scenario, method: str, seed: int, slots: list[MultiTargetSlot]
-) -> dict[str, Any]:
+def phase_figures(s: Scenario, method: str, seed: int, slots: list[TracksSlot]) -> dict[str, Any]:
     """The figures of one run (module doc)."""
     f: RunFigures = run_figures(run_of_slots(method, seed, slots), s.multi_tracker.gospa_cutoff_m)
     xy = np.stack([s.uav_start_xy, *(o.uav_xy_m for o in slots)])

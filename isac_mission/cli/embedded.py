@@ -44,7 +44,7 @@ from isac_mission.errors import ConfigError
 
 if TYPE_CHECKING:
     from isac_mission.config import Scenario
-    from isac_mission.records.multi_target import MultiTargetSlot
+    from isac_mission.records.tracks import TracksSlot
     from isac_mission.service.assembly import LiveOptions, WorldBeside
     from isac_mission.service.ground.report import SlotEvent
     from isac_mission.service.mission_result import LiveResult
@@ -246,7 +246,7 @@ async def run_embedded(
     stop: asyncio.Event,
     on_slot: Callable[[SlotEvent], None] | None = None,
     on_status: Callable[[str], None] | None = None,
-    on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
+    on_tracks: Callable[[TracksSlot, float], None] | None = None,
     leave: asyncio.Event | None = None,
 ) -> LiveResult:
     """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh

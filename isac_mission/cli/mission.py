@@ -95,7 +95,7 @@ def _fly_with_progress(s: Scenario, opts: LiveOptions, embedded: bool) -> tuple[
 
     from isac_mission.cli.stopping import StopRequests
     from isac_mission.errors import IsacError, PortInUseError
-    from isac_mission.records.multi_target import MultiTargetSlot
+    from isac_mission.records.tracks import TracksSlot
     from isac_mission.service.assembly import TAKING_OFF, Progress, Stopping, run_mission
     from isac_mission.service.ground.report import SlotEvent
 
@@ -117,7 +117,7 @@ def _fly_with_progress(s: Scenario, opts: LiveOptions, embedded: bool) -> tuple[
             took_off[0] = took_off[0] or msg == TAKING_OFF
             live.update(render())
 
-        def on_tracks(o: MultiTargetSlot, latency_s: float) -> None:
+        def on_tracks(o: TracksSlot, latency_s: float) -> None:
             last_slot[0] = o.slot
             confirmed = sum(t.confirmed for t in o.tracks)
             present = int(np.all(np.isfinite(o.truth), axis=1).sum())

@@ -17,10 +17,10 @@ from isac_mission.model.scene import UnlabelledScene
 from isac_mission.model.targets import TargetPaths
 from isac_mission.planning.multi_target import check_multi_target_method
 from isac_mission.planning.slot import Method, SolverKit
-from isac_mission.records.multi_target import MultiTargetSlot
+from isac_mission.records.tracks import TracksSlot
 from isac_mission.tracking.factory import scene_for, tracker_for
 
-__all__ = ["MultiTargetRun", "MultiTargetSlot", "run_multi_target"]
+__all__ = ["MultiTargetRun", "TracksSlot", "run_multi_target"]
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,7 @@ class MultiTargetRun:
     method: str
     seed: int
     paths: TargetPaths
-    slots: tuple[MultiTargetSlot, ...]
+    slots: tuple[TracksSlot, ...]
 
 
 def run_multi_target(
@@ -38,7 +38,7 @@ def run_multi_target(
     method: Method,
     noise: MultiTargetNoise,
     kit: SolverKit,
-    on_slot: Callable[[MultiTargetSlot], None] | None = None,
+    on_slot: Callable[[TracksSlot], None] | None = None,
 ) -> MultiTargetRun:
     """Fly one mission of N slots of a multi-target scenario with the given method
     (`closed_loop.fly_offline`); `kit` from `multi_target_kit`."""

@@ -22,7 +22,7 @@ from isac_mission.experiment.track_metrics import (
     track_figures,
 )
 from isac_mission.model.targets import TargetPaths
-from isac_mission.records.multi_target import MultiTargetSlot
+from isac_mission.records.tracks import TracksSlot
 
 __all__ = [
     "IDENTITY_CUTOFF_M",
@@ -44,7 +44,7 @@ def run_figures(run: MultiTargetRun, gospa_cutoff_m: float) -> RunFigures:
     return track_figures(run.slots, gospa_cutoff_m)
 
 
-def run_of_slots(method: str, seed: int, slots: Sequence[MultiTargetSlot]) -> MultiTargetRun:
+def run_of_slots(method: str, seed: int, slots: Sequence[TracksSlot]) -> MultiTargetRun:
     """A run made of slots 1.. of a mission flown elsewhere (the live ground loop's), for
     `run_figures`: its paths are the slots' truth (slot 0's unknown: NaN)."""
     if not slots:

@@ -29,8 +29,6 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
 
 from isac_mission.records import Trace, read_trace
-from isac_mission.records import multi_target as tracks_trace
-from isac_mission.records.jsonlines import loads_line
 from isac_mission.types import FloatArray
 
 TRAJECTORY_SIZE_IN: Final[tuple[float, float]] = (9.5, 6.5)
@@ -356,22 +354,18 @@ def plot_performance(
 
 
 def read_tracks_trace(path: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """(config, slot lines) of a tracks trace (its `end` lines left out)."""
-    lines = Path(path).read_text().splitlines()
-    head = loads_line(lines[0])
-    parsed = [dict(loads_line(line)) for line in lines[1:] if line]
-    return dict(head["config"]), [line for line in parsed if "end" not in line]
+    """(config, slot lines) of a trace (`read_trace`; its `end` lines left out)."""
+    trace = read_trace(path)
+    return dict(trace.config), [dict(line.line) for line in trace.lines]
 
 
 def is_tracks_trace(path: str | Path) -> bool:
-    """Whether the trace at `path` is a tracks trace (its first line's `format`), not the
-    labelled target's slot records; False for a file without a complete first line."""
-    with Path(path).open() as f:
-        first = f.readline()
-    if not first.endswith("\n"):
-        return False
-    head = loads_line(first)
-    return isinstance(head, dict) and head.get("format") == tracks_trace.TRACE_FORMAT
+    """Whether the trace at `path` is a tracker's of several tracks (its slot lines are not the
+    labelled target's slot records); False for a file without a complete first line."""
+    with Path(path).open("rb") as f:
+        if not f.readline().endswith(b"\n"):
+            return False
+    return not read_trace(path).labelled
 
 
 def plot_tracks(

@@ -8,7 +8,7 @@ track's bound); a run whose one track is labelled (a single track in every slot,
 its own measurement variances: `TrackEstimate.variances`) also has that track's per-slot arrays
 (`closed_loop.RunResult`), and its trace is the slot records of docs/trace.md. A run whose
 tracks are found and followed from unlabelled reports is traced as docs/trace.md, "Multi-target
-traces", describes (records/multi_target.py).
+traces", describes (records/tracks.py).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from isac_mission.experiment.track_metrics import RunFigures, track_figures
 from isac_mission.nlp_cache import CompiledNlpCache
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord, TraceWriter
-from isac_mission.records import multi_target as tracks_trace
+from isac_mission.records import tracks as tracks_trace
 from isac_mission.tracking.factory import draw_noise, keep_out_tracks, scene_for, tracker_for
 from isac_mission.types import FloatArray
 
@@ -115,13 +115,15 @@ def outcome_record(o: SlotOutcome) -> SlotRecord:
             "ao_iterations": rep.ao_iterations,
             "position_iterations": rep.position_iterations,
             "bandwidth_iterations": rep.bandwidth_iterations,
-        },
+        }
+        | tracks_trace.tracks_fields(o.planned_for, o.truth, o.tracking.tracks, o.reports),
     )
 
 
-def tracks_slot(o: SlotOutcome) -> tracks_trace.MultiTargetSlot:
-    """A slot as the tracks trace records it (records/multi_target.py)."""
-    return tracks_trace.MultiTargetSlot(
+def tracks_slot(o: SlotOutcome) -> tracks_trace.TracksSlot:
+    """A slot as the tracks trace records it (records/tracks.py)."""
+    inp = o.slot_input
+    return tracks_trace.TracksSlot(
         o.slot,
         o.method,
         o.plan,
@@ -131,6 +133,8 @@ def tracks_slot(o: SlotOutcome) -> tracks_trace.MultiTargetSlot:
         o.reports,
         o.tracking.tracks,
         o.planned_for,
+        start_xy=None if inp is None else inp.prev_xy_m,
+        start_velocity=None if inp is None else inp.prev_velocity_mps,
     )
 
 
@@ -140,17 +144,12 @@ def trace_path(trace_dir: Path, method: str, run: int) -> Path:
 
 
 def write_trace(path: Path, config: dict[str, Any], outcomes: Sequence[SlotOutcome]) -> None:
-    """The run's trace: the labelled track's slot records, or the tracks trace (module doc)."""
-    if has_labelled_track(outcomes):
-        with TraceWriter(path, config) as writer:
-            for o in outcomes:
-                writer.write_slot(outcome_record(o))
-        return
-    lines = [
-        tracks_trace.header_line(config),
-        *(tracks_trace.slot_line(tracks_slot(o)) for o in outcomes),
-    ]
-    path.write_text("\n".join(lines) + "\n")
+    """The run's trace: the labelled track's slot records, or the lines of tracks (module
+    doc)."""
+    labelled = has_labelled_track(outcomes)
+    with TraceWriter(path, config) as writer:
+        for o in outcomes:
+            writer.write_slot(outcome_record(o) if labelled else tracks_slot(o))
 
 
 _KITS: dict[int, SolverKit] = {}

@@ -1,5 +1,7 @@
-"""Reading a trace file (docs/trace.md): line 1 the config, then one slot line each, and an
-`end` line where a live run of the ground loop ended.
+"""Reading a trace file of any format and version (docs/trace.md): line 1 the format and the
+config (records/header.py), then one slot line each, and an `end` line where a live run of the
+ground loop ended. Every slot line gives its tracks (`Trace.lines`, records/tracks.py); a line
+of the labelled target also its `SlotRecord` (`Trace.slots`).
 
 An incomplete final line (the one a killed writer was in the middle of) is dropped and flagged
 with `Trace.truncated`; any other line that does not parse, or breaks the slot order, raises
@@ -13,8 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from isac_mission.errors import MessageError
+from isac_mission.records.header import parse_header
 from isac_mission.records.jsonlines import loads_line
-from isac_mission.records.slot import MissionEnd, SlotRecord, Trace, check_sequence
+from isac_mission.records.slot import CONTRACT_KEYS, MissionEnd, SlotRecord, Trace, check_sequence
+from isac_mission.records.tracks import TracksLine
 
 
 @dataclass(frozen=True)
@@ -26,14 +30,6 @@ class Scan:
     tail_unterminated_ok: bool  # the last line parsed but has no newline
 
 
-def _parse_config_line(text: str) -> dict[str, Any]:
-    obj = loads_line(text)
-    if not (isinstance(obj, dict) and set(obj) == {"config"} and isinstance(obj["config"], dict)):
-        raise MessageError('the first line must be {"config": {...}}')
-    config: dict[str, Any] = obj["config"]
-    return config
-
-
 def scan_trace(path: Path) -> Scan:
     """Read and validate the whole file (see the module doc)."""
     try:
@@ -43,7 +39,9 @@ def scan_trace(path: Path) -> Scan:
     pieces = data.split(b"\n")
     # pieces[-1] is b"" when the file ends with a newline, else the unterminated last line.
     config: dict[str, Any] | None = None
+    fmt = ""
     slots: list[SlotRecord] = []
+    lines: list[TracksLine] = []
     ends: list[MissionEnd] = []
     offset = good_end = 0
     truncated = tail_ok = False
@@ -58,15 +56,17 @@ def scan_trace(path: Path) -> Scan:
                 offset = good_end = end
                 continue
             if config is None:
-                config = _parse_config_line(text)
+                fmt, config = parse_header(loads_line(text))
             else:
                 obj = loads_line(text)
                 if isinstance(obj, dict) and "end" in obj:
                     ends.append(MissionEnd.from_dict(obj))
                 else:
-                    rec = SlotRecord.from_dict(obj)
-                    check_sequence(rec, slots[-1] if slots else None, config.get("M"))
-                    slots.append(rec)
+                    line, rec = _slot_line(obj)
+                    check_sequence(line, lines[-1] if lines else None, config.get("M"))
+                    lines.append(line)
+                    if rec is not None:
+                        slots.append(rec)
         except (MessageError, UnicodeDecodeError) as err:
             if is_last_unterminated and config is not None:
                 truncated = True
@@ -77,8 +77,31 @@ def scan_trace(path: Path) -> Scan:
         offset = good_end = end
     if config is None:
         raise MessageError(f"{path}: empty trace: no config line")
-    trace = Trace(config=config, slots=slots, path=path, truncated=truncated, ends=ends)
+    trace = Trace(
+        config=config,
+        slots=slots,
+        path=path,
+        truncated=truncated,
+        ends=ends,
+        lines=lines,
+        format=fmt,
+    )
     return Scan(trace=trace, good_end=good_end, tail_unterminated_ok=tail_ok)
+
+
+def _slot_line(obj: Any) -> tuple[TracksLine, SlotRecord | None]:
+    """A slot line's tracks, and its SlotRecord when it is the labelled target's (it has every
+    contract field: docs/trace.md)."""
+    if not isinstance(obj, dict):
+        raise MessageError(f"a slot line must be a JSON object (got {type(obj).__name__})")
+    if "config" in obj:
+        raise MessageError("a second config object after line 1")
+    labelled = "tracks" not in obj or all(key in obj for key in CONTRACT_KEYS)
+    rec = SlotRecord.from_dict(obj) if labelled else None
+    if "tracks" in obj:
+        return TracksLine.parse(obj), rec
+    assert rec is not None
+    return TracksLine.of_labelled(obj, rec), rec
 
 
 def read_trace(path: str | Path) -> Trace:

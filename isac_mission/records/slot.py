@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 import numpy as np
 
@@ -20,6 +20,9 @@ from isac_mission.errors import MessageError
 from isac_mission.records.fields import as_float, as_int, as_str, float_array, int_array
 from isac_mission.records.jsonlines import to_jsonable
 from isac_mission.types import FloatArray, IntArray
+
+if TYPE_CHECKING:
+    from isac_mission.records.tracks import TracksLine
 
 CONTRACT_KEYS: Final[tuple[str, ...]] = (
     "slot",
@@ -191,6 +194,16 @@ class SlotRecord:
     __hash__ = None  # type: ignore[assignment]
 
 
+class SlotLine(Protocol):
+    """What the order of slot lines is checked on."""
+
+    @property
+    def slot(self) -> int: ...
+
+    @property
+    def n_uavs(self) -> int: ...
+
+
 END_STATUSES: Final = ("complete", "interrupted")
 """How a live run of the ground loop ended: it traced slot N, or it was asked to stop before."""
 
@@ -239,15 +252,24 @@ class Trace:
     path: Path | None = None
     truncated: bool = False
     ends: list[MissionEnd] = field(default_factory=list)
+    lines: list[TracksLine] = field(default_factory=list)
+    """Every slot line's tracks, whatever the number of targets (records/tracks.py)."""
+    format: str = ""
+    """Line 1's format (records/header.py)."""
 
     @property
     def end(self) -> MissionEnd | None:
         """How the last run ended, if its end line follows the last slot (None: unknown, e.g.
         killed, or offline)."""
-        last = self.slots[-1].slot if self.slots else 0
+        last = self.lines[-1].slot if self.lines else (self.slots[-1].slot if self.slots else 0)
         if self.ends and self.ends[-1].last_slot == last:
             return self.ends[-1]
         return None
+
+    @property
+    def labelled(self) -> bool:
+        """The trace is the labelled target's: every slot line has its SlotRecord."""
+        return len(self.slots) == len(self.lines)
 
     @property
     def method(self) -> str:
@@ -255,7 +277,7 @@ class Trace:
         named = self.config.get("method")
         if isinstance(named, str):
             return named
-        return self.slots[0].method if self.slots else ""
+        return self.lines[0].method if self.lines else ""
 
     def stack(self, name: str) -> FloatArray:
         """One array field stacked over slots: e.g. "uav_xy" -> [N, M, 2]; "pcrb_trace" -> [N].
@@ -281,7 +303,7 @@ class Trace:
         return len(self.slots)
 
 
-def check_sequence(rec: SlotRecord, prev: SlotRecord | None, m_config: Any) -> None:
+def check_sequence(rec: SlotLine, prev: SlotLine | None, m_config: Any) -> None:
     """Raise MessageError unless rec follows prev (append-only) with config["M"] UAVs."""
     if isinstance(m_config, int) and not isinstance(m_config, bool) and rec.n_uavs != m_config:
         raise MessageError(f"slot {rec.slot} has {rec.n_uavs} UAVs but config M is {m_config}")

@@ -39,7 +39,7 @@ from isac_mission.mavwire.serial_link import parse_vehicle_links
 from isac_mission.nlp_cache import CompiledNlpCache
 from isac_mission.planning.fleet import prepare_fleet
 from isac_mission.planning.slot import Method, SolverKit
-from isac_mission.records.multi_target import MultiTargetSlot
+from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.ground.loop import GroundLoop
@@ -134,7 +134,7 @@ class Progress:
 
     on_status: Callable[[str], None] | None = None
     on_slot: Callable[[SlotEvent], None] | None = None
-    on_tracks: Callable[[MultiTargetSlot, float], None] | None = None
+    on_tracks: Callable[[TracksSlot, float], None] | None = None
 
     def status(self, phase: str) -> None:
         """Report the mission's phase, if anyone listens."""
@@ -221,7 +221,7 @@ async def run_serve(
     stop: asyncio.Event,
     on_slot: Callable[[SlotEvent], None] | None = None,
     on_status: Callable[[str], None] | None = None,
-    on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
+    on_tracks: Callable[[TracksSlot, float], None] | None = None,
     leave: asyncio.Event | None = None,
 ) -> LiveResult:
     """`run_mission` with the world elsewhere, its ports given as plain events and callbacks

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from isac_mission.mavwire.signing import SIGNATURE_REJECTIONS
-from isac_mission.records.multi_target import MultiTargetSlot
+from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.bridge.fleet import BridgeFleet
 from isac_mission.service.ground.report import GroundReport
 
@@ -35,7 +35,7 @@ class LiveResult:
     setpoint_periods_s: dict[int, list[float]] = field(default_factory=dict)
     """Per vehicle: wall intervals between the stream's periodic setpoints during the mission
     (its latest bridge.TIMESTAMPS_KEPT setpoints)."""
-    multi_target_slots: list[MultiTargetSlot] = field(default_factory=list)
+    multi_target_slots: list[TracksSlot] = field(default_factory=list)
     """A multi-target mission's slots (the ground loop's last SLOTS_KEPT); empty otherwise."""
     sizes_built_ahead: list[int] = field(default_factory=list)
     """The smaller fleets whose planner problems were built before the mission (prepare_fleet)."""

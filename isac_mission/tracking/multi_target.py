@@ -33,7 +33,7 @@ refuted slot is no hit for a track not yet confirmed, so a ghost is not confirme
 repair.
 
 A restart: `saved` gives what the tracker carries from a slot to the next (`TrackerState`,
-written to a live trace's slot line: records/multi_target.py), and `restored` makes a tracker
+written to a live trace's slot line: records/tracks.py), and `restored` makes a tracker
 that goes on from it exactly (`serve --resume`).
 
 Pure: numpy and scipy. Shapes: M UAVs, T tracks, k_m measurements of UAV m.

@@ -13,7 +13,7 @@ from pathlib import Path
 import yaml
 
 from isac_mission.bus import tcp_loopback
-from isac_mission.records.multi_target import TRACE_FORMAT
+from isac_mission.records.header import TRACE_FORMAT
 from tests.support.live_cli import ROOT, serve_argv, sim_argv, start
 from tests.support.ports import free_port_block, sitl_ports
 

@@ -19,7 +19,8 @@ from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.config import load_scenario
 from isac_mission.experiment.multi_target_metrics import follow
-from isac_mission.records.multi_target import TRACE_FORMAT, MultiTargetSlot
+from isac_mission.records.header import TRACE_FORMAT
+from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.assembly import LiveOptions
 from isac_mission.tracking.gospa import UNASSIGNED
 from sim.multi_target_scene import MultiTargetScene
@@ -44,7 +45,7 @@ async def test_a_live_multi_target_mission_tracks_every_target_in_the_scene(
         zenoh_endpoint=tcp_loopback(free_port_block(1, socket.SOCK_STREAM)),
         **sitl_ports(s.M).world_kwargs(),
     )
-    seen: list[MultiTargetSlot] = []
+    seen: list[TracksSlot] = []
     result = await asyncio.wait_for(
         run_embedded(s, opts, asyncio.Event(), on_tracks=lambda o, _lat: seen.append(o)),
         timeout=400,

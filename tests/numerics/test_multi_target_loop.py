@@ -26,7 +26,7 @@ from isac_mission.config import Scenario, load_scenario
 from isac_mission.errors import ConfigError
 from isac_mission.experiment.multi_target_loop import (
     MultiTargetRun,
-    MultiTargetSlot,
+    TracksSlot,
     run_multi_target,
 )
 from isac_mission.experiment.multi_target_metrics import follow, run_figures
@@ -38,7 +38,7 @@ from isac_mission.model.run_noise import draw_multi_target_noise
 from isac_mission.model.targets import TargetPaths
 from isac_mission.planning.multi_target import multi_target_kit
 from isac_mission.planning.problem import SlotInput, build_slot_problem
-from isac_mission.records.multi_target import TRACE_FORMAT
+from isac_mission.records.header import TRACE_FORMAT
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.gospa import UNASSIGNED, gospa
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, SumObjective, predict_information
@@ -172,7 +172,7 @@ def test_the_metrics_of_a_hand_made_run() -> None:
             np.zeros((3, 2)), np.zeros(3, dtype=np.int64), np.ones(3) / 3, 0.0, SolveReport("ok")
         )
         slots.append(
-            MultiTargetSlot(
+            TracksSlot(
                 n + 1,
                 "sd",
                 plan,

@@ -17,7 +17,7 @@ from isac_mission.planning.multi_target import (
     multi_target_kit,
     plan_tracks,
 )
-from isac_mission.records.multi_target import MultiTargetSlot, slot_line
+from isac_mission.records.tracks import TracksSlot, slot_line
 from isac_mission.service.ground.mission import MissionState
 from isac_mission.wire import DetectionSetMsg, TruthSetMsg
 from sim.multi_target_scene import MultiTargetScene
@@ -42,7 +42,7 @@ def _without_times(line: str) -> str:
     return json.dumps(d, sort_keys=True)
 
 
-def _fly_the_mission_state(s: Scenario) -> list[MultiTargetSlot]:
+def _fly_the_mission_state(s: Scenario) -> list[TracksSlot]:
     """The live state's recursion, the world's reports taken at the plans' waypoints (where the
     offline loop's UAVs are) with the plans' shares."""
     scene = MultiTargetScene(s, SEED)

@@ -1,6 +1,6 @@
 """A multi-target mission continued from a slot line of its live trace (`serve --resume`) goes on
 exactly as the uninterrupted mission: the tracker restored from slot k's line
-(records/multi_target.py `resume_point`, tracking/multi_target.py `MultiTargetTracker.restored`),
+(records/tracks.py `resume_point`, tracking/multi_target.py `MultiTargetTracker.restored`),
 fed slots k + 1 .. N's reports, gives the same tracks with the same IDs, confirmations, beliefs
 and bounds to the last bit, and writes the same lines; the resumed mission's shares and BSs are
 those the next plan starts from, so its next plan is the uninterrupted one's.
@@ -19,9 +19,9 @@ from isac_mission.errors import MessageError
 from isac_mission.model.run_noise import draw_multi_target_noise
 from isac_mission.planning.multi_target import multi_target_kit
 from isac_mission.records.jsonlines import loads_line
-from isac_mission.records.multi_target import (
-    MultiTargetSlot,
+from isac_mission.records.tracks import (
     ResumePoint,
+    TracksSlot,
     resume_fields,
     resume_point,
     slot_line,
@@ -56,11 +56,11 @@ class Flown:
     msgs: dict[int, DetectionSetMsg]
     truth: TruthSetMsg
     uav_xy: FloatArray
-    slot: MultiTargetSlot
+    slot: TracksSlot
     line: str
 
 
-def _line(o: MultiTargetSlot) -> str:
+def _line(o: TracksSlot) -> str:
     """The live loop's line of a slot (without its latency)."""
     return slot_line(o, resume_fields(o))
 
@@ -146,7 +146,7 @@ def test_a_tracker_restored_from_slot_k_goes_on_exactly(
             np.testing.assert_array_equal(got.prediction.x, want.prediction.x)
             np.testing.assert_array_equal(got.prediction.P, want.prediction.P)
             np.testing.assert_array_equal(got.prior_information, want.prior_information)
-        commit_plan(mission, f.planned_for, f.plan, f.start_xy)
+        commit_plan(mission, f.planned_for, f.plan, f.start_xy, f.velocity)
         o = processed(mission, n, f.msgs, f.truth, f.uav_xy)
         # The whole line: tracks (IDs, confirmed, x, P, bound, weight) and what the tracker
         # carries on (J, hits, misses, refutations, candidates, the next ID), bit for bit.
@@ -161,7 +161,7 @@ def _resumed(s: Scenario, point: ResumePoint, errors: FloatArray | None = None) 
     )
 
 
-def _assert_same_state(tracker: MultiTargetTracker, o: MultiTargetSlot) -> None:
+def _assert_same_state(tracker: MultiTargetTracker, o: TracksSlot) -> None:
     """The restored tracker's state is the saved one, array for array."""
     got, want = tracker.saved(), o.tracker_state
     assert want is not None

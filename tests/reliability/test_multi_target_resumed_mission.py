@@ -23,7 +23,7 @@ import yaml
 from isac_mission.bus import tcp_loopback
 from isac_mission.experiment.multi_target_metrics import follow
 from isac_mission.experiment.plots import read_tracks_trace
-from isac_mission.records.multi_target import TRACE_FORMAT
+from isac_mission.records.header import TRACE_FORMAT
 from isac_mission.records.progress import TraceProgress, trace_progress
 from isac_mission.tracking.gospa import UNASSIGNED
 from isac_mission.tracking.pcrb import Bound

@@ -10,7 +10,7 @@ import numpy as np
 
 from isac_mission.planning.multi_target import TracksPlan
 from isac_mission.planning.slot import Method
-from isac_mission.records.multi_target import MultiTargetSlot
+from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.ground.mission import ArrivedReport, ArrivedTruth, MissionState
 from isac_mission.service.ground.tracefile import track_set_slot
 from isac_mission.tracking.beliefs import TargetBelief
@@ -38,10 +38,15 @@ def plan_slot_of(
 
 
 def commit_plan(
-    mission: MissionState, planned_for: int, plan: SlotPlan, uav_xy: FloatArray
+    mission: MissionState,
+    planned_for: int,
+    plan: SlotPlan,
+    uav_xy: FloatArray,
+    uav_v: FloatArray | None = None,
 ) -> None:
-    """Commit a plan made elsewhere (an earlier run's) for the next slot, planned from uav_xy."""
-    mission.commit(mission.next_job(uav_xy), TracksPlan(planned_for, None, plan))
+    """Commit a plan made elsewhere (an earlier run's) for the next slot, planned from uav_xy
+    [M, 2] (m) with velocities uav_v [M, 2] (m/s)."""
+    mission.commit(mission.next_job(uav_xy, uav_v), TracksPlan(planned_for, None, plan))
 
 
 def processed(
@@ -50,7 +55,7 @@ def processed(
     msgs: Mapping[int, ArrivedReport],
     truth: ArrivedTruth | None,
     fallback_xy: FloatArray,
-) -> MultiTargetSlot:
+) -> TracksSlot:
     """Slot n processed, as the trace of tracks records it."""
     return track_set_slot(mission.process(n, msgs, truth, fallback_xy))
 

@@ -1,6 +1,6 @@
 """Trace files as `run` and `serve` leave them (docs/trace.md), written directly for the tests
 that read them: a single-target trace through `TraceWriter`, a multi-target one with its header
-(`records/multi_target.py`) and one line per slot; each with the `end` line a live run writes
+(`records/tracks.py`) and one line per slot; each with the `end` line a live run writes
 when it stops (none when `killed`)."""
 
 from __future__ import annotations
@@ -11,8 +11,9 @@ import numpy as np
 
 from isac_mission.config import load_scenario
 from isac_mission.records import MissionEnd, SlotRecord, TraceWriter
+from isac_mission.records.header import header_line
 from isac_mission.records.jsonlines import dumps_line
-from isac_mission.records.multi_target import end_line, header_line
+from isac_mission.records.tracks import end_line
 
 
 def slot_record(n: int, m: int = 3) -> SlotRecord:
@@ -66,7 +67,7 @@ def write_multi_target_trace(
     path: Path, scenario: str, slots: int, *, killed: bool = False
 ) -> None:
     """A multi-target `serve` trace of `scenario` (method proposed) with slots 1..slots: its
-    header (records/multi_target.py), one line per slot, and its `end` line unless `killed`."""
+    header (records/tracks.py), one line per slot, and its `end` line unless `killed`."""
     s = load_scenario(scenario)
     lines = [header_line(s.trace_config() | {"seed": s.seed, "method": "proposed"})]
     for n in range(1, slots + 1):

@@ -21,9 +21,10 @@ from isac_mission.config import Scenario, load_scenario
 from isac_mission.errors import ConfigError
 from isac_mission.planning.multi_target import multi_target_kit
 from isac_mission.records import MissionEnd
+from isac_mission.records.header import header_line
 from isac_mission.records.jsonlines import dumps_line, loads_line, to_jsonable
-from isac_mission.records.multi_target import header_line, resume_fields, slot_line
 from isac_mission.records.progress import trace_progress
+from isac_mission.records.tracks import resume_fields, slot_line
 from isac_mission.service.assembly import LiveOptions, live_trace_limits, planning_scenario
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.mission import MissionState
@@ -51,7 +52,7 @@ def _config(s: Scenario, method: str = "proposed") -> dict[str, object]:
 
 def _lines(s: Scenario, slots: int) -> list[str]:
     """The slot lines of a mission of `s` flown `slots` slots (method sd: the fleet parks),
-    with what a restart needs (records/multi_target.py `resume_fields`)."""
+    with what a restart needs (records/tracks.py `resume_fields`)."""
     scene = MultiTargetScene(s, 1)
     mission = MissionState(s, multi_target_kit(s), "sd")
     out = []

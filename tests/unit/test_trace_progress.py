@@ -29,7 +29,7 @@ def test_the_progress_is_the_last_slot_on_disk(
     write(trace, scenario, 12)
     before = trace.read_bytes()
     progress = trace_progress(trace)
-    assert (progress.slots, progress.last_slot, progress.multi_target) == (12, 12, multi)
+    assert (progress.slots, progress.last_slot, not progress.labelled) == (12, 12, multi)
     assert progress.config["N"] == 60 and progress.path == trace
     assert progress.end == MissionEnd("interrupted", 12, 60)
     assert trace.read_bytes() == before
@@ -72,5 +72,5 @@ def test_slots_out_of_order_name_the_line(tmp_path: Path) -> None:
     write_multi_target_trace(trace, "multi-target", 3, killed=True)
     lines = trace.read_bytes().splitlines(keepends=True)
     trace.write_bytes(b"".join([*lines, lines[2]]))  # slot 2 again after slot 3
-    with pytest.raises(MessageError, match=r"line 5: slot 2 after slot 3"):
+    with pytest.raises(MessageError, match=r"line 5: slot 2 does not follow slot 3"):
         trace_progress(trace)

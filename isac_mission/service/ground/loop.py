@@ -34,7 +34,7 @@ from isac_mission.planning.fallback import OPERATOR_HOLD
 from isac_mission.planning.fleet import PlanningJob
 from isac_mission.planning.multi_target import TracksPlan
 from isac_mission.planning.slot import SolverKit
-from isac_mission.records.multi_target import MultiTargetSlot
+from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.ground.assembler import DetectionAssembler
 from isac_mission.service.ground.bus_loop import BusLoop
 from isac_mission.service.ground.mission import (
@@ -71,7 +71,7 @@ class GroundLoop(BusLoop):
         kit: SolverKit | None = None,
         on_slot: Callable[[SlotEvent], None] | None = None,
         initial_errors: FloatArray | None = None,
-        on_tracks: Callable[[MultiTargetSlot, float], None] | None = None,
+        on_tracks: Callable[[TracksSlot, float], None] | None = None,
     ) -> None:
         super().__init__(scenario, bus, settings)
         self.kit = (

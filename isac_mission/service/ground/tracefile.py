@@ -3,7 +3,7 @@
 The loop writes every slot through one `SlotOutput`, made for the scenario's tracker by
 `slot_output`: the labelled target's trace (`records.TraceWriter`, `SlotRecord` lines, the
 `track` message; a resume continues from the last complete slot's estimate, covariance and
-bound) or the trace of tracks (`records/multi_target.py` lines, the `track_set` message; a
+bound) or the trace of tracks (`records/tracks.py` lines, the `track_set` message; a
 resume restores the tracker from the last complete slot line). Both write and fsync slot by
 slot, continue a resumed trace after its last complete slot (a torn last line is cut off), start
 afresh when the file has no complete line, and end each run with an `end` line.
@@ -12,29 +12,26 @@ afresh when the file has no complete line, and end each run with an `end` line.
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError, MessageError
 from isac_mission.records import MissionEnd, SlotRecord, TraceWriter, read_trace
-from isac_mission.records.multi_target import (
-    MultiTargetSlot,
+from isac_mission.records.progress import trace_progress
+from isac_mission.records.tracks import (
+    TracksSlot,
     config_differences,
-    end_line,
-    header_line,
     resume_fields,
     resume_point,
-    slot_line,
+    tracks_fields,
 )
-from isac_mission.records.progress import trace_progress
 from isac_mission.service.ground.mission import GroundSlot
 from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
@@ -114,7 +111,7 @@ def slot_output(
     settings: GroundSettings,
     report: GroundReport,
     on_slot: Callable[[SlotEvent], None] | None,
-    on_tracks: Callable[[MultiTargetSlot, float], None] | None,
+    on_tracks: Callable[[TracksSlot, float], None] | None,
 ) -> SlotOutput:
     """The output of the scenario's tracker (module doc)."""
     if labelled(s):
@@ -248,7 +245,8 @@ def slot_record(g: GroundSlot, extra: Mapping[str, Any]) -> SlotRecord:
             "received": received,
         }
         | ({"planned_around": list(pending.planned_around)} if pending.planned_around else {})
-        | dict(extra),
+        | dict(extra)
+        | tracks_fields(g.planned_for, g.truth, g.tracking.tracks, g.reports),
     )
     return record
 
@@ -259,12 +257,12 @@ def _labelled(variances: FloatArray | None) -> FloatArray:
     return variances
 
 
-def track_set_slot(g: GroundSlot) -> MultiTargetSlot:
-    """The trace-of-tracks line of a slot (records/multi_target.py): `eta` 0 for a UAV whose
+def track_set_slot(g: GroundSlot) -> TracksSlot:
+    """The trace-of-tracks line of a slot (records/tracks.py): `eta` 0 for a UAV whose
     report did not arrive (the tracker took nothing from it); a skipped slot's positions where
     its reports said (NaN: none)."""
     arrived = np.isfinite(g.known_xy[:, 0])
-    return MultiTargetSlot(
+    return TracksSlot(
         g.slot,
         g.method,
         g.plan,
@@ -275,6 +273,8 @@ def track_set_slot(g: GroundSlot) -> MultiTargetSlot:
         g.tracking.tracks,
         g.planned_for,
         g.saved,  # type: ignore[arg-type]  # the tracker of tracks' TrackerState
+        g.pending.start_xy,
+        g.pending.start_velocity,
     )
 
 
@@ -288,12 +288,12 @@ class TrackSetOutput:
         self,
         s: Scenario,
         settings: GroundSettings,
-        on_tracks: Callable[[MultiTargetSlot, float], None] | None,
+        on_tracks: Callable[[TracksSlot, float], None] | None,
     ) -> None:
         self.s, self.settings, self.on_tracks = s, settings, on_tracks
-        self.slots: deque[MultiTargetSlot] = deque(maxlen=SLOTS_KEPT)
+        self.slots: deque[TracksSlot] = deque(maxlen=SLOTS_KEPT)
         """The last SLOTS_KEPT slots (the trace keeps every one)."""
-        self._trace: IO[str] | None = None
+        self.writer: TraceWriter | None = None
         self.last_traced = 0
 
     def config(self) -> dict[str, object]:
@@ -304,45 +304,27 @@ class TrackSetOutput:
         path = self.settings.trace_path
         if path is None:
             return None
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        path.parent.mkdir(parents=True, exist_ok=True)
         if self.settings.resume and path.exists() and b"\n" in path.read_bytes():
-            return self._resume(path)
+            refusal = track_set_refusal(path, self.config(), self.s.N)
+            if refusal is not None:
+                raise ConfigError(f"--resume: {refusal}")
+            last_line = trace_progress(path).last_line
+            self.writer = TraceWriter.resume(path, fsync=True)
+            if last_line is None:
+                return None
+            point = resume_point(last_line)
+            self.last_traced = point.slot
+            return ResumeFrom(point.slot, point.tracker, point.plan_eta, point.assoc)
         if self.settings.resume and path.exists():
             log.warning("%s has no complete line; starting a new trace", path)
-        self._trace = open(path, "w", encoding="utf-8")  # noqa: SIM115 (closed in close)
-        self._write_line(header_line(self.config()))
+        self.writer = TraceWriter(path, self.config(), fsync=True)
         return None
 
-    def _resume(self, path: Path) -> ResumeFrom | None:
-        refusal = track_set_refusal(path, self.config(), self.s.N)
-        if refusal is not None:
-            raise ConfigError(f"--resume: {refusal}")
-        progress = trace_progress(path)
-        out = None
-        if progress.last_line is not None:
-            point = resume_point(progress.last_line)
-            self.last_traced = point.slot
-            out = ResumeFrom(point.slot, point.tracker, point.plan_eta, point.assoc)
-        data = path.read_bytes()
-        with path.open("r+b") as raw:  # a torn last line (killed inside write) is cut off
-            raw.truncate(data.rfind(b"\n") + 1)
-            raw.flush()
-            os.fsync(raw.fileno())
-        self._trace = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed in close)
-        return out
-
     def close(self, end: Callable[[int], MissionEnd]) -> None:
-        if self._trace is not None:
-            self._write_line(end_line(end(self.last_traced)))
-            self._trace.close()
-
-    def _write_line(self, line: str) -> None:
-        f = self._trace
-        if f is None:
-            return
-        f.write(line + "\n")
-        f.flush()
-        os.fsync(f.fileno())
+        if self.writer is not None:
+            self.writer.write_end(end(self.writer.last_slot))
+            self.writer.close()
 
     def track_message(self, g: GroundSlot, t_s: float) -> Message:
         entries = tuple(
@@ -362,7 +344,8 @@ class TrackSetOutput:
     ) -> None:
         slot = track_set_slot(g)
         fields = {"latency_ms": extra["latency_ms"], **resume_fields(slot)}
-        self._write_line(slot_line(slot, fields))
+        if self.writer is not None:
+            self.writer.write_slot(slot, fields)
         self.last_traced = g.slot
         self.slots.append(slot)
         if self.on_tracks is not None:
@@ -389,7 +372,7 @@ def track_set_refusal(path: Path, config: Mapping[str, object], n_slots: int) ->
         return f"cannot continue {path}: {err}"
     if not progress.config:
         return None  # killed before its config line was complete: a new trace is started
-    if not progress.multi_target:
+    if progress.labelled and progress.slots:
         return f"{path} is a single-target trace, not a multi-target mission's"
     if progress.last_slot >= n_slots:
         return (
