@@ -4,9 +4,9 @@ service, phase by phase?
 For each method and seed: the live mission in this process (`run_embedded`: the simulated world,
 the MAVLink bridges and the multi-target ground loop over loopback Zenoh and UDP, lockstep at
 --speed, the live settings, the 1 s plan budget; free ports, no console) and its offline twin
-(`run_multi_target` on the scenario with the live settings, the same seed: the same targets, and
-the same reports wherever the UAVs are where their plans put them). From each run's
-`run_figures`, over the approach (slots 1..10) and the tracking phase (11..N): mean GOSPA (m), its
+(experiment/runs.py `fly_outcomes` on the scenario with the live settings, the same seed: the
+same targets, and the same reports wherever the UAVs are where their plans put them). From each
+run's `track_figures`, over the approach (slots 1..10) and the tracking phase (11..N): mean GOSPA (m), its
 localisation part and its missed + false part (m^2), the mean step per UAV per slot (m); over the
 mission: confirmation delays, ID switches, false confirmed tracks, and MSE / tr(PCRB_pos) of the
 followed targets (settled: from a target's 11th followed slot).
@@ -39,14 +39,9 @@ from isac_mission.bus import tcp_loopback  # noqa: E402
 from isac_mission.cli.embedded import run_embedded  # noqa: E402
 from isac_mission.config import Scenario, load_scenario  # noqa: E402
 from isac_mission.experiment.bootstrap import Interval, paired_bootstrap  # noqa: E402
-from isac_mission.experiment.multi_target_loop import run_multi_target  # noqa: E402
-from isac_mission.experiment.multi_target_metrics import (  # noqa: E402
-    RunFigures,
-    run_figures,
-    run_of_slots,
-)
-from isac_mission.model.run_noise import draw_multi_target_noise  # noqa: E402
-from isac_mission.planning.multi_target import multi_target_kit  # noqa: E402
+from isac_mission.experiment.runs import fly_outcomes, tracks_slot  # noqa: E402
+from isac_mission.experiment.track_metrics import RunFigures, track_figures  # noqa: E402
+from isac_mission.planning.tracks import multi_target_kit  # noqa: E402
 from isac_mission.quiet import quiet_highs_banner  # noqa: E402
 from isac_mission.records.tracks import TracksSlot  # noqa: E402
 from isac_mission.service.assembly import LiveOptions, planning_scenario  # noqa: E402
@@ -87,13 +82,13 @@ def fly_live(s: Scenario, method: str, seed: int, speed: float, out: Path) -> li
 def fly_offline(s: Scenario, method: str, seed: int) -> list[TracksSlot]:
     """The offline twin: the live settings, the same seed."""
     planning = planning_scenario(s, LiveOptions())
-    noise = draw_multi_target_noise(planning, seed)
-    return list(run_multi_target(planning, method, noise, multi_target_kit(planning)).slots)  # type: ignore[arg-type]
+    outcomes = fly_outcomes(planning, method, seed, multi_target_kit(planning))
+    return [tracks_slot(o) for o in outcomes]
 
 
 def phase_figures(s: Scenario, method: str, seed: int, slots: list[TracksSlot]) -> dict[str, Any]:
     """The figures of one run (module doc)."""
-    f: RunFigures = run_figures(run_of_slots(method, seed, slots), s.multi_tracker.gospa_cutoff_m)
+    f: RunFigures = track_figures(slots, s.multi_tracker.gospa_cutoff_m)
     xy = np.stack([s.uav_start_xy, *(o.uav_xy_m for o in slots)])
     step = np.linalg.norm(np.diff(xy, axis=0), axis=2).mean(axis=1)  # [N] per slot
     a, t = slice(0, APPROACH_SLOTS), slice(APPROACH_SLOTS, None)

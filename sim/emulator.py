@@ -1,37 +1,27 @@
-"""Sensing emulator: publishes each slot's detections on the bus and follows the plans' shares.
+"""Sensing emulator: publishes each slot's reports on the bus and follows the plans' shares.
 
-A thin I/O wrapper around the pure `sim.sensing.Sensor`. Each slot it draws every UAV's detection
-and publishes it on `isac/<mission>/detections/<m>` (codec `detection` payload; a missed
-detection is published with null range and radial velocity). On a multi-target mission
-(`draw_reports`, `publish_reports`) each UAV's unlabelled report of `sim.multi_target_scene` goes out instead, as a
-`detection_set` (an empty one when it detected nothing). The bandwidth shares are equal
-(1/M) until a plan arrives on `isac/<mission>/plan`; slot n then uses the shares of the plan
-with the largest slot <= n (plan n carries eta_n; see isac_mission/wire/models.py). A malformed
-plan (including one for a different number of UAVs or base stations) is counted in
+The world's scene (`sim.scenes.WorldScene`) draws every UAV's report of a slot with the shares
+in use (`shares_for`) and makes it the message of its detection model (`detection`, a miss with
+null range and radial velocity; or an unlabelled `detection_set`, empty when it detected
+nothing); `publish_reports` puts each on `isac/<mission>/detections/<m>`. The bandwidth shares
+are equal (1/M) until a plan arrives on `isac/<mission>/plan`; slot n then uses the shares of
+the plan with the largest slot <= n (plan n carries eta_n; see isac_mission/wire/models.py). A
+malformed plan (including one for a different number of UAVs or base stations) is counted in
 `plans_rejected`, logged with its reason and ignored.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import AsyncIterable, Callable
+from collections.abc import AsyncIterable, Callable, Sequence
 from typing import Protocol
 
 import numpy as np
 
 from isac_mission.errors import MessageError
-from isac_mission.model.detections import UavReport
-from isac_mission.types import Detections, FloatArray
-from isac_mission.wire import (
-    Keys,
-    PlanMsg,
-    decode,
-    detection_messages,
-    detection_set_messages,
-    encode,
-)
-from sim.multi_target_scene import MultiTargetScene
-from sim.sensing import Sensor, equal_shares
+from isac_mission.types import FloatArray
+from isac_mission.wire import DetectionMsg, DetectionSetMsg, Keys, PlanMsg, decode, encode
+from sim.sensing import equal_shares
 
 log = logging.getLogger(__name__)
 
@@ -47,22 +37,13 @@ class Publisher(Protocol):
 
 
 class SensingEmulator:
-    """Publishes detections for n_uavs UAVs; n_bs (optional) bounds a plan's BS indices."""
+    """Publishes reports for n_uavs UAVs; n_bs (optional) bounds a plan's BS indices."""
 
-    def __init__(
-        self,
-        bus: Publisher,
-        keys: Keys,
-        sensor: Sensor,
-        n_uavs: int,
-        *,
-        n_bs: int | None = None,
-    ) -> None:
+    def __init__(self, bus: Publisher, keys: Keys, n_uavs: int, *, n_bs: int | None = None) -> None:
         if n_uavs < 1:
             raise ValueError(f"n_uavs must be >= 1, got {n_uavs}")
         self._bus = bus
         self._keys = keys
-        self._sensor = sensor
         self.n_uavs = n_uavs
         self.n_bs = n_bs
         self._plans: dict[int, PlanMsg] = {}
@@ -110,36 +91,10 @@ class SensingEmulator:
             return equal_shares(self.n_uavs)
         return np.array(plan.plan.bandwidth_share, dtype=float)
 
-    def emit(self, slot: int, t_s: float, target_x: FloatArray, uav_xy_m: FloatArray) -> Detections:
-        """Draw slot `slot`'s detections at sim time t_s (s) from the true target state [4] and
-        the UAVs' actual horizontal positions [M, 2] (m), publish them, and return them."""
-        eta = self.shares_for(slot)
-        det = self._sensor.sense(slot, target_x, uav_xy_m, eta)
-        for msg in detection_messages(det, t_s, eta):
-            self._bus.publish(self._keys.detections(msg.uav), encode(msg))
-            self.detections_published += 1
-        self._forget_old_plans(slot)
-        return det
-
-    def draw_reports(
-        self, slot: int, scene: MultiTargetScene, uav_xy_m: FloatArray
-    ) -> tuple[list[UavReport], FloatArray]:
-        """Slot `slot`'s unlabelled reports [M] (1..N, with their origins) from the UAVs'
-        actual horizontal positions [M, 2] (m), and the shares eta [M] in use."""
-        eta = self.shares_for(slot)
-        return scene.reports(slot, uav_xy_m, eta), eta
-
-    def publish_reports(
-        self,
-        slot: int,
-        t_s: float,
-        reports: list[UavReport],
-        uav_xy_m: FloatArray,
-        eta: FloatArray,
-    ) -> None:
-        """One `detection_set` per UAV of `draw_reports`' reports, stamped t_s (s)."""
-        msgs = detection_set_messages(slot, t_s, [r.measurements for r in reports], uav_xy_m, eta)
-        for msg in msgs:
+    def publish_reports(self, slot: int, reports: Sequence[DetectionMsg | DetectionSetMsg]) -> None:
+        """Put slot `slot`'s reports (one message per UAV, drawn with `shares_for(slot)`) on
+        each one's UAV's detections key, in order."""
+        for msg in reports:
             self._bus.publish(self._keys.detections(msg.uav), encode(msg))
             self.detections_published += 1
         self._forget_old_plans(slot)

@@ -1,10 +1,13 @@
-"""The simulated world's targets on a multi-target mission (pure: numpy only, seeded).
+"""The simulated world's targets on a multi-target mission (no I/O; seeded): the unlabelled
+implementation of `sim.scenes.WorldScene`.
 
 Every target's true path and each slot's unlabelled reports are drawn exactly as `simulate`
 draws run seed `seed` (`draw_multi_target_noise`, `target_paths`, `unlabelled_detections`: the
 functions the offline loop calls), so that the live world and the offline loop see the same
 targets and, from the same UAV positions and shares, the same measurements. The paths cover
-slots 0..N; past slot N the world has nothing more to show.
+slots 0..N; past slot N the world has nothing more to show. The world publishes slot n as
+`truth_set` (every target's state, with the origin of each measurement of the slot) and one
+`detection_set` per UAV (`show`).
 """
 
 from __future__ import annotations
@@ -17,6 +20,8 @@ from isac_mission.model.radar import SensingParams
 from isac_mission.model.run_noise import draw_multi_target_noise
 from isac_mission.model.targets import target_paths, target_radar_gains
 from isac_mission.types import FloatArray
+from isac_mission.wire import TruthSetMsg, detection_set_messages
+from sim.scenes import SceneSlot
 
 
 class MultiTargetScene:
@@ -54,3 +59,14 @@ class MultiTargetScene:
             self.detection,
             self.noise.slots[n - 1],
         )
+
+    def show(self, n: int, t_s: float, uav_xy_m: FloatArray, eta: FloatArray) -> SceneSlot:
+        """Slot n (0..N) at simulation time t_s (s): `truth_set` with the origins of the slot's
+        measurements, then each UAV's `detection_set` from the UAVs at uav_xy_m [M, 2] (m) with
+        shares eta [M] (an empty one when it detected nothing; none at slot 0, which is before
+        plan 1 and has no reports)."""
+        reports = self.reports(n, uav_xy_m, eta) if n > 0 else []
+        origins = tuple(tuple(int(o) for o in r.origin) for r in reports)
+        truth = TruthSetMsg(slot=n, t_s=t_s, states=self.truth(n), origins=origins)
+        measurements = [r.measurements for r in reports]
+        return SceneSlot(truth, tuple(detection_set_messages(n, t_s, measurements, uav_xy_m, eta)))

@@ -7,11 +7,12 @@
   start points, MAVLink on 127.0.0.1 in PX4 SITL's layout: offboard link from
   mavlink_local_base_port + m to mavlink_base_port + m, GCS link from gcs_local_base_port + m
   to gcs_port) and drives everything else;
-- at each slot boundary t = t0 + n dt it advances the target to slot n (slot 0 is x0), draws and
-  publishes every UAV's detection from the vehicles' actual horizontal positions
-  (`sim.emulator.SensingEmulator`), and publishes `truth` and `clock`; on a multi-target mission
-  every UAV's unlabelled report (`detection_set`) and every target's truth (`truth_set`) of
-  `sim.multi_target_scene` instead;
+- at each slot boundary t = t0 + n dt it asks its scene (`sim.scenes.WorldScene`, picked from the
+  scenario by `sim.world_assembly.make_scene`) for slot n: the truth, then every UAV's report
+  drawn from the vehicles' actual horizontal positions with the shares of the plan in use; it
+  publishes the truth (`truth` of the paper's labelled target, `truth_set` of several), the
+  reports (`detection`, `detection_set`; `sim.emulator.SensingEmulator`) and `clock`; a slot the
+  scene does not cover (past slot N with several targets) has the clock only;
 - `clock` is also published every 1 / clock_rate_hz simulation seconds (slot -1 before the
   mission starts).
 
@@ -27,8 +28,8 @@ eta_n of slot n's detections; the ground publishes plan n+1 after processing slo
 n+1 (or a later one) has arrived, or `lockstep_timeout_s` wall seconds have passed, repeating
 the clock message meanwhile.
 
-The parts: options and counters `sim.world_options`, target, sensor and vehicles
-`sim.world_assembly`, truth and clock publishing `sim.world_outputs`, detections
+The parts: options and counters `sim.world_options`, scene and vehicles `sim.world_assembly`,
+what a slot shows `sim.scenes`, truth and clock publishing `sim.world_outputs`, reports and plans
 `sim.emulator`.
 
 Vehicle telemetry is not published on Zenoh here: it goes over MAVLink (the service's bridge
@@ -50,9 +51,9 @@ from sim.clock import SimClock
 from sim.emulator import SensingEmulator
 from sim.impaired_io import ImpairedPublisher
 from sim.lockstep import Lockstep
-from sim.multi_target_scene import MultiTargetScene
+from sim.scenes import WorldScene
 from sim.world_assembly import (
-    make_target_and_sensor,
+    make_scene,
     make_vehicles,
     positions_xy_m,
     ready_for_offboard_start,
@@ -76,13 +77,8 @@ class World:
         self.options = options
         self.keys = Keys(scenario.mission_id)
         self.stats = WorldStats()
-        self.target, self.sensor = make_target_and_sensor(scenario, options)
-        self.scene: MultiTargetScene | None = None
-        """The targets of a multi-target mission (`simulate`'s draws for the world's seed); the
-        single `target` then stays unused."""
-        if scenario.multi_target:
-            seed = scenario.seed if options.seed is None else options.seed
-            self.scene = MultiTargetScene(scenario, seed)
+        self.scene: WorldScene = make_scene(scenario, options)
+        """The targets and their sensing, of the scenario's detection model."""
         self.clock = SimClock(tick_hz=options.tick_hz, speed=options.speed)
         self.vehicles = make_vehicles(scenario, options)
         self.bus: ZenohBus | None = None
@@ -126,11 +122,7 @@ class World:
             self.options.speed,
         )
         self.emulator = SensingEmulator(
-            self.detection_links or self.bus,
-            self.keys,
-            self.sensor,
-            self.scenario.M,
-            n_bs=self.scenario.K,
+            self.detection_links or self.bus, self.keys, self.scenario.M, n_bs=self.scenario.K
         )
         self.emulator.add_plan_listener(self._on_plan)
         for v in self.vehicles:
@@ -211,43 +203,18 @@ class World:
             self._run_slot(n, now_s)
 
     def _run_slot(self, n: int, now_s: float) -> None:
+        """Slot n: the scene's truth (first, so that an evaluator has it when the slot's reports
+        complete) and every UAV's report, if the scene covers it; then the clock."""
         outputs, emulator = self.outputs, self.emulator
         assert outputs is not None and emulator is not None
-        t_s = self._slot_time(n)
-        if self.scene is not None:
-            self._run_multi_target_slot(n, now_s, t_s, self.scene)
-            return
-        x = self.target.state if n == 0 else self.target.advance()
-        if self.target.slot != n:  # the target is advanced exactly once per slot
-            raise RuntimeError(f"target at slot {self.target.slot}, world at slot {n}")
-        # Truth first, so that an evaluator has it when the slot's detections complete.
-        outputs.publish_truth(n, t_s, x)
-        self.stats.truth_published += 1
-        det = emulator.emit(n, t_s, x, positions_xy_m(self.vehicles))
-        self.stats.slots = n + 1
-        self._publish_clock(now_s)
-        log.debug(
-            "slot %d at t = %.2f s: %d/%d detections", n, t_s, det.received.sum(), len(det.received)
-        )
-        if self.options.lockstep and n < self.scenario.N and emulator.latest_plan_slot < n + 1:
-            self.lockstep.hold(n, now_s)
-
-    def _run_multi_target_slot(
-        self, n: int, now_s: float, t_s: float, scene: MultiTargetScene
-    ) -> None:
-        """Slot n of a multi-target mission: every target's truth with the origins of the
-        slot's measurements (first, as on a single-target mission), then every UAV's unlabelled
-        report (slots 1..N; slot 0 is before plan 1 and has none). Past slot N the world shows
-        nothing more."""
-        outputs, emulator = self.outputs, self.emulator
-        assert outputs is not None and emulator is not None
-        if scene.covers(n):
+        if self.scene.covers(n):
+            t_s = self._slot_time(n)
             xy = positions_xy_m(self.vehicles)
-            reports, eta = emulator.draw_reports(n, scene, xy) if n > 0 else ([], None)
-            outputs.publish_truth_set(n, t_s, scene.truth(n), reports)
+            shown = self.scene.show(n, t_s, xy, emulator.shares_for(n))
+            outputs.publish_truth(shown.truth)
             self.stats.truth_published += 1
-            if eta is not None:
-                emulator.publish_reports(n, t_s, reports, xy, eta)
+            emulator.publish_reports(n, shown.reports)
+            log.debug("slot %d at t = %.2f s: %d reports", n, t_s, len(shown.reports))
         self.stats.slots = n + 1
         self._publish_clock(now_s)
         if self.options.lockstep and n < self.scenario.N and emulator.latest_plan_slot < n + 1:

@@ -1,6 +1,7 @@
-"""The parts of the simulated world, made from a scenario and the world's options: the target,
-the sensor (with their seeded random streams), and the vehicles (one PX4-like autopilot per UAV),
-with the few questions the world asks of the fleet (ready for an offboard start? where is
+"""The parts of the simulated world, made from a scenario and the world's options: the scene
+(its targets and their sensing, with their seeded random streams; `make_scene`, the one place
+that picks it from the scenario's detection model) and the vehicles (one PX4-like autopilot per
+UAV), with the few questions the world asks of the fleet (ready for an offboard start? where is
 everyone?).
 
 The vehicles' local NED frames are all centred on the scenario origin (0, 0) (north = y,
@@ -16,20 +17,39 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.mavwire.modes import FlightMode
 from isac_mission.model.run_noise import draw_run_noise
+from isac_mission.tracking.factory import labelled
 from isac_mission.types import FloatArray
 from sim.autopilot.battery import BatterySettings
 from sim.autopilot.endpoint import Autopilot
 from sim.autopilot.settings import AutopilotSettings
+from sim.multi_target_scene import MultiTargetScene
+from sim.scenes import LabelledTargetScene, WorldScene
 from sim.sensing import SensingModel, Sensor
 from sim.target import CvTarget, ScriptedTarget, TargetModel
 from sim.vehicle import VehicleLimits
 from sim.world_options import WorldOptions
 
 
+def world_seed(scenario: Scenario, options: WorldOptions) -> int:
+    """The seed of the world's targets and sensing: options.seed, else the scenario's."""
+    return scenario.seed if options.seed is None else options.seed
+
+
+def make_scene(scenario: Scenario, options: WorldOptions) -> WorldScene:
+    """The world's scene, of the scenario's detection model (`tracking.factory.labelled`): the
+    paper's labelled target and its detections (`make_target_and_sensor`), or the targets of
+    `simulate`'s run for the world's seed and their unlabelled reports (`MultiTargetScene`; the
+    target options, a scripted path, the initial error and the reflection, are the labelled
+    target's)."""
+    if labelled(scenario):
+        return LabelledTargetScene(*make_target_and_sensor(scenario, options))
+    return MultiTargetScene(scenario, world_seed(scenario, options))
+
+
 def make_target_and_sensor(scenario: Scenario, options: WorldOptions) -> tuple[TargetModel, Sensor]:
     """The target and the sensor, each on its own random stream spawned (in this order) from the
-    world's seed (options.seed, else the scenario's)."""
-    seed = scenario.seed if options.seed is None else options.seed
+    world's seed (`world_seed`)."""
+    seed = world_seed(scenario, options)
     target_seq, sensing_seq = np.random.SeedSequence(seed).spawn(2)
     target = make_target(scenario, options, np.random.default_rng(target_seq), seed)
     sensor = Sensor(SensingModel.from_scenario(scenario), np.random.default_rng(sensing_seq))

@@ -1,5 +1,5 @@
-"""What the world publishes on the bus besides the detections: `truth` once per slot (`truth_set`
-on a multi-target mission) and `clock`.
+"""What the world publishes on the bus besides the detections: the scene's truth once per slot
+(`truth`, or `truth_set` on a multi-target mission: `sim.scenes`) and `clock`.
 
 `clock` goes out at every slot boundary, every 1 / clock_rate_hz simulation seconds on the grid
 k / clock_rate_hz (slot -1 before the mission starts), and repeated while the world holds in
@@ -12,9 +12,7 @@ from __future__ import annotations
 import math
 
 from isac_mission.bus import ZenohBus
-from isac_mission.model.detections import UavReport
 from isac_mission.timebase import UNPACED_SPEED, SlotTimeline, reached
-from isac_mission.types import FloatArray
 from isac_mission.wire import ClockMsg, Keys, TruthMsg, TruthSetMsg, encode
 
 
@@ -33,18 +31,8 @@ class WorldOutputs:
         self.next_clock_s = 0.0
         """Simulation time (s) at which the next periodic clock message is due."""
 
-    def publish_truth(self, n: int, t_s: float, x: FloatArray) -> None:
-        """The target's true state x [4] (m, m/s) at slot n, time t_s (s)."""
-        self._bus.publish(self._keys.truth, encode(TruthMsg(slot=n, t_s=t_s, target_x=x)))
-
-    def publish_truth_set(
-        self, n: int, t_s: float, states: FloatArray, reports: list[UavReport]
-    ) -> None:
-        """Every target's state [T, 4] (m, m/s; NaN rows: not in the scene) at slot n, time
-        t_s (s), with the origin of each measurement of the slot's `reports` [M] (none at slot
-        0, which has no reports)."""
-        origins = tuple(tuple(int(o) for o in r.origin) for r in reports)
-        msg = TruthSetMsg(slot=n, t_s=t_s, states=states, origins=origins)
+    def publish_truth(self, msg: TruthMsg | TruthSetMsg) -> None:
+        """The scene's truth of a slot (`sim.scenes.SceneSlot.truth`) on the truth key."""
         self._bus.publish(self._keys.truth, encode(msg))
 
     def clock_due(self, now_s: float) -> bool:

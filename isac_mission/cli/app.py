@@ -20,7 +20,7 @@ import typer
 from rich.console import Console
 from typer.core import TyperGroup
 
-from isac_mission.config import Scenario, load_scenario, single_target_problem
+from isac_mission.config import Scenario, load_scenario
 from isac_mission.errors import ConfigError
 
 console = Console()
@@ -205,11 +205,10 @@ PublicOpt = Annotated[
 ]
 
 
-def load_or_exit(path: Path, single_target_only: bool = False) -> Scenario:
+def load_or_exit(path: Path) -> Scenario:
     """Load a scenario or print its problem (one line; several problems one per line) and exit
-    with status 2; with `single_target_only`, a multi-target scenario is refused too
-    (`single_target_problem`). A deprecated section is one `deprecated:` line on stderr each
-    (the scenario still loads)."""
+    with status 2. A deprecated section is one `deprecated:` line on stderr each (the scenario
+    still loads)."""
     from rich.markup import escape
 
     with warnings.catch_warnings(record=True) as caught:
@@ -228,12 +227,6 @@ def load_or_exit(path: Path, single_target_only: bool = False) -> Scenario:
             )
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    problem = single_target_problem(s) if single_target_only else None
-    if problem is not None:
-        err_console.print(
-            f"[bold red]not supported yet:[/] {escape(f'{path}: {problem}')}", highlight=False
-        )
-        raise typer.Exit(2)
     return s
 
 

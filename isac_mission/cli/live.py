@@ -49,9 +49,9 @@ if TYPE_CHECKING:
 def resolved_method(method: str | None, s: Scenario, out_dir: Path, resume: bool) -> str:
     """--method if given; else, resuming, the method of the one trace in out_dir
     (trace_<method>.jsonl: `serve --resume` continues what was flown), else the live default
-    (`planning/multi_target.live_method`). ValueError when out_dir holds the traces of several
+    (`planning/tracks.live_method`). ValueError when out_dir holds the traces of several
     methods."""
-    from isac_mission.planning.multi_target import live_method
+    from isac_mission.planning.tracks import live_method
 
     if method is not None:
         return method
@@ -190,7 +190,7 @@ def _checked_options(command: LiveCommand, s: Scenario) -> tuple[LiveOptions, st
     if method not in METHODS:
         err_console.print(f"--method: unknown {method!r}; choose from {', '.join(METHODS)}")
         raise typer.Exit(2)
-    from isac_mission.planning.multi_target import method_problem
+    from isac_mission.planning.tracks import method_problem
 
     problem = method_problem(s, method)
     if problem is not None:
@@ -394,9 +394,9 @@ def compile_problems(
     from isac_mission.config.live_settings import LIVE_SETTINGS
     from isac_mission.nlp_cache import CompiledNlpCache
     from isac_mission.planning.fleet import prepare_fleet
-    from isac_mission.planning.multi_target import live_method
     from isac_mission.planning.registry import METHODS
     from isac_mission.planning.slot import SolverKit
+    from isac_mission.planning.tracks import live_method
     from isac_mission.tracking.factory import keep_out_tracks
 
     s = load_or_exit(config)

@@ -21,9 +21,9 @@ DEFAULT_METHODS = ("proposed", "sd", "aba", "crb", "horizon")
 
 def default_methods(s: Scenario) -> str:
     """`simulate`'s methods without --methods: those of DEFAULT_METHODS that can plan for the
-    scenario's tracks (planning/multi_target.method_problem: on a scenario of several targets, those
+    scenario's tracks (planning/tracks.method_problem: on a scenario of several targets, those
     the registry says plan for several, Registered.max_targets)."""
-    from isac_mission.planning.multi_target import method_problem
+    from isac_mission.planning.tracks import method_problem
 
     return ",".join(m for m in DEFAULT_METHODS if method_problem(s, m) is None)
 
@@ -108,8 +108,8 @@ def simulate(
 ) -> None:
     """Offline closed loop (Section II-C) for every method, Monte Carlo with common random numbers."""
     from isac_mission.experiment.report import simulate_report
-    from isac_mission.planning.multi_target import method_problem
     from isac_mission.planning.registry import METHODS
+    from isac_mission.planning.tracks import method_problem
 
     s = load_or_exit(config)
     if live_settings:
@@ -177,7 +177,7 @@ def replay(
     )
     from isac_mission.records import read_trace
 
-    s = load_or_exit(config, single_target_only=True)
+    s = load_or_exit(config)
     quiet_highs_banner()
     try:
         recorded = read_trace(trace)
@@ -194,7 +194,7 @@ def replay(
             f"{' (with the live settings)' if live else ''}:[/] " + "; ".join(diffs[live])
         )
         raise typer.Exit(1)
-    if not any(r.plan_start_xy is not None for r in recorded.slots):
+    if not any(line.line.get("plan_start_xy") is not None for line in recorded.lines):
         err_console.print(
             f"[bold red]{trace} records no planner inputs (plan_start_xy): written by an "
             "older isac-mission?[/]"

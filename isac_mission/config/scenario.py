@@ -262,13 +262,20 @@ class Scenario:
     def with_changes(self, **changes: Any) -> Scenario:
         """A copy with some fields replaced (no re-validation: for studies and tests). A new N
         keeps a target that was in the scene to the end in it to the new end (a longer mission
-        of paper.yaml is still its one plain target, not the multi-target path)."""
+        of paper.yaml is still its one plain target, not the multi-target path); a new x0 is
+        the first target's initial state, as `targets[0].x0` (the tracker's cue for it)."""
+        targets = changes.get("targets", self.targets)
         if "N" in changes and "targets" not in changes:
             n_slots = int(changes["N"])
-            changes["targets"] = tuple(
+            targets = tuple(
                 dataclasses.replace(t, last_slot=n_slots) if t.last_slot >= self.N else t
-                for t in self.targets
+                for t in targets
             )
+        if "x0" in changes and "targets" not in changes and targets:
+            x0 = tuple(float(v) for v in changes["x0"])
+            targets = (dataclasses.replace(targets[0], x0=x0), *targets[1:])  # type: ignore[arg-type]
+        if targets is not self.targets:
+            changes["targets"] = targets
         return replace(self, **changes)
 
     def trace_config(self) -> dict[str, Any]:

@@ -6,13 +6,13 @@ and the run's random numbers: the initial estimate errors, the process noise and
 measurement draws, scaled by each method's own noise standard deviations). The tracker and the
 scene come from `tracking/factory.py`: the paper's labelled target (the EKF and PCRB of
 `tracking/cycle.py`) or several targets' unlabelled reports (`tracking/multi_target.py`). The
-planner is the one the live service calls (`planning/multi_target.plan_tracks` over
+planner is the one the live service calls (`planning/tracks.plan_tracks` over
 `plan_slot`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,8 +24,8 @@ from isac_mission.model.run_noise import RunNoise
 from isac_mission.model.run_noise import draw_run_noise as draw_run_noise
 from isac_mission.model.scene import Scene
 from isac_mission.model.scene import true_trajectory as true_trajectory
-from isac_mission.planning.multi_target import plan_tracks
 from isac_mission.planning.slot import Method, SlotInput, SolverKit
+from isac_mission.planning.tracks import plan_tracks
 from isac_mission.tracking.factory import keep_out_tracks, scene_for, tracker_for
 from isac_mission.tracking.pcrb import Bound
 from isac_mission.tracking.tracker import SlotTracking, Tracker, TrackEstimate, TrackPrediction
@@ -113,6 +113,23 @@ class RunResult:
     assoc: IntArray
     fallback: list[str] = field(default_factory=list)
 
+    @classmethod
+    def of_outcomes(cls, method: str, seed: int, slots: Sequence[SlotOutcome]) -> RunResult:
+        """The per-slot arrays of a run's labelled track."""
+        return cls(
+            method=method,
+            seed=seed,
+            est=np.array([o.target_est for o in slots]),
+            true=np.array([o.target_true for o in slots]),
+            pcrb=np.array([o.bound.C for o in slots]),
+            solve_s=np.array([o.plan.report.solve_s for o in slots], dtype=float),
+            status=[o.plan.report.status for o in slots],
+            fallback=[o.plan.report.fallback for o in slots],
+            uav_xy=np.array([o.uav_xy for o in slots]),
+            eta=np.array([o.eta for o in slots]),
+            assoc=np.array([o.plan.bs_of_uav for o in slots], dtype=np.int64),
+        )
+
 
 def fly_offline(
     s: Scenario,
@@ -190,19 +207,7 @@ def run_closed_loop(
         raise ConfigError(f"{s.mission_id}: {problem}")
     scene = scene_for(s, noise, truth)
     slots = fly_offline(s, method, scene, tracker_for(s), kit, on_slot)
-    return RunResult(
-        method=method,
-        seed=noise.seed,
-        est=np.array([o.target_est for o in slots]),
-        true=np.array([o.target_true for o in slots]),
-        pcrb=np.array([o.bound.C for o in slots]),
-        solve_s=np.array([o.plan.report.solve_s for o in slots], dtype=float),
-        status=[o.plan.report.status for o in slots],
-        fallback=[o.plan.report.fallback for o in slots],
-        uav_xy=np.array([o.uav_xy for o in slots]),
-        eta=np.array([o.eta for o in slots]),
-        assoc=np.array([o.plan.bs_of_uav for o in slots], dtype=np.int64),
-    )
+    return RunResult.of_outcomes(method, noise.seed, slots)
 
 
 def record_slot_inputs(

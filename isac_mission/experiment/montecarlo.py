@@ -38,8 +38,8 @@ from isac_mission.experiment.runs import (
     outcome_record,
     trace_path,
 )
-from isac_mission.planning.multi_target import method_problem
 from isac_mission.planning.slot import Method
+from isac_mission.planning.tracks import method_problem
 from isac_mission.tracking.gospa import CUTOFF_M, mission_gospa
 
 __all__ = [
@@ -160,7 +160,7 @@ def run_monte_carlo(
     """Every method on runs 0..runs-1 (noise seed = seed + run); results per method by run.
 
     ConfigError, before any run, for a method that cannot plan for the scenario's tracks
-    (planning/multi_target.method_problem). progress(method, run) is called as each (method, run)
+    (planning/tracks.method_problem). progress(method, run) is called as each (method, run)
     finishes. workers > 1 runs them in separate processes (results are identical: each run's
     noise depends on its seed only).
     """

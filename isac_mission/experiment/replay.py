@@ -35,7 +35,9 @@ from isac_mission.planning.fleet import KitCache, PlanningJob, active_part
 from isac_mission.planning.registry import METHODS
 from isac_mission.planning.slot import Method, SolverKit
 from isac_mission.records import SlotRecord, Trace
+from isac_mission.records.tracks import TracksLine, resume_point
 from isac_mission.tracking.cycle import CycleModel, TrackState, predict
+from isac_mission.tracking.factory import keep_out_tracks, restored_tracker
 from isac_mission.tracking.pcrb import Bound
 from isac_mission.tracking.tracker import LABELLED_TRACK_ID, TrackPrediction
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
@@ -100,11 +102,15 @@ def _differences(want: dict[str, Any], mine: dict[str, Any], prefix: str) -> lis
 
 
 def _same(a: Any, b: Any) -> bool:
-    if isinstance(a, (int, float, list)) and isinstance(b, (int, float, list)):
-        try:
-            return bool(np.allclose(np.asarray(a, float), np.asarray(b, float), rtol=1e-9))
-        except ValueError:  # shapes differ
-            return False
+    """Equal as the trace holds them: numbers as np.isclose (1e-9 relative), lists (tuples) and mappings
+    entry by entry."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    numbers = (int, float)
+    if isinstance(a, numbers) and isinstance(b, numbers) and not isinstance(a, bool):
+        return bool(np.isclose(float(a), float(b), rtol=1e-9))
     return bool(a == b)
 
 
@@ -119,117 +125,177 @@ def replay_trace(
     trace: Trace, s: Scenario, slots: Sequence[int] | None = None, kit: SolverKit | None = None
 ) -> list[ReplayedSlot]:
     """Replay `trace` (its method) on the planning scenario `s`, slot by slot (all slots with a
-    recorded start, or those listed in `slots`). ValueError when `s` is not the scenario the
-    trace was planned with (config_differences) or the trace records no planner inputs."""
+    recorded start, or those listed in `slots`), for any number of targets: the labelled
+    target's prediction from the previous line's estimate and bound, a tracker of several
+    tracks restored from the previous line's `tracker` (docs/trace.md; a trace without it, an
+    offline one, has no slot to replay). ValueError when `s` is not the scenario the trace was
+    planned with (config_differences) or the trace records no planner inputs."""
     diff = config_differences(trace.config, s)
     if diff:
         raise ValueError(
             "the scenario is not the one the trace was planned with: " + "; ".join(diff)
         )
     method = _method(trace)
-    kits = KitCache(kit if kit is not None else SolverKit(s), method)
+    keep_out = keep_out_tracks(s)
+    kits = KitCache(kit if kit is not None else SolverKit(s, n_keep_out=keep_out), method, keep_out)
     model = CycleModel.from_scenario(s)
     wanted = None if slots is None else set(slots)
     records = {r.slot: r for r in trace.slots}
+    lines = {line.slot: line for line in trace.lines}
     out: list[ReplayedSlot] = []
     replayed: dict[int, tuple[tuple[int, ...], SlotPlan]] = {}
-    for rec in trace.slots:
-        if rec.plan_start_xy is None or rec.plan_xy is None:
+    for line in trace.lines:
+        raw = _fields(line, records)
+        if raw.get("plan_start_xy") is None or raw.get("plan_xy") is None:
             continue
-        prev = records.get(rec.slot - 1)
-        if rec.slot > 1 and prev is None:
+        prev = lines.get(line.slot - 1)
+        if line.slot > 1 and prev is None:
             continue  # the trace starts later (a resume): no previous belief to start from
-        job = _live_job(rec, prev, s, model, kits, method, replayed)
-        plan = job.run()
-        replayed[rec.slot] = (job.active, plan)
-        if wanted is not None and rec.slot not in wanted:
+        predictions = _predictions(line, prev, records, s, model)
+        if predictions is None:
             continue
-        start_xy, start_v = _offline_start(prev, s)
+        job = _live_job(line, prev, records, s, kits, method, predictions, replayed)
+        plan = job.run()
+        replayed[line.slot] = (job.active, plan)
+        if wanted is not None and line.slot not in wanted:
+            continue
+        start_xy, start_v = _offline_start(prev, records, s)
         offline = replace(job, uav_xy=start_xy, uav_v=start_v).run()
-        x_pred = job.targets[0].state_pred
-        start_v_live = (
-            np.zeros((s.M, 2)) if rec.plan_start_velocity is None else rec.plan_start_velocity
-        )
+        rec = records.get(line.slot)
+        gap = float("nan")  # a line of tracks records no prediction
+        if rec is not None:
+            gap = float(np.max(np.abs(np.asarray(rec.target_pred) - job.targets[0].state_pred)))
+        plan_xy = _array(raw, "plan_xy")
+        start_v_live = _array(raw, "plan_start_velocity", np.zeros((s.M, 2)))
         out.append(
             ReplayedSlot(
-                slot=rec.slot,
-                status=rec.status,
-                start_gap_m=_norms(rec.plan_start_xy - start_xy),
+                slot=line.slot,
+                status=line.status,
+                start_gap_m=_norms(_array(raw, "plan_start_xy") - start_xy),
                 start_velocity_gap_mps=_norms(start_v_live - start_v),
-                prediction_gap=float(np.max(np.abs(np.asarray(rec.target_pred) - x_pred))),
-                replay_gap_m=_norms(plan.uav_xy_m - rec.plan_xy),
-                planned_step_m=_norms(rec.plan_xy - start_xy),
+                prediction_gap=gap,
+                replay_gap_m=_norms(plan.uav_xy_m - plan_xy),
+                planned_step_m=_norms(plan_xy - start_xy),
                 offline_step_m=_norms(offline.uav_xy_m - start_xy),
-                fallback=rec.fallback or "",
+                fallback=line.fallback,
                 replay_fallback=plan.report.fallback,
             )
         )
     return out
 
 
+def _fields(line: TracksLine, records: dict[int, SlotRecord]) -> dict[str, Any]:
+    """A slot line's fields: its SlotRecord's for the labelled target, else the line as read."""
+    rec = records.get(line.slot)
+    return line.line if rec is None else rec.to_dict()
+
+
+def _array(raw: dict[str, Any], key: str, default: FloatArray | None = None) -> FloatArray:
+    """A line's array field (null entries NaN); `default` when absent or null."""
+    value = raw.get(key)
+    if value is None:
+        if default is None:
+            raise ValueError(f"the line has no {key}")
+        return default
+    return np.array([[np.nan if v is None else v for v in row] for row in value], dtype=float)
+
+
 def _norms(d: FloatArray) -> FloatArray:
     return np.asarray(np.linalg.norm(np.asarray(d, dtype=float), axis=-1))
 
 
-def _live_job(
-    rec: SlotRecord,
-    prev: SlotRecord | None,
+def _predictions(
+    line: TracksLine,
+    prev: TracksLine | None,
+    records: dict[int, SlotRecord],
     s: Scenario,
     model: CycleModel,
+) -> tuple[TrackPrediction, ...] | None:
+    """The tracks slot line.slot was planned for, as the ground loop predicted them: the
+    labelled target's from the previous line's estimate and bound (slot 1: the initial estimate
+    whose prediction is the recorded one); a tracker of several tracks restored from the
+    previous line (None: the line does not carry the tracker, or slot 1, whose initial
+    estimates are not traced)."""
+    rec = records.get(line.slot)
+    if rec is not None:
+        before = None if prev is None else records.get(prev.slot)
+        if before is None:
+            # The initial estimate is not traced (offline it is x0 plus the run's drawn error):
+            # the one whose prediction is slot 1's target_pred, with the scenario's P0.
+            x_init = np.linalg.solve(model.F, np.asarray(rec.target_pred, dtype=float))
+            belief, bound = Gaussian(x_init, s.P0.copy()), Bound.from_covariance(s.P0.copy())
+        else:
+            belief = Gaussian(np.asarray(before.target_est), np.asarray(before.P))
+            bound = Bound.from_information(np.asarray(before.J))
+        predicted = predict(model, TrackState(belief, bound))
+        return (TrackPrediction(LABELLED_TRACK_ID, True, predicted.prediction, predicted.prior),)
+    if prev is None or "tracker" not in prev.line:
+        return None
+    tracker = restored_tracker(s, resume_point(prev.line).tracker)
+    for spec in s.targets:  # a known target entering after the previous slot (at its cue)
+        if spec.prior_known and spec.first_slot == prev.slot:
+            tracker.add_confirmed(Gaussian(np.array(spec.x0, dtype=float), s.P0.copy()))
+    return tracker.predict()
+
+
+def _live_job(
+    line: TracksLine,
+    prev: TracksLine | None,
+    records: dict[int, SlotRecord],
+    s: Scenario,
     kits: KitCache,
     method: Method,
+    predictions: tuple[TrackPrediction, ...],
     replayed: dict[int, tuple[tuple[int, ...], SlotPlan]],
 ) -> PlanningJob:
-    """The planning job of slot rec.slot as the ground loop built it (mission.next_job)."""
+    """The planning job of slot line.slot as the ground loop built it (mission.next_job): the
+    recorded start, the previous plan's shares and BSs, the vehicles it planned around."""
+    raw = _fields(line, records)
     if prev is None:
-        # The initial estimate is not traced (offline it is x0 plus the run's drawn error): the
-        # one whose prediction is slot 1's target_pred, with the scenario's P0.
-        x_init = np.linalg.solve(model.F, np.asarray(rec.target_pred, dtype=float))
-        belief, bound = Gaussian(x_init, s.P0.copy()), Bound.from_covariance(s.P0.copy())
         eta, assoc = np.full(s.M, 1.0 / s.M), None
     else:
-        belief = Gaussian(np.asarray(prev.target_est), np.asarray(prev.P))
-        bound = Bound.from_information(np.asarray(prev.J))
-        eta, assoc = (
-            np.asarray(prev.bandwidth_share, dtype=float),
-            np.asarray(prev.assoc, dtype=np.int64),
-        )
-    predicted = predict(model, TrackState(belief, bound))
-    excluded = tuple(sorted(int(m) for m in rec.extra.get("planned_around", [])))
+        before = _fields(prev, records)
+        shares = before.get("plan_eta") if "tracker" in before else None
+        eta = np.asarray(before["eta"] if shares is None else shares, dtype=float)
+        assoc = np.asarray([-1 if a is None else a for a in before["assoc"]], dtype=np.int64)
+    excluded = tuple(sorted(int(m) for m in raw.get("planned_around", [])))
     active = tuple(m for m in range(s.M) if m not in excluded)
     prev_plan = None
-    last = replayed.get(rec.slot - 1)
+    last = replayed.get(line.slot - 1)
     if last is not None and last[0] == active:
         prev_plan = active_part(last[1], active)
     return PlanningJob(
-        slot=rec.slot,
+        slot=line.slot,
         method=method,
         kits=kits,
-        uav_xy=np.asarray(rec.plan_start_xy, dtype=float),
-        uav_v=None if rec.plan_start_velocity is None else np.asarray(rec.plan_start_velocity),
+        uav_xy=_array(raw, "plan_start_xy"),
+        uav_v=None
+        if raw.get("plan_start_velocity") is None
+        else _array(raw, "plan_start_velocity"),
         prev_eta=eta,
         prev_assoc=assoc,
-        predictions=(
-            TrackPrediction(LABELLED_TRACK_ID, True, predicted.prediction, predicted.prior),
-        ),
+        predictions=predictions,
         excluded=excluded,
         prev_plan=prev_plan,
     )
 
 
-def _offline_start(prev: SlotRecord | None, s: Scenario) -> tuple[FloatArray, FloatArray]:
+def _offline_start(
+    prev: TracksLine | None, records: dict[int, SlotRecord], s: Scenario
+) -> tuple[FloatArray, FloatArray]:
     """Where the offline loop starts slot n: the previous plan's waypoint [M, 2] and end
     velocity [M, 2] (the mean leg velocity with the paper's kinematics); the start points at
     rest at slot 1, and the measured positions after a slot without a plan of the loop."""
     if prev is None:
         return np.array(s.uav_start_xy, dtype=float), np.zeros((s.M, 2))
-    if prev.plan_xy is None:
-        return np.array(prev.uav_xy_m, dtype=float), np.zeros((s.M, 2))
-    xy = np.array(prev.plan_xy, dtype=float)
-    if prev.plan_velocity is not None:
-        return xy, np.array(prev.plan_velocity, dtype=float)
-    start = prev.plan_start_xy if prev.plan_start_xy is not None else xy
-    return xy, (xy - np.asarray(start)) / s.dt
+    raw = _fields(prev, records)
+    if raw.get("plan_xy") is None:
+        return np.array(prev.uav_xy, dtype=float), np.zeros((s.M, 2))
+    xy = _array(raw, "plan_xy")
+    if raw.get("plan_velocity") is not None:
+        return xy, _array(raw, "plan_velocity")
+    start = _array(raw, "plan_start_xy", xy)
+    return xy, (xy - start) / s.dt
 
 
 @dataclass(frozen=True)

@@ -67,19 +67,7 @@ def has_labelled_track(outcomes: Sequence[SlotOutcome]) -> bool:
 
 def labelled_result(method: str, seed: int, outcomes: Sequence[SlotOutcome]) -> RunResult:
     """The per-slot arrays of a run's labelled track (as `closed_loop.run_closed_loop` gives)."""
-    return RunResult(
-        method=method,
-        seed=seed,
-        est=np.array([o.target_est for o in outcomes]),
-        true=np.array([o.target_true for o in outcomes]),
-        pcrb=np.array([o.bound.C for o in outcomes]),
-        solve_s=np.array([o.plan.report.solve_s for o in outcomes], dtype=float),
-        status=[o.plan.report.status for o in outcomes],
-        fallback=[o.plan.report.fallback for o in outcomes],
-        uav_xy=np.array([o.uav_xy for o in outcomes]),
-        eta=np.array([o.eta for o in outcomes]),
-        assoc=np.array([o.plan.bs_of_uav for o in outcomes], dtype=np.int64),
-    )
+    return RunResult.of_outcomes(method, seed, outcomes)
 
 
 def outcome_record(o: SlotOutcome) -> SlotRecord:
@@ -152,38 +140,51 @@ def write_trace(path: Path, config: dict[str, Any], outcomes: Sequence[SlotOutco
             writer.write_slot(outcome_record(o) if labelled else tracks_slot(o))
 
 
+def scenario_kit(s: Scenario) -> SolverKit:
+    """A new SolverKit of the scenario (building one compiles the cvxpy problems), with the
+    keep-out points its tracker needs (`factory.keep_out_tracks`); its IPOPT problems compiled
+    where the cache has them (isac_mission/nlp_cache.py: the same numbers, faster;
+    `isac-mission compile CONFIG --scenario-settings` fills it)."""
+    return SolverKit(s, n_keep_out=keep_out_tracks(s), ipopt=CompiledNlpCache(compile="never"))
+
+
 _KITS: dict[int, SolverKit] = {}
 
 
 def kit_for(s: Scenario) -> SolverKit:
-    """One SolverKit per scenario per process (building one compiles the cvxpy problems), with
-    the keep-out points its tracker needs (`factory.keep_out_tracks`); its IPOPT problems
-    compiled where the cache has them (isac_mission/nlp_cache.py: the same numbers, faster;
-    `isac-mission compile CONFIG --scenario-settings` fills it)."""
+    """One `scenario_kit` per scenario per process (the last scenario's kept)."""
     key = id(s)
     if key not in _KITS:
         _KITS.clear()
-        _KITS[key] = SolverKit(
-            s, n_keep_out=keep_out_tracks(s), ipopt=CompiledNlpCache(compile="never")
-        )
+        _KITS[key] = scenario_kit(s)
     return _KITS[key]
+
+
+def fly_outcomes(s: Scenario, method: Method, seed: int, kit: SolverKit) -> tuple[SlotOutcome, ...]:
+    """One mission of `method` (`closed_loop.fly_offline`) in the scenario's scene drawn from
+    noise seed `seed` (`factory.draw_noise`, `scene_for`), tracked by a new tracker of the
+    scenario (`factory.tracker_for`); `kit` as `scenario_kit` builds it."""
+    scene = scene_for(s, draw_noise(s, seed))
+    return fly_offline(s, method, scene, tracker_for(s), kit)
+
+
+def mission_run(s: Scenario, method: str, seed: int, outcomes: Sequence[SlotOutcome]) -> MissionRun:
+    """What a run flown with noise seed `seed` measured (`MissionRun`): its tracks' figures
+    (the scenario's GOSPA cut-off), and its labelled track's arrays when it had one
+    (`has_labelled_track`)."""
+    return MissionRun(
+        method=method,
+        seed=seed,
+        solve_s=np.array([o.plan.report.solve_s for o in outcomes], dtype=float),
+        tracking=track_figures([tracks_slot(o) for o in outcomes], s.multi_tracker.gospa_cutoff_m),
+        labelled=labelled_result(method, seed, outcomes) if has_labelled_track(outcomes) else None,
+    )
 
 
 def fly_run(s: Scenario, method: Method, run: int, seed: int, trace_dir: Path | None) -> MissionRun:
     """Run `run` of `method` (noise seed = seed + run), traced under trace_dir when given."""
-    kit = kit_for(s)
-    noise = draw_noise(s, seed + run)
-    scene = scene_for(s, noise)
-    outcomes = fly_offline(s, method, scene, tracker_for(s), kit)
+    outcomes = fly_outcomes(s, method, seed + run, kit_for(s))
     if trace_dir is not None:
         config = s.trace_config() | {"seed": seed + run, "method": method}
         write_trace(trace_path(trace_dir, method, run), config, outcomes)
-    return MissionRun(
-        method=method,
-        seed=noise.seed,
-        solve_s=np.array([o.plan.report.solve_s for o in outcomes], dtype=float),
-        tracking=track_figures([tracks_slot(o) for o in outcomes], s.multi_tracker.gospa_cutoff_m),
-        labelled=(
-            labelled_result(method, noise.seed, outcomes) if has_labelled_track(outcomes) else None
-        ),
-    )
+    return mission_run(s, method, seed + run, outcomes)

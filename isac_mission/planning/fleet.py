@@ -21,10 +21,10 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.planning.fallback import NO_BS, OPERATOR_HOLD, hold_plan
-from isac_mission.planning.multi_target import Planner as Planner
-from isac_mission.planning.multi_target import TracksPlan, plan_tracks
 from isac_mission.planning.registry import planner
 from isac_mission.planning.slot import Method, SolverKit, plan_slot
+from isac_mission.planning.tracks import Planner as Planner
+from isac_mission.planning.tracks import TracksPlan, plan_tracks
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, HorizonPlan, IntArray, SlotPlan
@@ -50,7 +50,7 @@ class KitCache:
     ) -> None:
         """method: what the kits are warmed up for (the mission's planning method);
         base_keep_out: the keep-out points every kit has besides the excluded vehicles (the
-        full kit's own: the other tracks of a multi-target mission, planning/multi_target.py)."""
+        full kit's own: the other tracks of a multi-target mission, planning/tracks.py)."""
         self.full = full
         self.method: Method = method
         self.base_keep_out = base_keep_out
@@ -149,7 +149,7 @@ class PlanningJob:
         return self.run_tracks(planner).plan
 
     def run_tracks(self, planner: Planner = plan_slot) -> TracksPlan:
-        """Plan the active vehicles for the tracks (planning/multi_target.plan_tracks) and widen
+        """Plan the active vehicles for the tracks (planning/tracks.plan_tracks) and widen
         the plan to all of them (see the module doc)."""
         active = self.active
         if not active:

@@ -19,8 +19,8 @@ from isac_mission.records.slot import (
     OPTIONAL_KEYS,
     MissionEnd,
     SlotRecord,
-    Trace,
 )
+from isac_mission.records.trace import Trace
 from isac_mission.records.writer import TraceWriter
 
 __all__ = [

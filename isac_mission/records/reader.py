@@ -17,7 +17,8 @@ from typing import Any
 from isac_mission.errors import MessageError
 from isac_mission.records.header import parse_header
 from isac_mission.records.jsonlines import loads_line
-from isac_mission.records.slot import CONTRACT_KEYS, MissionEnd, SlotRecord, Trace, check_sequence
+from isac_mission.records.slot import CONTRACT_KEYS, MissionEnd, SlotRecord, check_sequence
+from isac_mission.records.trace import Trace
 from isac_mission.records.tracks import TracksLine
 
 

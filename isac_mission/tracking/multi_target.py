@@ -195,6 +195,8 @@ class MultiTargetTracker:
     """Tracks from unlabelled reports: `add_confirmed` for a target whose prior is known, then
     `predict` and `update` each slot."""
 
+    labels_reports = False
+
     def __init__(self, settings: TrackerSettings) -> None:
         self.settings = settings
         self._tracks: list[_Track] = []

@@ -91,6 +91,13 @@ class Tracker(Protocol):
     """A tracker of any number of targets: `add_confirmed` for a target whose prior is known,
     then `predict` and `update` each slot."""
 
+    @property
+    def labels_reports(self) -> bool:
+        """True when every UAV's report is of the one target, labelled (the paper's detection
+        model): the tracker holds one track, and its slot carries the labelled target's fields
+        (docs/trace.md) and goes out as a `track` (docs/bus.md)."""
+        ...
+
     def add_confirmed(self, belief: Gaussian) -> int:
         """Start a confirmed track from a known prior (x [4], P [4, 4]; its bound from the same
         covariance); returns its ID."""
@@ -147,6 +154,8 @@ def labelled_reports(z: FloatArray) -> tuple[FloatArray, ...]:
 class LabelledTracker:
     """The paper's tracker of one target whose detections are labelled (tracking/cycle.py: the
     EKF and the PCRB, the same numbers): one track, ID 1, confirmed from its prior."""
+
+    labels_reports = True
 
     def __init__(self, model: CycleModel, state: TrackState | None = None) -> None:
         self.model = model

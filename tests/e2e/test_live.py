@@ -25,6 +25,7 @@ from isac_mission.cli.embedded import run_embedded
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo
 from isac_mission.experiment.replay import replay_trace, summarize_replay
+from isac_mission.experiment.runs import labelled_arrays
 from isac_mission.planning.slot import METHODS
 from isac_mission.records import Trace, read_trace
 from isac_mission.service.assembly import LiveOptions, planning_scenario
@@ -184,7 +185,7 @@ async def test_live_location_rmse_is_close_to_simulate_over_five_seeds(
 
     def offline_mse(s: Scenario) -> np.ndarray:
         runs = run_monte_carlo(s, ["proposed"], len(seeds), seed=1)["proposed"]
-        err = np.array([r.est - r.true for r in runs])
+        err = np.array([labelled_arrays(r).est - labelled_arrays(r).true for r in runs])
         return np.mean(np.sum(err[..., :2] ** 2, axis=-1), axis=-1)
 
     # The offline twin plans as the live service does (margins, vehicle acceleration).

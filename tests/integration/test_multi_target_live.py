@@ -18,7 +18,7 @@ from scipy.stats import chi2
 from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.config import load_scenario
-from isac_mission.experiment.multi_target_metrics import follow
+from isac_mission.experiment.track_metrics import follow
 from isac_mission.records.header import TRACE_FORMAT
 from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.assembly import LiveOptions

@@ -1,6 +1,6 @@
 """Initiation of a far target from recorded slots of `multi-target.yaml` (slot 20, when the
 entering target appears 1-3 km from every UAV and most of the band is on a tracked target: its
-ranges are coarse, 100-850 m). Recorded with `run_multi_target(..., "proposed", seed)`; numbers
+ranges are coarse, 100-850 m). Recorded with `runs.fly_outcomes(..., "proposed", seed, ...)`; numbers
 rounded to the millimetre."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""The multi-target closed loop (experiment/multi_target_loop.py), its planning objective and its
-metrics (experiment/multi_target_metrics.py), each against an independent computation:
+"""The offline loop on several targets (experiment/runs.py), its planning objective and its
+metrics (experiment/track_metrics.py), each against an independent computation:
 
 - the summed objective against its parts and its gradients against finite differences, and a
   slot problem given other targets minimising the sum of every target's bound;
@@ -24,21 +24,17 @@ from rich.console import Console
 
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.errors import ConfigError
-from isac_mission.experiment.multi_target_loop import (
-    MultiTargetRun,
-    TracksSlot,
-    run_multi_target,
-)
-from isac_mission.experiment.multi_target_metrics import follow, run_figures
+from isac_mission.experiment.montecarlo import run_monte_carlo
 from isac_mission.experiment.report import simulate_report
+from isac_mission.experiment.runs import fly_outcomes, tracks_slot
+from isac_mission.experiment.track_metrics import follow, track_figures
 from isac_mission.model.detections import CLUTTER, UavReport
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.radar import SensingParams
-from isac_mission.model.run_noise import draw_multi_target_noise
-from isac_mission.model.targets import TargetPaths
-from isac_mission.planning.multi_target import multi_target_kit
 from isac_mission.planning.problem import SlotInput, build_slot_problem
+from isac_mission.planning.tracks import multi_target_kit
 from isac_mission.records.header import TRACE_FORMAT
+from isac_mission.records.tracks import TracksSlot
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.gospa import UNASSIGNED, gospa
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, SumObjective, predict_information
@@ -114,21 +110,21 @@ def test_a_slot_problem_with_other_targets_minimises_their_sum(scenario: Scenari
 
 
 @pytest.fixture(scope="module")
-def mission(scenario: Scenario) -> MultiTargetRun:
+def mission(scenario: Scenario) -> tuple[TracksSlot, ...]:
     s = scenario.with_changes(N=36)
-    return run_multi_target(s, "proposed", draw_multi_target_noise(s, 1), multi_target_kit(s))
+    return tuple(tracks_slot(o) for o in fly_outcomes(s, "proposed", 1, multi_target_kit(s)))
 
 
 def test_a_mission_follows_every_target_and_keeps_its_distance(
-    scenario: Scenario, mission: MultiTargetRun
+    scenario: Scenario, mission: tuple[TracksSlot, ...]
 ) -> None:
-    figures = run_figures(mission, scenario.multi_tracker.gospa_cutoff_m)
+    figures = track_figures(mission, scenario.multi_tracker.gospa_cutoff_m)
     for t, target in enumerate(figures.targets):
         assert target.seen_slot > 0, t
         assert target.confirmation_delay is not None and target.confirmation_delay <= 6, t
         assert target.id_switches == 0, t
     assert figures.targets[0].confirmed_slot == 1  # known from the start
-    for slot in mission.slots:
+    for slot in mission:
         truth = slot.truth[np.all(np.isfinite(slot.truth), axis=1)]
         distance = np.linalg.norm(slot.uav_xy_m[:, None] - truth[None, :, :2], axis=2)
         assert distance.min() >= scenario.d_safe, slot.slot
@@ -138,9 +134,7 @@ def test_a_mission_follows_every_target_and_keeps_its_distance(
 
 def test_a_single_target_planner_is_refused_by_name(scenario: Scenario) -> None:
     with pytest.raises(ConfigError, match=r"horizon.*plans for one target"):
-        run_multi_target(
-            scenario, "horizon", draw_multi_target_noise(scenario, 1), multi_target_kit(scenario)
-        )
+        run_monte_carlo(scenario, ["horizon"], 1, 1)
 
 
 def _track(track_id: int, xy: tuple[float, float], std_m: float = 1.0) -> TrackEstimate:
@@ -184,9 +178,7 @@ def test_the_metrics_of_a_hand_made_run() -> None:
                 0,
             )
         )
-    states = np.repeat(truth[None], 5, axis=0)
-    run = MultiTargetRun("sd", 1, TargetPaths(states, np.ones((5, 2), dtype=bool)), tuple(slots))
-    f = run_figures(run, 10.0)
+    f = track_figures(slots, 10.0)
     for n, slot in enumerate(slots):
         xy = np.array([t.belief.x[:2] for t in slot.tracks])
         assert f.gospa_m[n] == pytest.approx(gospa(truth[:, :2], xy, c=10.0).distance)

@@ -10,9 +10,9 @@ import pytest
 
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.errors import ConfigError
-from isac_mission.experiment.multi_target_loop import run_multi_target
+from isac_mission.experiment.runs import fly_outcomes, tracks_slot
 from isac_mission.model.run_noise import draw_multi_target_noise
-from isac_mission.planning.multi_target import (
+from isac_mission.planning.tracks import (
     KEEP_OUT_CAPACITY,
     multi_target_kit,
     plan_tracks,
@@ -74,9 +74,7 @@ def test_the_live_mission_state_fed_the_worlds_reports_is_simulates_run(
     scenario: Scenario,
 ) -> None:
     s = scenario
-    offline = run_multi_target(
-        s, "proposed", draw_multi_target_noise(s, SEED), multi_target_kit(s)
-    ).slots
+    offline = [tracks_slot(o) for o in fly_outcomes(s, "proposed", SEED, multi_target_kit(s))]
     live = _fly_the_mission_state(s)
     assert len(live) == len(offline) == SLOTS
     for a, b in zip(live, offline, strict=True):

@@ -17,7 +17,7 @@ import pytest
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.errors import MessageError
 from isac_mission.model.run_noise import draw_multi_target_noise
-from isac_mission.planning.multi_target import multi_target_kit
+from isac_mission.planning.tracks import multi_target_kit
 from isac_mission.records.jsonlines import loads_line
 from isac_mission.records.tracks import (
     ResumePoint,

@@ -21,8 +21,8 @@ import pytest
 import yaml
 
 from isac_mission.bus import tcp_loopback
-from isac_mission.experiment.multi_target_metrics import follow
 from isac_mission.experiment.plots import read_tracks_trace
+from isac_mission.experiment.track_metrics import follow
 from isac_mission.records.header import TRACE_FORMAT
 from isac_mission.records.progress import TraceProgress, trace_progress
 from isac_mission.tracking.gospa import UNASSIGNED
@@ -65,7 +65,7 @@ def _strict_json_lines(path: Path) -> list[dict[str, Any]]:
 
 def _followed(line: dict[str, Any]) -> dict[int, int]:
     """Target index -> the ID of the confirmed track following it in a slot line (the metrics'
-    rule, experiment/multi_target_metrics.py `follow`)."""
+    rule, experiment/track_metrics.py `follow`)."""
     confirmed = [
         TrackEstimate(
             t["id"],

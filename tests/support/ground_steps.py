@@ -8,8 +8,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from isac_mission.planning.multi_target import TracksPlan
 from isac_mission.planning.slot import Method
+from isac_mission.planning.tracks import TracksPlan
 from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.ground.mission import ArrivedReport, ArrivedTruth, MissionState
 from isac_mission.service.ground.tracefile import track_set_slot

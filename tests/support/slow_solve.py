@@ -40,15 +40,15 @@ def long_native_solve(wall_s: float) -> None:
 def main(argv: list[str]) -> None:
     every = argv[0] == "every"
     slow_slot, solve_s, cli_args = -1 if every else int(argv[0]), float(argv[1]), argv[2:]
-    original = fleet_plan.PlanningJob.run
+    original = fleet_plan.PlanningJob.run_tracks
 
-    def run(self: fleet_plan.PlanningJob, *args: Any, **kwargs: Any) -> Any:
+    def run_tracks(self: fleet_plan.PlanningJob, *args: Any, **kwargs: Any) -> Any:
         if every or self.slot == slow_slot:
             print("slow solve started", file=sys.stderr, flush=True)
             long_native_solve(solve_s)
         return original(self, *args, **kwargs)
 
-    fleet_plan.PlanningJob.run = run  # type: ignore[method-assign]
+    fleet_plan.PlanningJob.run_tracks = run_tracks  # type: ignore[method-assign]
     from isac_mission.cli import app
 
     sys.argv = ["isac-mission", *cli_args]

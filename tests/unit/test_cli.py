@@ -82,7 +82,7 @@ def test_run_and_serve_fly_the_horizon_by_default_and_resume_what_was_flown(
     from isac_mission.cli.live import resolved_method
     from isac_mission.config import load_scenario
     from isac_mission.errors import ConfigError
-    from isac_mission.planning.multi_target import check_multi_target_method
+    from isac_mission.planning.tracks import check_multi_target_method
 
     paper, multi = load_scenario("paper"), load_scenario("multi-target")
     assert not paper.multi_target and multi.multi_target

@@ -1,4 +1,5 @@
-"""sim/emulator.py without a network: shares follow the plans; bad plans are counted and ignored."""
+"""sim/emulator.py without a network: shares follow the plans, each report goes out on its UAV's
+key; bad plans are counted and ignored."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 
 from isac_mission.config import parse_scenario
 from isac_mission.types import SlotPlan, SolveReport
-from isac_mission.wire import DetectionMsg, Keys, PlanMsg, decode, encode
+from isac_mission.wire import DetectionMsg, Keys, PlanMsg, decode, detection_messages, encode
 from sim.emulator import SensingEmulator
 from sim.sensing import SensingModel, Sensor
 
@@ -36,15 +37,21 @@ def _plan(slot: int, shares: list[float]) -> bytes:
 def _emulator() -> tuple[SensingEmulator, FakeBus]:
     s = parse_scenario({})
     bus = FakeBus()
-    sensor = Sensor(SensingModel.from_scenario(s), np.random.default_rng(0))
-    return SensingEmulator(bus, Keys("t"), sensor, 3, n_bs=s.K), bus
+    return SensingEmulator(bus, Keys("t"), 3, n_bs=s.K), bus
+
+
+def _run_slot(em: SensingEmulator, n: int, t_s: float) -> None:
+    """Slot n as the world runs it: detections drawn with the shares in use, then published."""
+    sensor = Sensor(SensingModel.from_scenario(parse_scenario({})), np.random.default_rng(n))
+    target = np.array([1500.0, 1500.0, 30.0, 0.0])
+    uav_xy = np.array([[1500.0, 2300.0], [807.0, 1100.0], [2193.0, 1100.0]])
+    eta = em.shares_for(n)
+    em.publish_reports(n, detection_messages(sensor.sense(n, target, uav_xy, eta), t_s, eta))
 
 
 def test_equal_shares_until_a_plan_then_the_latest_plan_not_after_the_slot() -> None:
     em, bus = _emulator()
-    target = np.array([1500.0, 1500.0, 30.0, 0.0])
-    uav_xy = np.array([[1500.0, 2300.0], [807.0, 1100.0], [2193.0, 1100.0]])
-    em.emit(0, 0.0, target, uav_xy)
+    _run_slot(em, 0, 0.0)
     assert len(bus.sent) == 3
     keys = [k for k, _ in bus.sent]
     assert keys == ["isac/t/detections/0", "isac/t/detections/1", "isac/t/detections/2"]
@@ -55,7 +62,7 @@ def test_equal_shares_until_a_plan_then_the_latest_plan_not_after_the_slot() -> 
     np.testing.assert_array_equal(em.shares_for(2), [0.5, 0.3, 0.2])
     np.testing.assert_array_equal(em.shares_for(3), [0.2, 0.2, 0.6])
     bus.sent.clear()
-    em.emit(2, 2.0, target, uav_xy)
+    _run_slot(em, 2, 2.0)
     assert [decode(DetectionMsg, p).bandwidth_share for _, p in bus.sent] == [0.5, 0.3, 0.2]
     assert em.detections_published == 6 and em.plans_received == 2
 

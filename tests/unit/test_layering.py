@@ -35,6 +35,8 @@ PURE = (
     "sim/vehicle.py",
     "sim/target.py",
     "sim/sensing.py",
+    "sim/scenes.py",
+    "sim/multi_target_scene.py",
     "sim/impairment.py",
 )
 """Pure modules and packages: numbers in, numbers out (numpy, scipy, cvxpy, filterpy ...)."""

@@ -16,8 +16,8 @@ import pytest
 
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.planning import fleet
-from isac_mission.planning import multi_target as mt_planning
-from isac_mission.planning.multi_target import multi_target_kit
+from isac_mission.planning import tracks as mt_planning
+from isac_mission.planning.tracks import multi_target_kit
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.tracking.tracker import TrackPrediction

@@ -19,7 +19,7 @@ from isac_mission.cli import app
 from isac_mission.cli.live import resume_problem
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.errors import ConfigError
-from isac_mission.planning.multi_target import multi_target_kit
+from isac_mission.planning.tracks import multi_target_kit
 from isac_mission.records import MissionEnd
 from isac_mission.records.header import header_line
 from isac_mission.records.jsonlines import dumps_line, loads_line, to_jsonable

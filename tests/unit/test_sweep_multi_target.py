@@ -1,6 +1,6 @@
 """`sweep` on a scenario of several targets: a serial sweep of a shortened config/multi-target.yaml
 writes the multi-target columns, each equal to an independent recomputation of `simulate`'s run
-(`run_multi_target` + `multi_target_metrics`) with the same seed; a method that plans one target
+(experiment/runs.py `fly_run`) with the same seed; a method that plans one target
 is refused before any work; the CSV's columns and the plots on hand-made rows (a single-target
 sweep's columns as before, GOSPA added)."""
 
@@ -18,13 +18,7 @@ from typer.testing import CliRunner
 
 from isac_mission.cli import app
 from isac_mission.config import Scenario, parse_scenario
-from isac_mission.experiment.multi_target_loop import run_multi_target
-from isac_mission.experiment.multi_target_metrics import (
-    RunFigures,
-    TargetFigures,
-    run_figures,
-    summarize_tracking,
-)
+from isac_mission.experiment.runs import fly_run
 from isac_mission.experiment.sweep.grid import GridPoint, Value, parse_grid
 from isac_mission.experiment.sweep.plots import gospa_plot_name, rmse_plot_name, sweep_figures
 from isac_mission.experiment.sweep.runs import TaskRow
@@ -35,8 +29,7 @@ from isac_mission.experiment.sweep.summary import (
     sweep_table,
     write_csv,
 )
-from isac_mission.model.run_noise import draw_multi_target_noise
-from isac_mission.planning.multi_target import multi_target_kit
+from isac_mission.experiment.track_metrics import RunFigures, TargetFigures, summarize_tracking
 
 ROOT = Path(__file__).resolve().parents[2]
 SLOTS = 6
@@ -120,8 +113,8 @@ def test_a_serial_sweep_of_several_targets_writes_simulates_figures(tmp_path: Pa
         )
         s = parse_scenario(data, "recomputed")
         method = row["method"]
-        run = run_multi_target(s, method, draw_multi_target_noise(s, SEED), multi_target_kit(s))
-        x = summarize_tracking([run_figures(run, s.multi_tracker.gospa_cutoff_m)])
+        run = fly_run(s, method, 0, SEED, None)
+        x = summarize_tracking([run.tracking])
         delays = x.confirmation_delays
         want: dict[str, float] = {
             "gospa_m": x.gospa_m,

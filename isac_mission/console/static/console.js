@@ -120,10 +120,13 @@ function replayScene() {
       uavs.push({ m, xy: f.uav_xy[m], trail, wp: f.plan_xy ? f.plan_xy[m] : null, eta: f.eta[m], bs: f.assoc[m], mode: null, link: null });
     }
     // a trace's estimate and truth, drawn as a track and a target are (named by the trace)
+    // a trace's tracks and targets, drawn as the live page draws them (a single target's is
+    // track 1); a frame without them (an older page's data): its estimate and truth
     const est = f && f.target_est && f.target_est[0] != null ? [{ id: 1, confirmed: true, x: f.target_est, ellipse: f.ellipse }] : [];
     return {
       label: run.label, colour: colourOf(i), uavs,
-      tracks: est, truths: f && f.target_true ? [{ index: 0, x: f.target_true }] : [],
+      tracks: f && f.tracks ? f.tracks : est,
+      truths: f && f.truths ? f.truths : f && f.target_true ? [{ index: 0, x: f.target_true }] : [],
     };
   });
   M.replayDrawn = layers.map((L) => ({ label: L.label, uavs: L.uavs.map((u) => u.xy) }));

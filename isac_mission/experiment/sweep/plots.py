@@ -1,6 +1,6 @@
-"""RMSE- and GOSPA-vs-parameter figures of a sweep: per swept path, the labelled target's location
-and velocity RMSE if a point is on the single-target path, the mission-mean GOSPA if a point is
-on the multi-target path (no pyplot, no files).
+"""RMSE- and GOSPA-vs-parameter figures of a sweep: per swept path, the labelled track's location
+and velocity RMSE if a point's runs had one, the mission-mean GOSPA if a point's runs had their
+tracks' figures instead (no pyplot, no files).
 
 `sweep_figures` returns them keyed by the file name the CLI writes them to
 (`rmse_vs_<path with _ for .>.png`, `gospa_vs_<...>.png`, saved with
@@ -132,8 +132,8 @@ def plot_gospa_vs(
 
 
 def sweep_figures(summaries: Sequence[PointSummary], grid: GridSpec) -> dict[str, Figure]:
-    """Per swept path, in grid order: `plot_rmse_vs` if a point is on the single-target path
-    (keyed by `rmse_plot_name(path)`), `plot_gospa_vs` if a point is on the multi-target path
+    """Per swept path, in grid order: `plot_rmse_vs` if a point had a labelled track (keyed by
+    `rmse_plot_name(path)`), `plot_gospa_vs` if a point had its tracks' figures instead
     (`gospa_plot_name(path)`)."""
     single = [s for s in summaries if s.tracking is None]
     multi = [s for s in summaries if s.tracking is not None]

@@ -1,12 +1,12 @@
 """The work of a sweep: tasks (grid point x method x run), one closed-loop run per task, serially.
 
-Task = (grid point, method, run) -> one mission of the offline loop (`closed_loop.fly_offline`)
-with the run's noise (`tracking/factory.draw_noise`, seed = seed + run: common random numbers
-across methods and grid points) -> one `TaskRow`. A point of the single-target path flies
-`run_closed_loop` (its labelled target's errors and bound, and its GOSPA); a point of the
-multi-target path (docs/model.md, "Several targets") flies `multi_target_loop.run_multi_target`
-and keeps the run's `multi_target_metrics.RunFigures`, as `simulate` does. `run_task` is also
-what the Dask workers run (`cluster.run_dask`); this module never imports Dask.
+Task = (grid point, method, run) -> one mission flown as `simulate` flies a run
+(experiment/runs.py: `fly_outcomes` with the run's noise, seed = seed + run: common random
+numbers across methods and grid points; `mission_run` measures it) -> one `TaskRow`. Every row
+has its run's tracks' GOSPA (track_metrics.py); a run with a labelled track
+(`runs.has_labelled_track`) has that track's errors and bound, a run without one keeps its
+tracks' `RunFigures`, as `simulate` reports each. `run_task` is also what the Dask workers run
+(`cluster.run_dask`); this module never imports Dask.
 """
 
 from __future__ import annotations
@@ -21,9 +21,8 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.config.live_settings import LiveSettings
 from isac_mission.errors import ConfigError
-from isac_mission.experiment.closed_loop import run_closed_loop
-from isac_mission.experiment.multi_target_loop import run_multi_target
-from isac_mission.experiment.multi_target_metrics import RunFigures, run_figures
+from isac_mission.experiment.closed_loop import SlotOutcome
+from isac_mission.experiment.runs import MissionRun, fly_outcomes, mission_run, scenario_kit
 from isac_mission.experiment.sweep.grid import (
     GridPoint,
     GridSpec,
@@ -31,12 +30,9 @@ from isac_mission.experiment.sweep.grid import (
     load_config_mapping,
     load_grid,
 )
-from isac_mission.model.run_noise import MultiTargetNoise
-from isac_mission.nlp_cache import CompiledNlpCache
-from isac_mission.planning.multi_target import check_multi_target_method
+from isac_mission.experiment.track_metrics import RunFigures
 from isac_mission.planning.slot import Method, SolverKit
-from isac_mission.tracking.factory import draw_noise, keep_out_tracks, labelled
-from isac_mission.tracking.gospa import mission_gospa
+from isac_mission.planning.tracks import method_problem
 
 
 @dataclass(frozen=True)
@@ -55,11 +51,11 @@ class SweepTask:
 class TaskRow:
     """Metrics of one closed-loop run (units: m^2, (m/s)^2, ms, m; means over slots 1..N).
 
-    loc_mse, vel_mse, pcrb_pos, pcrb_vel: the labelled target's squared errors and tr(PCRB)
-    parts (NaN on a multi-target point: no one target); gospa_m: the mission-mean GOSPA (m, the
-    scenario's cut-off tracker.multi.gospa_cutoff_m, p = 2; one target: min(error, c) as
-    montecarlo.MethodSummary.gospa_m); figures: a multi-target run's figures (None on the
-    single-target path; not a runs.csv column).
+    loc_mse, vel_mse, pcrb_pos, pcrb_vel: the labelled track's squared errors and tr(PCRB)
+    parts (NaN for a run without a labelled track); gospa_m: the mission-mean GOSPA of the run's
+    confirmed tracks (m, the scenario's cut-off tracker.multi.gospa_cutoff_m, p = 2; one
+    labelled track: min(error, c) as montecarlo.MethodSummary.gospa_m); figures: the tracks'
+    figures of a run without a labelled track (None for a run with one; not a runs.csv column).
     """
 
     point: int
@@ -95,9 +91,8 @@ def plan_sweep(
     live: LiveSettings | None = None,
 ) -> SweepPlan:
     """Load both files and validate every grid point (raises ConfigError before any work, a
-    method that plans for one target on a point of the multi-target path included:
-    `planning.multi_target.check_multi_target_method`); with `live`, every point plans with the
-    live settings (config/live_settings.py) applied to its scenario, as
+    method that cannot plan for a point's tracks included: `check_methods`); with `live`, every
+    point plans with the live settings (config/live_settings.py) applied to its scenario, as
     `simulate --live-settings` does."""
     base = load_config_mapping(config)
     grid = load_grid(grid_file)
@@ -112,16 +107,13 @@ def plan_sweep(
 
 
 def check_methods(points: Sequence[GridPoint], methods: Sequence[Method], source: str) -> None:
-    """Raise ConfigError (one line, the first refusal) if a method cannot plan a point: on the
-    multi-target path, a method that plans for one target (the registry's max_targets)."""
+    """Raise ConfigError (one line, the first refusal) if a method cannot plan for a point's
+    tracks (`planning/tracks.method_problem`, as `simulate` refuses it)."""
     for p in points:
-        if labelled(p.scenario):
-            continue
         for m in methods:
-            try:
-                check_multi_target_method(m)
-            except ConfigError as err:
-                raise ConfigError(f"{source}: grid point {p.index}: {err}") from None
+            problem = method_problem(p.scenario, m)
+            if problem is not None:
+                raise ConfigError(f"{source}: grid point {p.index}: {problem}")
 
 
 def make_tasks(points: Sequence[GridPoint], grid: GridSpec, seed: int) -> list[SweepTask]:
@@ -139,15 +131,13 @@ _MAX_KITS = 8
 
 
 def kit_for(key: str, s: Scenario) -> SolverKit:
-    """The SolverKit of a scenario, built once per process (a few are kept), with the keep-out
-    points its tracker needs (`tracking/factory.keep_out_tracks`: none for the labelled target)."""
+    """The SolverKit of a grid point's scenario (`runs.scenario_kit`, as `simulate` builds it),
+    built once per process (a few are kept)."""
     kit = _KITS.get(key)
     if kit is None:
         if len(_KITS) >= _MAX_KITS:
             _KITS.clear()
-        kit = _KITS[key] = SolverKit(
-            s, n_keep_out=keep_out_tracks(s), ipopt=CompiledNlpCache(compile="never")
-        )
+        kit = _KITS[key] = scenario_kit(s)
     return kit
 
 
@@ -176,54 +166,36 @@ def run_task(task: SweepTask) -> TaskRow:
     """One closed-loop mission; returns its per-run metrics (runs in a worker process)."""
     limit_blas_threads(1)
     s = task.scenario
-    kit = kit_for(task.key, s)
-    noise = draw_noise(s, task.seed)
-    if isinstance(noise, MultiTargetNoise):
-        return _multi_target_row(task, noise, kit)
-    res = run_closed_loop(s, task.method, noise, kit)
-    _, gospa_m = mission_gospa(
-        list(res.true[:, None, :2]), list(res.est[:, None, :2]), s.multi_tracker.gospa_cutoff_m
-    )
-    err = res.est - res.true  # [N, 4]
-    pos_tr = np.trace(res.pcrb[:, :2, :2], axis1=-2, axis2=-1)
-    vel_tr = np.trace(res.pcrb[:, 2:, 2:], axis1=-2, axis2=-1)
+    outcomes = fly_outcomes(s, task.method, task.seed, kit_for(task.key, s))
+    return task_row(task, mission_run(s, task.method, task.seed, outcomes), outcomes)
+
+
+def task_row(task: SweepTask, run: MissionRun, outcomes: Sequence[SlotOutcome]) -> TaskRow:
+    """The row of a task's run (`TaskRow`): its labelled track's columns when it had one, its
+    tracks' GOSPA in every case, its planner's times and statuses from the slots flown."""
+    labelled = run.labelled
+    nan = math.nan
+    loc_mse = vel_mse = pcrb_pos = pcrb_vel = nan
+    if labelled is not None:
+        err = labelled.est - labelled.true  # [N, 4]
+        loc_mse = float(np.mean(np.sum(err[:, :2] ** 2, axis=1)))
+        vel_mse = float(np.mean(np.sum(err[:, 2:] ** 2, axis=1)))
+        pcrb_pos = float(np.trace(labelled.pcrb[:, :2, :2], axis1=-2, axis2=-1).mean())
+        pcrb_vel = float(np.trace(labelled.pcrb[:, 2:, 2:], axis1=-2, axis2=-1).mean())
     return TaskRow(
         point=task.point,
         method=task.method,
         run=task.run,
         seed=task.seed,
-        loc_mse=float(np.mean(np.sum(err[:, :2] ** 2, axis=1))),
-        vel_mse=float(np.mean(np.sum(err[:, 2:] ** 2, axis=1))),
-        pcrb_pos=float(pos_tr.mean()),
-        pcrb_vel=float(vel_tr.mean()),
-        solve_median_ms=float(np.median(res.solve_s) * 1e3),
-        infeasible_slots=sum(st != "ok" for st in res.status),
-        slots=len(res.status),
-        gospa_m=gospa_m,
-    )
-
-
-def _multi_target_row(task: SweepTask, noise: MultiTargetNoise, kit: SolverKit) -> TaskRow:
-    """One mission of the multi-target path (`run_multi_target`) and its figures
-    (`multi_target_metrics.run_figures`, the scenario's GOSPA cut-off), as `simulate` has them."""
-    s = task.scenario
-    run = run_multi_target(s, task.method, noise, kit)
-    figures = run_figures(run, s.multi_tracker.gospa_cutoff_m)
-    reports = [o.plan.report for o in run.slots]
-    return TaskRow(
-        point=task.point,
-        method=task.method,
-        run=task.run,
-        seed=task.seed,
-        loc_mse=math.nan,
-        vel_mse=math.nan,
-        pcrb_pos=math.nan,
-        pcrb_vel=math.nan,
-        solve_median_ms=float(np.median([r.solve_s for r in reports]) * 1e3),
-        infeasible_slots=sum(r.status != "ok" for r in reports),
-        slots=len(reports),
-        gospa_m=float(figures.gospa_m.mean()),
-        figures=figures,
+        loc_mse=loc_mse,
+        vel_mse=vel_mse,
+        pcrb_pos=pcrb_pos,
+        pcrb_vel=pcrb_vel,
+        solve_median_ms=float(np.median(run.solve_s) * 1e3),
+        infeasible_slots=sum(o.plan.report.status != "ok" for o in outcomes),
+        slots=len(outcomes),
+        gospa_m=float(run.tracking.gospa_m.mean()),
+        figures=run.tracking if labelled is None else None,
     )
 
 

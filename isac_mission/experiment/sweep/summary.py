@@ -3,15 +3,15 @@
 Aggregates per (point, method): location / velocity RMSE over runs with a 95 % confidence
 interval (Student-t interval of the mean per-run MSE over runs, mapped through sqrt), mean
 tr(PCRB) parts, solve time, infeasible slots, the mission-mean GOSPA with its 95 % t-interval
-over runs; on a point of the multi-target path, the figures `simulate` reports for several
-targets (`multi_target_metrics.summarize_tracking` of the runs' figures).
+over runs; on a point whose runs had no labelled track, the figures `simulate` reports for their
+tracks (`track_metrics.summarize_tracking` of the runs' figures).
 
 sweep.csv, one row per (point, method): the swept values (one column per path), then
 `point, method, runs, loc_rmse, loc_rmse_lo, loc_rmse_hi, vel_rmse, vel_rmse_lo, vel_rmse_hi,
-pcrb_pos, pcrb_vel, solve_median_ms, infeasible_slots, slots` (the labelled target's: NaN on a
-multi-target point), then `gospa_m, gospa_m_lo, gospa_m_hi`, and, when a point of the sweep is
-on the multi-target path, `MULTI_TARGET_COLUMNS` and two columns per target i (its index in
-`targets:`): `target<i>_rmse_m`, `target<i>_bound_m2` (empty on a single-target point). NaN
+pcrb_pos, pcrb_vel, solve_median_ms, infeasible_slots, slots` (the labelled track's: NaN on a
+point without one), then `gospa_m, gospa_m_lo, gospa_m_hi`, and, when a point of the sweep has
+its tracks' figures, `MULTI_TARGET_COLUMNS` and two columns per target i (its index in
+`targets:`): `target<i>_rmse_m`, `target<i>_bound_m2` (empty on a point of a labelled track). NaN
 (`nan`): no value (one run: no interval; a target never followed: no RMSE). runs.csv: one row per
 task, `TaskRow`'s numbers (its `figures` left out).
 """
@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 from rich.table import Table
 
-from isac_mission.experiment.multi_target_metrics import TrackingSummary, summarize_tracking
 from isac_mission.experiment.sweep.grid import GridPoint, Value, fmt_value
 from isac_mission.experiment.sweep.runs import TaskRow
+from isac_mission.experiment.track_metrics import TrackingSummary, summarize_tracking
 from isac_mission.planning.registry import METHODS
 
 
@@ -39,9 +39,9 @@ class PointSummary:
 
     RMSE in m and m/s with 95 % CI bounds (NaN with a single run); tr(PCRB) parts in m^2 and
     (m/s)^2; solve_median_ms = median of the per-run medians (ms); these are the labelled
-    target's, NaN on a multi-target point. gospa_m: mean over runs of the mission-mean GOSPA (m)
-    with its 95 % t-interval (the lower bound clipped at 0; NaN with a single run). tracking: a multi-target point's figures
-    over its runs (`multi_target_metrics.summarize_tracking`; None on the single-target path).
+    track's, NaN on a point without one. gospa_m: mean over runs of the mission-mean GOSPA (m)
+    with its 95 % t-interval (the lower bound clipped at 0; NaN with a single run). tracking: the tracks' figures over the
+    runs of a point without a labelled track (`track_metrics.summarize_tracking`; None with one).
     """
 
     point: int
@@ -98,7 +98,7 @@ def aggregate(rows: Iterable[TaskRow], points: Sequence[GridPoint]) -> list[Poin
         figures = [r.figures for r in group if r.figures is not None]
         tracking = summarize_tracking(figures) if figures else None
         if tracking is not None:
-            gospa = tracking.gospa_m  # the same mean, as the multi-target report has it
+            gospa = tracking.gospa_m  # the same mean, as the tracks report has it
         out.append(
             PointSummary(
                 point=point,
@@ -141,7 +141,7 @@ MULTI_TARGET_COLUMNS = [
     "confirmation_delay_max",
     "never_confirmed",
 ]
-"""sweep.csv's columns of a multi-target point's figures (`TrackingSummary`), after
+"""sweep.csv's columns of a point's tracks' figures (`TrackingSummary`), after
 SUMMARY_COLUMNS: the GOSPA parts (m^2, means over slots and runs), ID switches per run, the share
 of runs with a confirmed false track, the longest run of slots a false track stayed confirmed,
 the confirmation delays' median and largest (slots from the first slot three UAVs saw a target
@@ -156,7 +156,7 @@ def target_columns(n_targets: int) -> list[str]:
 
 
 def tracking_cells(x: TrackingSummary) -> list[float | int]:
-    """A multi-target point's values of MULTI_TARGET_COLUMNS, then of its targets' columns."""
+    """A point's tracks' values of MULTI_TARGET_COLUMNS, then of its targets' columns."""
     delays = x.confirmation_delays
     return [
         x.localisation_m2,
@@ -178,7 +178,7 @@ def _cell(v: object) -> object:
 
 def write_csv(summaries: Sequence[PointSummary], paths: Sequence[str], out: Path) -> Path:
     """One row per (point, method): the swept values (one column per path), then the metrics
-    (module docstring: the multi-target columns only when a point is on that path)."""
+    (module docstring: the tracks' columns only when a point has its tracks' figures)."""
     out.parent.mkdir(parents=True, exist_ok=True)
     n_targets = max((len(s.tracking.rmse_m) for s in summaries if s.tracking), default=None)
     extra = [] if n_targets is None else [*MULTI_TARGET_COLUMNS, *target_columns(n_targets)]
@@ -223,10 +223,10 @@ def _g(v: float) -> str:
 
 def sweep_table(summaries: Sequence[PointSummary], paths: Sequence[str], title: str) -> Table:
     """Rich table: swept values (headed by the path's last key), method, then the labelled
-    target's RMSE with its 95 % CI and mean tr(PCRB) parts (if a point has one), GOSPA with its
-    95 % CI, a multi-target point's runs with a false track, confirmation delays and each
-    target's RMSE / tr(PCRB_pos) (if a point is on that path), infeasible slots, median planning
-    time; "-": not of this point's path."""
+    track's RMSE with its 95 % CI and mean tr(PCRB) parts (if a point has one), GOSPA with its
+    95 % CI, the share of a point's runs with a false track, confirmation delays and each
+    target's RMSE / tr(PCRB_pos) (if a point has its tracks' figures), infeasible slots, median
+    planning time; "-": not of this point's kind."""
     single = any(s.tracking is None for s in summaries)
     n_targets = max((len(s.tracking.rmse_m) for s in summaries if s.tracking), default=0)
     t = Table(title=title, caption=" / ".join(paths))

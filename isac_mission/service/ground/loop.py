@@ -32,8 +32,8 @@ from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.planning.fallback import OPERATOR_HOLD
 from isac_mission.planning.fleet import PlanningJob
-from isac_mission.planning.multi_target import TracksPlan
 from isac_mission.planning.slot import SolverKit
+from isac_mission.planning.tracks import TracksPlan
 from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.ground.assembler import DetectionAssembler
 from isac_mission.service.ground.bus_loop import BusLoop
@@ -81,7 +81,9 @@ class GroundLoop(BusLoop):
         )
         self.initial_errors = initial_errors
         self.state = MissionState(scenario, self.kit, settings.method, initial_errors)
-        self.output = slot_output(scenario, settings, self.report, on_slot, on_tracks)
+        self.output = slot_output(
+            scenario, self.state.tracker, settings, self.report, on_slot, on_tracks
+        )
         self.detections = DetectionAssembler[DetectionMsg | DetectionSetMsg](
             scenario.M, scenario.N, settings, self.report.counters
         )

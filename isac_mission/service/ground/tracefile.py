@@ -36,8 +36,9 @@ from isac_mission.service.ground.mission import GroundSlot
 from isac_mission.service.ground.report import SLOTS_KEPT, GroundReport, SlotEvent
 from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.tracking.cycle import TrackState
-from isac_mission.tracking.factory import labelled
+from isac_mission.tracking.factory import tracker_for
 from isac_mission.tracking.pcrb import Bound
+from isac_mission.tracking.tracker import Tracker
 from isac_mission.types import FloatArray, Gaussian, IntArray
 from isac_mission.wire import (
     DetectionMsg,
@@ -108,13 +109,14 @@ class SlotOutput(Protocol):
 
 def slot_output(
     s: Scenario,
+    tracker: Tracker,
     settings: GroundSettings,
     report: GroundReport,
     on_slot: Callable[[SlotEvent], None] | None,
     on_tracks: Callable[[TracksSlot, float], None] | None,
 ) -> SlotOutput:
-    """The output of the scenario's tracker (module doc)."""
-    if labelled(s):
+    """The output of the mission's tracker (module doc)."""
+    if tracker.labels_reports:
         return RecordOutput(s, settings, report, on_slot)
     return TrackSetOutput(s, settings, on_tracks)
 
@@ -343,7 +345,10 @@ class TrackSetOutput:
         self, g: GroundSlot, extra: dict[str, Any], latency_s: float, links: dict[int, str]
     ) -> None:
         slot = track_set_slot(g)
-        fields = {"latency_ms": extra["latency_ms"], **resume_fields(slot)}
+        around = g.pending.planned_around
+        fields = (
+            dict(extra) | ({"planned_around": list(around)} if around else {}) | resume_fields(slot)
+        )
         if self.writer is not None:
             self.writer.write_slot(slot, fields)
         self.last_traced = g.slot
@@ -357,7 +362,7 @@ def resume_refusal(s: Scenario, path: Path, config: Mapping[str, object]) -> str
     as its config line (None: it may). A labelled target's trace is continued from its last
     complete slot (`RecordOutput.open`); a trace of tracks is refused as `track_set_refusal`
     says."""
-    return None if labelled(s) else track_set_refusal(path, config, s.N)
+    return None if tracker_for(s).labels_reports else track_set_refusal(path, config, s.N)
 
 
 def track_set_refusal(path: Path, config: Mapping[str, object], n_slots: int) -> str | None:
