@@ -18,10 +18,12 @@ from scipy.stats import chi2
 from isac_mission.bus import tcp_loopback
 from isac_mission.cli.embedded import run_embedded
 from isac_mission.config import load_scenario
+from isac_mission.experiment.replay import replay_trace
 from isac_mission.experiment.track_metrics import follow
+from isac_mission.records import read_trace
 from isac_mission.records.header import TRACE_FORMAT
 from isac_mission.records.tracks import TracksSlot
-from isac_mission.service.assembly import LiveOptions
+from isac_mission.service.assembly import LiveOptions, planning_scenario
 from isac_mission.tracking.gospa import UNASSIGNED
 from sim.multi_target_scene import MultiTargetScene
 from tests.support.live_cli import ROOT
@@ -91,3 +93,10 @@ async def test_a_live_multi_target_mission_tracks_every_target_in_the_scene(
     assert json.loads(lines[-1]) == {"end": {"status": "complete", "last_slot": SLOTS, "N": SLOTS}}
     ids = {t["id"] for t in json.loads(lines[-2])["tracks"]}
     assert ids == {t.track_id for t in last.tracks}
+
+    # Planned as offline (lockstep): every slot's recorded inputs, the tracker restored from the
+    # previous line, give the recorded plan again through the offline planner.
+    rows = replay_trace(read_trace(result.trace_path), planning_scenario(s, LiveOptions()))
+    assert len(rows) >= 0.8 * (SLOTS - 1), [r.slot for r in rows]
+    assert max(float(r.replay_gap_m.max()) for r in rows) < 1e-3
+    assert all(r.replay_fallback == r.fallback for r in rows)
