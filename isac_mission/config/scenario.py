@@ -273,7 +273,7 @@ class Scenario:
             )
         if "x0" in changes and "targets" not in changes and targets:
             x0 = tuple(float(v) for v in changes["x0"])
-            targets = (dataclasses.replace(targets[0], x0=x0), *targets[1:])  # type: ignore[arg-type]
+            targets = (dataclasses.replace(targets[0], x0=x0), *targets[1:])
         if targets is not self.targets:
             changes["targets"] = targets
         return replace(self, **changes)

@@ -6,7 +6,8 @@ checks. Functions take batches: positions [L, M, 2], shares [L, M] -> [L] boolea
 With the safety rule on (planner.safety_margin, planning/margins.py; docs/model.md, "Safety")
 14j keeps the slot's clearance from the predicted target, 14i keeps D_s + 2 e, 14a and 14b hold
 e farther from the BS, and 14i/14j hold along the legs too (planning/legs.py); with "none" the
-checks are the paper's.
+checks are the paper's. 14j holds against every target of the slot (the lead and
+`other_targets`), each moving by its own motion model along the legs.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.model.channel import full_band_rate
+from isac_mission.model.motion import MotionModel
 from isac_mission.planning.legs import (
     chord_shortfall,
     leg_accel_bound_mps2,
@@ -27,6 +29,29 @@ from isac_mission.planning.legs import (
 )
 from isac_mission.planning.margins import SafetyMargins, hermite_bulge_m, leg_samples, rule_on
 from isac_mission.types import BoolArray, FloatArray, IntArray
+
+
+@dataclass(frozen=True)
+class MovingTargets:
+    """Targets 14j keeps a clearance from, each moving by its own motion model.
+
+    state [T, 4]: each one's predicted (x_m, y_m, vx_mps, vy_mps) at the slot's end;
+    clearance_m [T]: the distance 14j keeps from each; motions: each one's motion model (T)."""
+
+    state: FloatArray
+    clearance_m: FloatArray
+    motions: tuple[MotionModel, ...]
+
+    def positions(self, before_end_s: FloatArray) -> FloatArray:
+        """[T, S, 2] each target's predicted position before_end_s [S] (s, negative: before
+        the slot's end) after the slot's end."""
+        t = np.asarray(before_end_s, dtype=float).reshape(-1, 1)
+        return np.stack(
+            [
+                np.asarray(m.position_after(x, t))
+                for m, x in zip(self.motions, self.state, strict=True)
+            ]
+        )
 
 
 @dataclass(frozen=True)
@@ -42,6 +67,10 @@ class SlotConstraints:
     target_clearance_m; None: D_s); target_velocity_mps [2]: its predicted velocity, for the
     legs (None: at rest); start_velocity_mps [M, 2]: the vehicles' velocities at the legs'
     start, for Hermite legs (used with the end velocities given to `position_violations`).
+    target_motion: the predicted target's motion model (None: the scenario's); other_targets:
+    the slot's other targets (SlotInput.targets[1:]), from each of which 14j keeps its own
+    clearance as from the predicted target, along the legs too, each moving by its own motion
+    model (None: none).
     """
 
     prev_xy: FloatArray
@@ -55,6 +84,8 @@ class SlotConstraints:
     target_clearance_m: float | None = None
     target_velocity_mps: FloatArray | None = None
     start_velocity_mps: FloatArray | None = None
+    target_motion: MotionModel | None = None
+    other_targets: MovingTargets | None = None
 
     @property
     def margins(self) -> SafetyMargins:
@@ -82,22 +113,41 @@ class SlotConstraints:
         """True when 14i/14j are checked along the legs (the rule on)."""
         return rule_on(self.scenario)
 
-    def _target_state(self) -> FloatArray:
-        """The predicted target [4] at the slot's end (at rest without a velocity)."""
+    @functools.cached_property
+    def targets(self) -> MovingTargets:
+        """Every target 14j keeps its clearance from [T]: the predicted target first (at rest
+        without a velocity, by the scenario's motion model without its own), then
+        other_targets."""
         v = np.zeros(2) if self.target_velocity_mps is None else self.target_velocity_mps
-        return np.concatenate([np.asarray(self.target_xy, dtype=float), np.asarray(v, float)])
+        state = np.concatenate([np.asarray(self.target_xy, dtype=float), np.asarray(v, float)])
+        motion = self.scenario.motion if self.target_motion is None else self.target_motion
+        lead = MovingTargets(state[None], np.array([self.clearance_m]), (motion,))
+        o = self.other_targets
+        if o is None or not len(o.motions):
+            return lead
+        return MovingTargets(
+            np.concatenate([lead.state, np.asarray(o.state, dtype=float).reshape(-1, 4)]),
+            np.concatenate([lead.clearance_m, np.asarray(o.clearance_m, dtype=float)]),
+            lead.motions + tuple(o.motions),
+        )
+
+    def targets_points(self, fractions: FloatArray | None = None) -> FloatArray:
+        """Every target [T, S, 2] at the leg samples tau_i dt (or at `fractions` [S]) of the
+        slot ending at its prediction, each by its motion model."""
+        f = self.leg_fractions if fractions is None else fractions
+        return self.targets.positions(-((1.0 - np.asarray(f, dtype=float)) * self.scenario.dt))
+
+    def targets_start(self) -> FloatArray:
+        """Every target [T, 2] at the legs' start."""
+        return self.targets.positions(np.array([-self.scenario.dt]))[:, 0]
 
     def target_points(self, fractions: FloatArray | None = None) -> FloatArray:
-        """The predicted target [S, 2] at the leg samples tau_i dt (or at `fractions` [S]) of
-        the slot ending at its prediction, by the scenario's motion model."""
-        f = self.leg_fractions if fractions is None else fractions
-        before_end_s = -((1.0 - np.asarray(f, dtype=float))[:, None] * self.scenario.dt)
-        return np.asarray(self.scenario.motion.position_after(self._target_state(), before_end_s))
+        """The predicted target [S, 2] at the leg samples (`targets_points` of the first)."""
+        return np.asarray(self.targets_points(fractions)[0])
 
     def target_start(self) -> FloatArray:
         """The predicted target [2] at the legs' start."""
-        start = self.scenario.motion.position_after(self._target_state(), -self.scenario.dt)
-        return np.asarray(start)
+        return np.asarray(self.targets_start()[0])
 
     def sample_clearances_m(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(target [S, M], keep-out [S, M, K], pairs [S, P]): the distances the SCA subproblem
@@ -148,12 +198,13 @@ class SlotConstraints:
         q = np.asarray(uav_xy).reshape(-1, s.M, 2)
         nearest_bs = np.sqrt(np.min(_sq_norm(q[:, :, None, :] - self.bs_xy[None, None]), axis=2))
         step = np.sqrt(_sq_norm(q - self.prev_xy[None]))
-        to_target = np.sqrt(_sq_norm(q - self.target_xy[None, None]))
+        targets = self.targets
+        to_target = np.sqrt(_sq_norm(q[:, :, None, :] - targets.state[None, None, :, :2]))
         sep, link = self.separation_m, self.margins.link_m
         out = {
             "14b control range": np.any(nearest_bs + link > s.d_th + tol_m, axis=1),
             "14h max speed": np.any(step > s.v_max * s.dt + tol_m, axis=1),
-            "14j target distance": np.any(to_target < self.clearance_m - tol_m, axis=1),
+            "14j target distance": np.any(to_target < targets.clearance_m - tol_m, axis=(1, 2)),
         }
         if s.planner.keep_in_area:
             lo, hi = self.area_bounds()
@@ -199,15 +250,16 @@ class SlotConstraints:
         s = self.scenario
         pts, accel, fractions = self._legs(self.prev_xy, q, slice(None), end_velocity_mps)
         h = s.dt / len(fractions)  # accel [L, M]
-        rel = pts - self.target_points(fractions)[None, :, None, :]  # [L, S, M, 2]
-        rel0 = self.prev_xy - self.target_start()  # [M, 2]
+        targets = self.targets
+        rel = pts[:, None] - self.targets_points(fractions)[None, :, :, None, :]  # [L, T, S, M, 2]
+        rel0 = self.prev_xy[None] - self.targets_start()[:, None]  # [T, M, 2]
         short = chord_shortfall(
-            np.broadcast_to(rel0, q.shape),
-            np.moveaxis(rel, 1, 2),
-            self.clearance_m,
-            accel * h**2 / 8,
-        )
-        out = {"14j along the legs": np.any(short > tol_m, axis=1)}
+            np.broadcast_to(rel0, (len(q), *rel0.shape)),
+            np.moveaxis(rel, 2, 3),
+            targets.clearance_m[None, :, None],
+            (accel * h**2 / 8)[:, None, :],
+        )  # [L, T, M]
+        out = {"14j along the legs": np.any(short > tol_m, axis=(1, 2))}
         sep = self.separation_m
         if s.M > 1:
             i, j = _pairs(s.M)
@@ -260,7 +312,9 @@ class SlotConstraints:
         nearest_bs = np.sqrt(np.min(_sq_norm(q[:, None, :] - self.bs_xy[None]), axis=1))
         bad |= nearest_bs + self.margins.link_m > s.d_th
         bad |= np.sqrt(_sq_norm(q - self.prev_xy[m])) > s.v_max * s.dt
-        bad |= np.sqrt(_sq_norm(q - self.target_xy)) < self.clearance_m
+        targets = self.targets
+        to_target = np.sqrt(_sq_norm(q[:, None, :] - targets.state[None, :, :2]))  # [L, T]
+        bad |= np.any(to_target < targets.clearance_m, axis=1)
         if s.planner.keep_in_area:
             lo, hi = self.area_bounds()
             bad |= np.any((q < lo) | (q > hi), axis=-1)
@@ -287,9 +341,10 @@ class SlotConstraints:
         pts_m, acc_m, fractions = self._legs(self.prev_xy[[m]], q[:, None, :], [m], None)
         h = s.dt / len(fractions)
         pts, sag = pts_m[:, :, 0], acc_m[:, 0] * h**2 / 8  # [L, S, 2], [L]
-        rel = pts - self.target_points(fractions)[None]
-        rel0 = np.broadcast_to(prev - self.target_start(), q.shape)
-        bad = chord_shortfall(rel0, rel, self.clearance_m, sag) > 0
+        rel = pts[:, None] - self.targets_points(fractions)[None]  # [L, T, S, 2]
+        rel0 = np.broadcast_to(prev - self.targets_start(), (len(q), *rel.shape[1:2], 2))
+        clearance = self.targets.clearance_m[None]
+        bad = np.any(chord_shortfall(rel0, rel, clearance, sag[:, None]) > 0, axis=1)
         sep = self.separation_m
         idx = [j for j in range(s.M) if j != m]
         if idx:

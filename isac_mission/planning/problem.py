@@ -22,7 +22,7 @@ from isac_mission.deprecation import renamed_fields
 from isac_mission.model.vehicle import VehicleModel
 from isac_mission.planning.association import associate
 from isac_mission.planning.communication import CommunicationPlan, communication_optimal
-from isac_mission.planning.feasibility import SlotConstraints, operating_area
+from isac_mission.planning.feasibility import MovingTargets, SlotConstraints, operating_area
 from isac_mission.planning.margins import target_clearance_m
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import Objective, PlanningObjective, SensingParams, SumObjective
@@ -46,8 +46,9 @@ class SlotInput:
     prev_xy_m [M, 2]: where the UAVs are (q_{n-1}), m; prev_bandwidth_share [M]: last slot's
     shares; prev_bs_of_uav [M] or None: last slot's BS per UAV; targets: the targets the plan is
     for (tracking/beliefs.py), at least one: the objective is the sum of their weighted
-    tr(PCRB), and the first, `lead`, is the one the slot's 14j clearance and the horizon's NLP
-    follow (docs/model.md, "Several targets"); prev_velocity_mps [M, 2] or None: the vehicles'
+    tr(PCRB), the exact check keeps 14j from each along the legs, and the first, `lead`, is the
+    one the convex subproblem's 14j rows, the fallback's evasion and the horizon's NLP follow
+    (docs/model.md, "Planning for several targets"); prev_velocity_mps [M, 2] or None: the vehicles'
     velocities now (used when planner.accel_limit_mps2 or planner.vehicle_model is set);
     keep_out_xy_m [L, 2] or None: points every planned UAV keeps D_s from (vehicles outside this
     plan, other tracks; the kit must be built with n_keep_out = L); prev_plan: last slot's plan
@@ -72,7 +73,7 @@ class SlotInput:
 
     @property
     def lead(self) -> TargetBelief:
-        """The target the slot's 14j clearance follows: the first of `targets`."""
+        """The target the solvers' 14j rows follow: the first of `targets`."""
         return self.targets[0]
 
 
@@ -176,6 +177,8 @@ def build_slot_problem(
         target_clearance_m=slot_clearance_m(inp, s),
         target_velocity_mps=x_pred[2:4],
         start_velocity_mps=inp.prev_velocity_mps,
+        target_motion=inp.lead.motion,
+        other_targets=moving_targets(inp.targets[1:], s),
     )
     step = s.v_max * s.dt if moves else 0.0
     comm = communication_optimal(
@@ -222,13 +225,29 @@ def with_end_velocity(plan: SlotPlan, inp: SlotInput, s: Scenario) -> SlotPlan:
 
 
 def slot_clearance_m(inp: SlotInput, s: Scenario) -> float:
-    """The slot's 14j clearance (planning/margins.py) from the lead target's predicted
-    covariance (prior_information^-1 when its belief has none)."""
-    lead = inp.lead
-    cov = lead.cov_pred
+    """The slot's 14j clearance from the lead target (`belief_clearance_m`)."""
+    return belief_clearance_m(inp.lead, s)
+
+
+def belief_clearance_m(belief: TargetBelief, s: Scenario) -> float:
+    """The 14j clearance (planning/margins.py) from a target, for its predicted covariance
+    (prior_information^-1 when its belief has none)."""
+    cov = belief.cov_pred
     if cov is None and s.planner.safety_margin != "none":
-        cov = lead.covariance()
+        cov = belief.covariance()
     return target_clearance_m(s, cov)
+
+
+def moving_targets(beliefs: tuple[TargetBelief, ...], s: Scenario) -> MovingTargets | None:
+    """The targets `beliefs` as the exact check's moving targets (each its predicted state,
+    clearance and motion model), None for none."""
+    if not beliefs:
+        return None
+    return MovingTargets(
+        np.array([b.state_pred for b in beliefs], dtype=float),
+        np.array([belief_clearance_m(b, s) for b in beliefs]),
+        tuple(b.motion for b in beliefs),
+    )
 
 
 def warm_up_input(kit: SolverKit) -> SlotInput:

@@ -2,10 +2,10 @@
 several targets"): the offline loop and the live ground loop plan through here.
 
 Every method plans for the sum of the confirmed tracks' tr(PCRB) (`SlotInput.targets`, the
-first the primary; one track: the paper's objective); the confirmed track nearest to the fleet
-is the target the plan's safety rule follows along each leg, and every other track, confirmed or
-tentative, is a keep-out point at its predicted position that every UAV keeps D_s from (the
-nearest `KEEP_OUT_CAPACITY`). With no confirmed track the fleet holds where it is. A method that
+first the primary; one track: the paper's objective); the exact check keeps every confirmed
+track's 14j clearance along each leg, the confirmed track nearest to the fleet is the one the
+solvers' 14j rows follow, and every other track, confirmed or tentative, is also a keep-out point
+at its predicted position that every UAV keeps D_s from (the nearest `KEEP_OUT_CAPACITY`). With no confirmed track the fleet holds where it is. A method that
 plans for one target only (the registry's max_targets) is refused for a tracker that may hold
 several tracks (`method_problem`).
 """
