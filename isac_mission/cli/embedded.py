@@ -252,8 +252,7 @@ async def run_embedded(
     """World, bridges and ground loop in this process, over loopback UDP MAVLink and Zenoh
     (`run_mission` with `embedded_world`, its ports given as plain events and callbacks, for
     scripts and tests; `leave` None: the landing is always waited for)."""
-    from isac_mission.service.assembly import Progress, Stopping, run_mission
+    from isac_mission.service.assembly import run_serve
 
-    stopping = Stopping(stop, leave or asyncio.Event())
-    progress = Progress(on_status, on_slot, on_tracks)
-    return await run_mission(s, opts, stopping, progress, embedded_world(s, opts))
+    world = embedded_world(s, opts)
+    return await run_serve(s, opts, stop, on_slot, on_status, on_tracks, leave, world)

@@ -223,11 +223,13 @@ async def run_serve(
     on_status: Callable[[str], None] | None = None,
     on_tracks: Callable[[TracksSlot, float], None] | None = None,
     leave: asyncio.Event | None = None,
+    world: WorldBeside | None = None,
 ) -> LiveResult:
-    """`run_mission` with the world elsewhere, its ports given as plain events and callbacks
-    (for scripts and tests; `leave` None: the landing is always waited for)."""
+    """`run_mission` with the world elsewhere (or `world` beside it), its ports given as plain
+    events and callbacks (for scripts and tests; `leave` None: the landing is always waited
+    for)."""
     stopping = Stopping(stop, leave or asyncio.Event())
-    return await run_mission(s, opts, stopping, Progress(on_status, on_slot, on_tracks))
+    return await run_mission(s, opts, stopping, Progress(on_status, on_slot, on_tracks), world)
 
 
 async def fly_mission(
