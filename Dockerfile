@@ -1,6 +1,6 @@
 # isac-mission: one image for every role (sim, serve, run, simulate).
 # BASE: the official python:3.11-slim by default; where Docker Hub cannot be reached,
-# scripts/build-base-image.sh builds a stand-in from Debian's packages (README, "Deployment").
+# scripts/build-base-image.sh builds a stand-in from Debian's packages (docs/deployment.md, "Docker Compose").
 ARG BASE=python:3.11-slim
 FROM ${BASE}
 ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 MAVLINK20=1 MAVLINK_DIALECT=common

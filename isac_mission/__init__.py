@@ -19,7 +19,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
-__version__ = "0.1.0"
+__version__ = "0.4.0"
 """The package version; pyproject.toml reads it from here (one source of truth)."""
 
 _EXPORTS: dict[str, str] = {

@@ -1,4 +1,5 @@
-"""Renamed public fields: the old names keep working for a release, with a DeprecationWarning."""
+"""Deprecations: renamed public fields keep their old names until `REMOVAL_VERSION`, each use
+warning (DeprecationWarning) with the release that removes it."""
 
 from __future__ import annotations
 
@@ -8,6 +9,10 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 T = TypeVar("T", bound=type)
+
+REMOVAL_VERSION = "0.5.0"
+"""The release that removes every name and section deprecated now: the next minor after the
+package's version (CHANGELOG.md, "Deprecated")."""
 
 
 def renamed_fields(**old_to_new: str) -> Callable[[T], T]:
@@ -45,5 +50,8 @@ def _reader(owner: str, old: str, new: str) -> Callable[[Any], Any]:
 
 def _warn(owner: str, old: str, new: str, stacklevel: int = 3) -> None:
     warnings.warn(
-        f"{owner}.{old} is deprecated: use {owner}.{new}", DeprecationWarning, stacklevel=stacklevel
+        f"{owner}.{old} is deprecated: use {owner}.{new} ({owner}.{old} is removed in "
+        f"{REMOVAL_VERSION})",
+        DeprecationWarning,
+        stacklevel=stacklevel,
     )

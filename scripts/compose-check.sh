@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The two-container deployment, checked end to end on this machine (README, "Deployment"):
+# The two-container deployment, checked end to end on this machine (docs/deployment.md,
+# "Docker Compose"):
 # engine and Compose installed when missing, a Docker engine started when none answers, the base
 # image pulled or (no Docker Hub) built from Debian's packages, the image built, `up`, then from
 # the host: planned slots, the console on 127.0.0.1:8080, the fleet's heartbeats on 127.0.0.1:14550;
@@ -229,7 +230,7 @@ grep -Eq 'vehicles landed[^0-9]*3' "$ground_log" || {
     docker logs --tail 40 "$ground" >&2
     fail "the ground's summary does not say the 3 vehicles landed"
 }
-# The trace, copied out of the named volume as the README says.
+# The trace, copied out of the named volume as docs/deployment.md says.
 out="$(mktemp -d)"
 docker cp "$("${compose[@]}" -p "$project" ps -a -q ground)":/data/serve "$out/" > /dev/null
 # One trace, of the default method (trace_horizon.jsonl; the name follows `serve`'s default).

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The test suite by tiers (README, "Tests"; tiers in tests/conftest.py): set up the venv if
+# The test suite by tiers (docs/testing.md, "Tiers"; tiers in tests/conftest.py): set up the venv if
 # needed, lint, type-check, the fast tier, and, unless --fast, the live tier.
 #   ./scripts/test.sh           ruff, mypy, fast tier, then live tier (what CI runs: .ci/run)
 #   ./scripts/test.sh --fast    ruff, mypy, fast tier only (a few minutes: after every change)

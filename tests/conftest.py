@@ -1,6 +1,6 @@
 """Shared fixtures and the suite's tiers.
 
-Tiers (README, "Tests"), set by folder so that no test can be left without one:
+Tiers (docs/testing.md, "Tiers"), set by folder so that no test can be left without one:
 - fast (tests/unit, tests/numerics): pure functions, models, codecs, config, the layering rules,
   numerics at a size that runs in seconds. No subprocess, no socket, no browser: the guard below
   fails a fast test that opens one, so it moves to a live folder.

@@ -1,5 +1,5 @@
 """Zenoh security from the scenario's `security.zenoh`: what the listening side enforces and who a
-connecting process logs in as (README, "Security").
+connecting process logs in as (docs/deployment.md, "Security").
 
 Secrets come from files and environment variables only, never from the scenario, and are never
 logged: a login is logged by its user name and where it came from. Every problem is a ConfigError

@@ -6,8 +6,8 @@ loopback only (`tcp/127.0.0.1:7447`, docs/bus.md), and endpoints on other hosts 
 `BusSettings.allow_non_loopback` is set (for a deployment on a container network). Every problem
 is a `ConfigError` naming the setting at fault.
 
-Security (`BusSecurity`, README "Security"; measured with zenoh 1.10.2): the listening side checks
-user/password logins against a dictionary file (`transport/auth/usrpwd`) and applies an access
+Security (`BusSecurity`, docs/deployment.md, "Security"; measured with zenoh 1.10.2): the
+listening side checks user/password logins against a dictionary file (`transport/auth/usrpwd`) and applies an access
 control list whose subjects are those usernames (`access_control`); ACL by username is enforced by
 a peer hub as well as a router, on what enters it from the network (its own session is not
 filtered). TLS (`transport/link/tls`) encrypts the link and lets the connecting side check the

@@ -94,7 +94,7 @@ def sim(
         list[str] | None,
         typer.Option(
             help="Vehicle M also speaks MAVLink on a serial device, as M=DEVICE[:BAUD] "
-            "(e.g. 0=/dev/ttyUSB0:57600; repeatable; docs/service.md, 'Serial links')."
+            "(e.g. 0=/dev/ttyUSB0:57600; repeatable; docs/deployment.md, 'Links as deployed')."
         ),
     ] = None,
 ) -> None:
@@ -126,7 +126,7 @@ def sim(
         err_console.print(str(err), highlight=False, markup=False)
         raise typer.Exit(2) from None
     try:
-        # Security on: logs in as the world role (README, "Security").
+        # Security on: logs in as the world role (docs/deployment.md, "Security").
         bus = secured_settings(
             s.security.zenoh,
             s.mission_id,

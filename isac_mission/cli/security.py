@@ -23,7 +23,7 @@ def gen_certs(
     force: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
 ) -> None:
     """A local CA and a TLS certificate for 127.0.0.1 / localhost (made with the
-    cryptography library), for security.zenoh.tls (README, "Security")."""
+    cryptography library), for security.zenoh.tls (docs/deployment.md, "Security")."""
     from isac_mission.bus.certs import generate_certs
 
     try:

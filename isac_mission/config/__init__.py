@@ -7,7 +7,7 @@ is a field whose description points at docs/model.md.
 
 One schema (docs/decisions/0001-one-scenario-schema.md): the targets as a list under `targets:`,
 their motion under `target_motion:`, one `tracker:` section (`kind`, and the multi-target
-tracker under `multi:`); the deprecated `target:` and `multi_target:` are read until 0.2.0.
+tracker under `multi:`); the deprecated `target:` and `multi_target:` are read until 0.5.0.
 
 Modules: `units` (dB/dBm), `sections` (timing ... planner, the tracker and the targets' motion),
 `targets` (`targets:` entries, `detection:`), `signing` (MAVLink signing and its key),

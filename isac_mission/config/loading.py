@@ -18,6 +18,41 @@ from isac_mission.config.validation import validation_lines
 from isac_mission.errors import ConfigError
 
 
+class _StrictLoader(yaml.SafeLoader):
+    """YAML's safe loader that refuses a key given twice in one mapping with two values (PyYAML
+    would keep the last silently); the same value twice is harmless and read as once."""
+
+
+def _unique_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+    first: dict[Any, tuple[int, Any]] = {}
+    for key_node, value_node in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            continue  # `<<:` merges defaults that the mapping's own keys may override
+        key = loader.construct_object(key_node, deep=True)
+        value = loader.construct_object(value_node, deep=True)
+        try:
+            line, kept = first.setdefault(key, (key_node.start_mark.line, value))
+        except TypeError:
+            continue  # an unhashable key: the constructor below says what is wrong with it
+        if kept != value:
+            raise yaml.constructor.ConstructorError(
+                "while constructing a mapping",
+                node.start_mark,
+                f"found key {key!r} twice with two values ({kept!r} on line {line + 1}, "
+                f"{value!r} here)",
+                key_node.start_mark,
+            )
+    return loader.construct_mapping(node, deep=True)
+
+
+_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_mapping)
+
+
+def load_yaml(text: str) -> Any:
+    """The content of a YAML document, each mapping's keys unique; yaml.YAMLError otherwise."""
+    return yaml.load(text, Loader=_StrictLoader)  # a SafeLoader: constructs plain data only
+
+
 def parse_scenario(data: Any, source: str = "<config>") -> Scenario:
     """Validate a mapping (as read from YAML) and resolve it. Raises ConfigError. Warns
     (DeprecationWarning, attributed to the first caller outside the package) once per deprecated
@@ -91,7 +126,7 @@ def read_scenario_data(path_or_name: str | Path) -> tuple[Any, str]:
     except OSError as err:
         raise ConfigError(f"{p}: cannot read: {err.strerror}") from None
     try:
-        return yaml.safe_load(text), str(p)
+        return load_yaml(text), str(p)
     except yaml.YAMLError as err:
         raise ConfigError(f"{p}: not valid YAML: {err}") from None
 

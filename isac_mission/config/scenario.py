@@ -5,7 +5,7 @@ One schema (docs/decisions/0001-one-scenario-schema.md): the targets under `targ
 how they may move under `target_motion:`, one `tracker:` section (`kind`, the labelled EKF's keys,
 the multi-target tracker's under `multi:`). The sections of before, `target:` and
 `multi_target:`, are still read, each with a DeprecationWarning (`ScenarioFile.deprecations`),
-until 0.2.0.
+until 0.5.0.
 """
 
 from __future__ import annotations
@@ -43,12 +43,13 @@ from isac_mission.config.targets import (
     TargetEntry,
     TargetSpec,
 )
+from isac_mission.deprecation import REMOVAL_VERSION
 from isac_mission.model.motion import ConstantVelocity, MotionModel
 from isac_mission.types import FloatArray
 
-SCHEMA_REMOVAL_VERSION = "0.2.0"
+SCHEMA_REMOVAL_VERSION = REMOVAL_VERSION
 """The release that drops the deprecated sections `target:` and `multi_target:` (the package's
-next minor after 0.1.0)."""
+next minor)."""
 
 DEFAULT_TARGET_STATE: tuple[float, float, float, float] = (600.0, 1600.0, 30.0, 0.0)
 """x_0 = [x, y, vx, vy] (m, m/s) of the default target: the paper's."""

@@ -156,7 +156,7 @@ class TargetMotionConfig(Section):
 
 
 class TargetConfig(Section):
-    """`target:`, deprecated (removed in 0.2.0): one target and the scenario's target motion in
+    """`target:`, deprecated (removed in 0.5.0): one target and the scenario's target motion in
     one section. Read as `targets:` with one entry (initial_state, rcs_dbsm) and
     `target_motion:` (process_noise_intensity, max_accel_mps2); see ScenarioFile."""
 
@@ -195,7 +195,7 @@ class SensingConfig(Section):
 class MultiTrackerConfig(Section):
     """`tracker.multi:`: the multi-target tracker and its metric (docs/model.md, "The
     multi-target tracker"); read on the multi-target path only. Given as the top-level
-    `multi_target:` section before 0.2.0 (deprecated)."""
+    `multi_target:` section before 0.5.0 (deprecated)."""
 
     association: Literal["jpda", "gnn"] = Field(
         "jpda",

@@ -1,5 +1,5 @@
 """Security settings: Zenoh users, roles (access control) and TLS, and the `security` section
-that holds them beside MAVLink signing (README, "Security"; docs/reliability.md)."""
+that holds them beside MAVLink signing (docs/deployment.md, "Security"; docs/reliability.md)."""
 
 from __future__ import annotations
 
@@ -81,8 +81,9 @@ class ZenohTlsConfig(Section):
 
 
 class ZenohSecurityConfig(Section):
-    """Zenoh user/password authentication, role-based access control and TLS (README,
-    "Security"; docs/reliability.md). Files only: no password is ever written in the scenario.
+    """Zenoh user/password authentication, role-based access control and TLS
+    (docs/deployment.md, "Security"; docs/reliability.md). Files only: no password is ever
+    written in the scenario.
 
     The listening side (the ground loop) checks logins against `users_file` and lets each role
     put only on its `publishes` topics; a connecting process logs in with the credentials of

@@ -2,8 +2,8 @@
 session, fold them into a `MissionView`, push updates to the pages' feeds, and send the
 operator's fleet commands on `control`.
 
-Security (README, "Security"): with `security.zenoh` off, any page on the console's address may
-command. With it on, the console watches as the `observer` role (its password from the users
+Security (docs/deployment.md, "Security"): with `security.zenoh` off, any page on the console's
+address may command. With it on, the console watches as the `observer` role (its password from the users
 file the ground side holds) and a page commands only after it has logged in with the `operator`
 role's password: the console opens an operator session with it, so the Zenoh listener itself
 checks the password; a page without it is read-only.

@@ -24,6 +24,7 @@ import numpy as np
 from pydantic import TypeAdapter, ValidationError
 from pydantic_core import PydanticSerializationError
 
+from isac_mission.deprecation import REMOVAL_VERSION
 from isac_mission.errors import MessageError
 from isac_mission.types import Detections, FloatArray
 from isac_mission.wire.control_models import MAX_ID_CHARS, ControlMsg, ControlReplyMsg
@@ -154,17 +155,23 @@ def read_request(payload: Payload, *, n_uavs: int | None = None) -> RequestRead:
 
 
 def _deprecated(old: str, new: str) -> None:
-    warnings.warn(f"wire.{old} is deprecated: use wire.{new}", DeprecationWarning, stacklevel=3)
+    warnings.warn(
+        f"wire.{old} is deprecated: use wire.{new} (wire.{old} is removed in {REMOVAL_VERSION})",
+        DeprecationWarning,
+        stacklevel=3,
+    )
 
 
 def encode_control(msg: ControlMsg) -> bytes:
-    """Deprecated (README's operator example): `encode(msg)`."""
+    """Deprecated, removed in 0.5.0: `encode(msg)` (the operator's example, docs/deployment.md,
+    "Taking a vehicle, and fleet commands")."""
     _deprecated("encode_control", "encode")
     return encode(msg)
 
 
 def decode_control_reply(payload: Payload) -> ControlReplyMsg:
-    """Deprecated (README's operator example): `decode(ControlReplyMsg, payload)`."""
+    """Deprecated, removed in 0.5.0: `decode(ControlReplyMsg, payload)` (the operator's example,
+    docs/deployment.md, "Taking a vehicle, and fleet commands")."""
     _deprecated("decode_control_reply", "decode")
     return decode(ControlReplyMsg, payload)
 

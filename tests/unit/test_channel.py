@@ -24,7 +24,7 @@ def test_gain_falls_with_square_of_3d_distance(paper: Scenario) -> None:
 
 
 def test_full_band_rates_match_paper_notes(paper: Scenario) -> None:
-    # PAPER-NOTES: about 332 / 190 / 127 Mbit/s at 0 / 1 / 3 km.
+    # The full-band rate from the paper's constants: about 332 / 190 / 127 Mbit/s at 0 / 1 / 3 km.
     r = full_band_rate(np.array([0.0, 1000.0, 3000.0]), paper.dH, paper.rho0, paper.B) / 1e6
     np.testing.assert_allclose(r, [332, 190, 127], atol=1.0)
 

@@ -16,6 +16,7 @@ from isac_mission.config import (
     scenario_names,
     scenario_path,
 )
+from isac_mission.config.loading import load_yaml
 from isac_mission.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -143,3 +144,33 @@ def test_a_sweep_reads_a_shipped_scenario_by_name() -> None:
 
     expected = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
     assert load_config_mapping("paper") == expected
+
+
+def test_a_key_given_twice_with_two_values_is_refused_naming_it_and_both_lines(
+    tmp_path: Path,
+) -> None:
+    f = tmp_path / "twice.yaml"
+    f.write_text("planner:\n  polish: false\n  safety_margin: none\n  safety_margin: covariance\n")
+    with pytest.raises(
+        ConfigError,
+        match=r"found key 'safety_margin' twice with two values \('none' on line 3, 'covariance'",
+    ):
+        load_scenario(f)
+    with pytest.raises(ConfigError, match="line 4"):
+        load_scenario(f)
+    f.write_text("planner:\n  polish: false\n  safety_margin: none\n  safety_margin: none\n")
+    once = tmp_path / "once.yaml"
+    once.write_text("planner:\n  polish: false\n  safety_margin: none\n")
+    assert load_scenario(f).trace_config() == load_scenario(once).trace_config()
+
+
+def test_merged_defaults_may_be_overridden_and_every_shipped_scenario_has_unique_keys(
+    tmp_path: Path,
+) -> None:
+    f = tmp_path / "merged.yaml"
+    f.write_text(
+        "defaults: &d {polish: false, max_ao_iterations: 8}\nplanner:\n  <<: *d\n  polish: true\n"
+    )
+    assert load_yaml(f.read_text())["planner"] == {"polish": True, "max_ao_iterations": 8}
+    for name in scenario_names():
+        assert isinstance(load_yaml((SCENARIOS_DIR / f"{name}.yaml").read_text()), dict), name

@@ -107,7 +107,7 @@ def test_file_is_strict_json_with_null_for_missing_numbers(tmp_path: Path) -> No
         writer.write_slot(rec)
     lines = path.read_text().splitlines()
     assert len(lines) == 2
-    assert list(json.loads(lines[0])) == ["format", "config"]
+    assert list(json.loads(lines[0])) == ["format", "isac_mission_version", "config"]
     assert "NaN" not in lines[1] and "Infinity" not in lines[1]
     slot = json.loads(lines[1], parse_constant=lambda c: pytest.fail(f"token {c}"))
     assert list(slot)[: len(CONTRACT_KEYS)] == list(CONTRACT_KEYS)

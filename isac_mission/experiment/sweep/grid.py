@@ -40,6 +40,7 @@ import yaml
 from pydantic import BaseModel
 
 from isac_mission.config import Scenario, ScenarioFile, parse_scenario, read_scenario_data
+from isac_mission.config.loading import load_yaml
 from isac_mission.errors import ConfigError
 from isac_mission.planning.registry import METHODS
 from isac_mission.planning.slot import Method
@@ -236,7 +237,7 @@ def load_grid(path: str | Path) -> GridSpec:
     """Read and validate a grid YAML file. Raises ConfigError."""
     p = Path(path)
     try:
-        data = yaml.safe_load(p.read_text())
+        data = load_yaml(p.read_text())
     except OSError as err:
         raise ConfigError(f"{p}: cannot read: {err.strerror}") from None
     except yaml.YAMLError as err:
