@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from isac_mission.errors import MessageError
-from isac_mission.records.header import parse_header
+from isac_mission.records.header import parse_header, written_by
 from isac_mission.records.jsonlines import loads_line
 from isac_mission.records.slot import CONTRACT_KEYS, MissionEnd, SlotRecord, check_sequence
 from isac_mission.records.trace import Trace
@@ -41,6 +41,7 @@ def scan_trace(path: Path) -> Scan:
     # pieces[-1] is b"" when the file ends with a newline, else the unterminated last line.
     config: dict[str, Any] | None = None
     fmt = ""
+    release: str | None = None
     slots: list[SlotRecord] = []
     lines: list[TracksLine] = []
     ends: list[MissionEnd] = []
@@ -57,7 +58,9 @@ def scan_trace(path: Path) -> Scan:
                 offset = good_end = end
                 continue
             if config is None:
-                fmt, config = parse_header(loads_line(text))
+                head = loads_line(text)
+                fmt, config = parse_header(head)
+                release = written_by(head)
             else:
                 obj = loads_line(text)
                 if isinstance(obj, dict) and "end" in obj:
@@ -86,6 +89,7 @@ def scan_trace(path: Path) -> Scan:
         ends=ends,
         lines=lines,
         format=fmt,
+        written_by=release,
     )
     return Scan(trace=trace, good_end=good_end, tail_unterminated_ok=tail_ok)
 

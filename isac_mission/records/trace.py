@@ -33,6 +33,9 @@ class Trace:
     """Every slot line's tracks, whatever the number of targets (records/tracks.py)."""
     format: str = ""
     """Line 1's format (records/header.py)."""
+    written_by: str | None = None
+    """The release of isac-mission that wrote the trace (line 1's `isac_mission_version`; None
+    for a trace written before 0.4.0)."""
 
     @property
     def end(self) -> MissionEnd | None:

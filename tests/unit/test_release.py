@@ -50,6 +50,7 @@ def test_a_trace_names_the_release_that_wrote_it(tmp_path: Path) -> None:
     assert VERSION_KEY not in line_1["config"]
     back = read_trace(path)
     assert back.config == json.loads(json.dumps(config)) and len(back.slots) == 1
+    assert back.written_by == isac_mission.__version__
 
 
 def test_a_trace_without_the_release_reads_and_a_bad_one_is_refused(tmp_path: Path) -> None:
