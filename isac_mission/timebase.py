@@ -1,10 +1,15 @@
 """One time base: simulation-time sources and the one slot timeline (pure, no I/O).
 
 Time sources (`SimTime`): `now_s()` in simulation seconds, non-decreasing, and `speed`
-(simulation seconds per wall second, > 0). `WallTime` is the wall clock for real vehicles,
-`FuncTime` adapts any clock function (e.g. an in-process `sim.clock.SimClock`). The clock fed by
-the world's Zenoh `clock` messages is I/O and lives with the bridge
-(`isac_mission.service.bridge.clock_time.ClockSimTime`).
+(simulation seconds per wall second, > 0); and what the bridges need to know of the world's slot
+clock, so that no caller asks a time for its type: `follows_slot_clock`, `current_slot()` and
+`slot_end_s(n)` (None without a slot clock), `ready` and `wait_ready(timeout_s)`, and
+`start_clock(bus, keys)` / `stop_clock()` for a time fed by messages. `SimTime`'s own bodies are
+those of a free-running time (no slot clock, always ready, nothing to start): a class that
+subclasses `SimTime` inherits them and implements `now_s` and `speed` only. `WallTime` is the
+wall clock for real vehicles, `FuncTime` adapts any clock function (e.g. an in-process
+`sim.clock.SimClock`). The clock fed by the world's Zenoh `clock` messages is I/O and lives with
+the bridge (`isac_mission.service.bridge.clock_time.ClockSimTime`).
 
 Slots (`SlotTimeline(t0_s, dt_s)`): slot n covers simulation time (t0 + (n-1) dt, t0 + n dt];
 its end `slot_end_s(n) = t0 + n dt` is the boundary at which its detections are taken and by
@@ -22,7 +27,11 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Final, Protocol
+from typing import TYPE_CHECKING, Final, Protocol
+
+if TYPE_CHECKING:  # types of the clock subscription's arguments only: no I/O here
+    from isac_mission.bus import ZenohBus
+    from isac_mission.wire import Keys
 
 EPS_S: Final = 1e-9
 """The one tolerance, s, of simulation-time comparisons (slot boundaries, holds, waits)."""
@@ -38,7 +47,13 @@ def reached(now_s: float, t_s: float) -> bool:
 
 class SimTime(Protocol):
     """A source of simulation time: `now_s()` (s, non-decreasing) and `speed` (simulation
-    seconds per wall second, > 0)."""
+    seconds per wall second, > 0), and what it knows of the world's slot clock.
+
+    The members after `speed` have bodies: those of a free-running time, which follows no
+    world's slot clock (its slots are unknown: None), is always ready and has no clock to start
+    or stop. A class that subclasses `SimTime` inherits them (`WallTime`, `FuncTime`); a time fed
+    by the world's clock messages overrides them (`ClockSimTime`).
+    """
 
     def now_s(self) -> float:
         """Current simulation time, s."""
@@ -49,10 +64,50 @@ class SimTime(Protocol):
         """Simulation seconds per wall second."""
         ...
 
+    @property
+    def follows_slot_clock(self) -> bool:
+        """True when this time follows a world's slot clock, which knows the mission's slots
+        (False: a free-running time; `current_slot()` and `slot_end_s()` are then None)."""
+        return False
 
-class WallTime:
+    def current_slot(self) -> int | None:
+        """The latest slot n whose end t0 + n dt the world's clock has reached (-1 before the
+        mission starts); None when this time follows no slot clock."""
+        return None
+
+    def slot_end_s(self, slot: int) -> float | None:
+        """End of slot `slot`, t0 + slot dt in simulation seconds: when the vehicles must be at
+        plan `slot`'s waypoints. None when this time follows no slot clock or the mission start
+        t0 is not known yet."""
+        return None
+
+    @property
+    def ready(self) -> bool:
+        """True when `now_s()` is the simulation time (a time fed by clock messages: once the
+        first has arrived; before, it reads 0). A free-running time is always ready."""
+        return True
+
+    async def wait_ready(self, timeout_s: float) -> None:
+        """Return once `ready`, waiting at most `timeout_s` wall seconds (IsacError after).
+        A free-running time returns at once."""
+        return None
+
+    def start_clock(self, bus: ZenohBus, keys: Keys) -> bool:
+        """Start following the world's clock messages (`keys.clock` on `bus`) if this time
+        needs them and does not follow them yet; call on the event loop. True if this call
+        started it (then `stop_clock()` is the caller's); False for a free-running time."""
+        return False
+
+    async def stop_clock(self) -> None:
+        """Stop following the world's clock messages (idempotent); nothing for a free-running
+        time."""
+        return None
+
+
+class WallTime(SimTime):
     """The wall clock as simulation time, for real vehicles: Unix seconds (anchored once to
-    `time.time()` and advanced by the monotonic clock, so it never jumps), speed 1.
+    `time.time()` and advanced by the monotonic clock, so it never jumps), speed 1. Free-running:
+    no slot clock, always ready (`SimTime`'s bodies).
 
     Args:
         epoch_s: Subtracted from the Unix time (e.g. the mission start), s.
@@ -71,8 +126,9 @@ class WallTime:
         return 1.0
 
 
-class FuncTime:
+class FuncTime(SimTime):
     """Simulation time from functions: `now()` in s, `speed()` (or a fixed number).
+    Free-running: no slot clock, always ready (`SimTime`'s bodies).
 
     For an in-process clock, e.g. `FuncTime(lambda: clock.now_s, lambda: clock.speed)`.
     """

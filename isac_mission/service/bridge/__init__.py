@@ -30,7 +30,9 @@ MAV_FRAME_LOCAL_NED is centred on its `origin_xy_m` in the scenario plane on the
 x = east + x0, y = north + y0, altitude = -down. The simulated vehicles all use the scenario
 origin (0, 0), the default.
 
-Time (isac_mission/timebase.py): everything runs on a `SimTime` (`now_s()` and `speed`):
+Time (isac_mission/timebase.py): everything runs on a `SimTime` (`now_s()` and `speed`, and
+what the bridges need of the world's slot clock: `current_slot()`, `slot_end_s(n)`, `ready`,
+`wait_ready`, `start_clock`/`stop_clock`, so no bridge asks a time for its type):
 `ClockSimTime` follows the world's Zenoh `clock` messages, `WallTime` is the wall clock for real
 vehicles, `FuncTime` adapts any clock function (e.g. an in-process SimClock). Command ACK
 timeouts are wall seconds; every other timeout is in simulation seconds

@@ -22,8 +22,9 @@ from isac_mission.wire import ClockMsg, Keys, decode
 log = logging.getLogger(__name__)
 
 
-class ClockSimTime:
-    """Simulation time from the world's `clock` messages, extrapolated in between.
+class ClockSimTime(SimTime):
+    """Simulation time from the world's `clock` messages, extrapolated in between: the
+    `SimTime` that follows the world's slot clock (`follows_slot_clock`).
 
     now_s() = t of the last clock message + (wall time since it arrived) x its speed, at most
     `max_extrapolation_s` beyond it (so time stops with the world's clock, e.g. while the world
@@ -31,8 +32,9 @@ class ClockSimTime:
     `restart_jump_s` behind is taken as a restarted world and followed.
     Before the first message now_s() is 0 and speed 1; `wait_ready()` waits for it.
 
-    Feed it with `update(msg)`, or `start(bus, keys)` to subscribe to `isac/<mission>/clock`
-    (invalid payloads are counted in `invalid`, logged and dropped).
+    Feed it with `update(msg)`, or `start(bus, keys)` (`start_clock`, the port's name) to
+    subscribe to `isac/<mission>/clock` (invalid payloads are counted in `invalid`, logged and
+    dropped).
     """
 
     def __init__(
@@ -88,6 +90,11 @@ class ClockSimTime:
         return 1.0 if self._msg is None else self._msg.speed
 
     @property
+    def follows_slot_clock(self) -> bool:
+        """True: this time follows the world's slot clock."""
+        return True
+
+    @property
     def slot_s(self) -> float | None:
         """Slot length, s (None before the first message)."""
         return None if self._msg is None else self._msg.slot_s
@@ -98,7 +105,8 @@ class ClockSimTime:
         return None if self._msg is None else self._msg.mission_t0_s
 
     def current_slot(self) -> int:
-        """The slot n with t0 + n dt <= now (-1 before the mission)."""
+        """The slot n with t0 + n dt <= now (-1 before the mission; never None: this time
+        follows the world's slot clock)."""
         msg = self._msg
         if msg is None or msg.mission_t0_s is None:
             return -1
@@ -125,6 +133,18 @@ class ClockSimTime:
     def running(self) -> bool:
         """True while subscribed (after start, before stop)."""
         return self._task is not None
+
+    def start_clock(self, bus: ZenohBus, keys: Keys) -> bool:
+        """`start(bus, keys)` unless `running`; True if this call started the subscription
+        (then `stop_clock()` is the caller's)."""
+        if self.running:
+            return False
+        self.start(bus, keys)
+        return True
+
+    async def stop_clock(self) -> None:
+        """`stop()`: undeclare the subscription (idempotent)."""
+        await self.stop()
 
     def start(self, bus: ZenohBus, keys: Keys) -> None:
         """Subscribe to `keys.clock` on `bus` (call on the event loop)."""
@@ -159,19 +179,18 @@ class ClockSimTime:
 async def open_bus_and_clock(
     bus: ZenohBus | None, bus_settings: BusSettings | None, time: SimTime, keys: Keys
 ) -> tuple[ZenohBus, bool]:
-    """The given bus, or a new one; starts a ClockSimTime's subscription if it is not running.
-    Returns (bus, whether this call started the clock)."""
+    """The given bus, or a new one; starts the subscription of a time that follows the world's
+    clock messages if it is not running (`SimTime.start_clock`). Returns (bus, whether this call
+    started the clock)."""
     if bus is None:
         bus = await ZenohBus.open_async(bus_settings)
-    if isinstance(time, ClockSimTime) and not time.running:
-        time.start(bus, keys)
-        return bus, True
-    return bus, False
+    return bus, time.start_clock(bus, keys)
 
 
 async def close_bus_and_clock(own_bus: ZenohBus | None, started_clock: SimTime | None) -> None:
-    """Undo `open_bus_and_clock`: stop the clock it started, close the bus it opened."""
-    if isinstance(started_clock, ClockSimTime):
-        await started_clock.stop()
+    """Undo `open_bus_and_clock`: stop the clock it started (`started_clock`: the time whose
+    `start_clock` returned True, else None), close the bus it opened."""
+    if started_clock is not None:
+        await started_clock.stop_clock()
     if own_bus is not None:
         own_bus.close()

@@ -21,11 +21,7 @@ from isac_mission.bus import BusSettings, ZenohBus
 from isac_mission.config import Scenario
 from isac_mission.errors import IsacError, LinkError, MessageError
 from isac_mission.mavwire.ports import OFFBOARD_BASE_PORT
-from isac_mission.service.bridge.clock_time import (
-    ClockSimTime,
-    close_bus_and_clock,
-    open_bus_and_clock,
-)
+from isac_mission.service.bridge.clock_time import close_bus_and_clock, open_bus_and_clock
 from isac_mission.service.bridge.counters import FleetCounters
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.vehicle import VehicleBridge
@@ -217,12 +213,12 @@ class BridgeFleet:
         await self._all(lambda b: b.hold(), "hold")
 
     def deadline_s(self, slot: int) -> float:
-        """When plan `slot`'s waypoints must be reached: t0 + slot * dt from the clock, or
-        now + slot_s when the mission start is unknown (simulation seconds)."""
-        if isinstance(self.time, ClockSimTime):
-            end = self.time.slot_end_s(slot)
-            if end is not None:
-                return end
+        """When plan `slot`'s waypoints must be reached: t0 + slot * dt from the world's slot
+        clock, or now + slot_s when the time follows none or the mission start is unknown
+        (simulation seconds)."""
+        end = self.time.slot_end_s(slot)
+        if end is not None:
+            return end
         return self.time.now_s() + self.slot_s
 
     def on_plan(self, plan: PlanMsg, arrive_by_s: float | None = None) -> bool:
@@ -248,7 +244,7 @@ class BridgeFleet:
         if plan.slot <= st.last_slot:
             st.counters.plans_stale += 1
             return False
-        end = self.time.slot_end_s(plan.slot) if isinstance(self.time, ClockSimTime) else None
+        end = self.time.slot_end_s(plan.slot)  # None: no slot clock, or t0 not known yet
         if arrive_by_s is None and plan_is_late(end, self.time.now_s(), self.slot_s):
             st.counters.plans_late += 1
             st.counters.last_error = f"plan {plan.slot}: its slot ended at {end:.1f} s; dropped"

@@ -25,7 +25,6 @@ import numpy as np
 
 from isac_mission.errors import LinkError
 from isac_mission.mavwire.builders import arm_command, offboard_mode_command, takeoff_command
-from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.commanding import VehicleCommander
 from isac_mission.service.bridge.setpoints import SetpointStream
 from isac_mission.service.bridge.settings import BridgeSettings
@@ -105,8 +104,7 @@ class OffboardEntry:
             s.connect_timeout_s,
             "the vehicle's heartbeat and position",
         )
-        if isinstance(self.time, ClockSimTime):
-            await self.time.wait_ready(s.connect_timeout_s)
+        await self.time.wait_ready(s.connect_timeout_s)  # the world's first clock message
         here = vehicle_xy(st, self._origin)
         assert here is not None
         stream.hover(here)

@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import Final
-
-from isac_mission.timebase import SimTime
+from typing import Final, Protocol
 
 MIN_WALL_PERIOD_S: Final = 0.001
 """Shortest wall sleep of a periodic loop (a very fast or unpaced simulation)."""
@@ -23,10 +21,19 @@ MIN_SPEED: Final = 1e-9
 """Floor of the time source's speed in wall-time divisions (a stopped clock)."""
 
 
+class PaceSource(Protocol):
+    """What a paced loop reads of its time source (any `SimTime`): its speed only."""
+
+    @property
+    def speed(self) -> float:
+        """Simulation seconds per wall second."""
+        ...
+
+
 async def run_paced(
     rate_hz: float,
     tick: Callable[[], None],
-    time: SimTime,
+    time: PaceSource,
     on_error: Callable[[Exception], None],
 ) -> None:
     """Call `tick()` every 1 / rate_hz simulation seconds of `time` until cancelled;

@@ -34,11 +34,7 @@ from isac_mission.mavwire.builders import (
 )
 from isac_mission.mavwire.serial_link import open_link
 from isac_mission.mavwire.status import VehicleStatus
-from isac_mission.service.bridge.clock_time import (
-    ClockSimTime,
-    close_bus_and_clock,
-    open_bus_and_clock,
-)
+from isac_mission.service.bridge.clock_time import close_bus_and_clock, open_bus_and_clock
 from isac_mission.service.bridge.commanding import VehicleCommander
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.legs import as_xy
@@ -61,7 +57,8 @@ class VehicleBridge:
 
     Args:
         settings: Ports, frames, rates, tolerances.
-        time: Simulation time (ClockSimTime is started on `bus` if it is not running).
+        time: Simulation time (a time that follows the world's clock messages is started on
+            `bus` if it is not running: `SimTime.start_clock`).
         keys: The mission's Zenoh keys.
         bus: A Zenoh session owned by the caller; None = open one with `bus_settings`.
         bus_settings: For the bridge's own session (default `BusSettings()`).
@@ -229,7 +226,8 @@ class VehicleBridge:
     @property
     def slot(self) -> int:
         """The latest slot the bridge knows of (-1 before the mission)."""
-        from_clock = self.time.current_slot() if isinstance(self.time, ClockSimTime) else -1
+        clock_slot = self.time.current_slot()  # None: a time without the world's slot clock
+        from_clock = -1 if clock_slot is None else clock_slot
         return max(-1, from_clock, self.plan_slot - 1)
 
     @property
@@ -348,7 +346,7 @@ class VehicleBridge:
             self.counters.heartbeats_sent += 1
 
     def _telemetry_tick(self) -> None:
-        if isinstance(self.time, ClockSimTime) and not self.time.ready:
+        if not self.time.ready:
             # No simulation time to stamp with yet: telemetry stamped 0 would look minutes old
             # once the world's clock arrives, and the ground loop would plan around every vehicle.
             return
