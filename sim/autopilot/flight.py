@@ -4,8 +4,10 @@ Modes HOLD (AUTO.LOITER; DO_REPOSITION flies it to a point), TAKEOFF (AUTO.TAKEO
 (AUTO.LAND), RTL (AUTO.RTL, `rtl`), MISSION (AUTO.MISSION, `mission_flight`) and OFFBOARD;
 `armed` and `landed` complete the state (landed/disarmed, armed on the ground, in the air). A
 vehicle disarmed in the air (force disarm) falls under gravity to the ground. The failsafes
-(`failsafes`: offboard loss, datalink loss, low battery, auto-disarm) run before each step, the
-battery (`battery`) draws energy at each step.
+(`failsafes`: offboard loss, datalink loss, low battery, auto-disarm) are checked before each
+step, the battery (`battery`) draws energy at each step. The failsafes, RTL and MISSION are
+values in, a decision out: this class hands them what they read of the vehicle and applies
+what they decide (a mode change, a disarm, a STATUSTEXT, guidance).
 
 Everything runs on simulation time: `step(now_s, dt_s)` integrates the vehicle (`sim.vehicle`),
 checks the timeouts against `now_s` and runs the land detector. Frames: local NED (north, east,
@@ -27,8 +29,14 @@ from isac_mission.mavwire.modes import FlightMode
 from isac_mission.types import FloatArray
 from sim.autopilot import failsafes
 from sim.autopilot.battery import Battery
+from sim.autopilot.failsafes import (
+    BatteryActionDue,
+    FailsafeDecision,
+    FailsafeParams,
+    FailsafeStatus,
+)
 from sim.autopilot.guidance import Guidance, fall_step, goto, land_below
-from sim.autopilot.mission_flight import MissionRunner
+from sim.autopilot.mission_flight import MissionFrame, MissionRunner, MissionVehicle
 from sim.autopilot.params import LIMIT_FIELDS, Param
 from sim.autopilot.rtl import Rtl, RtlPhase
 from sim.autopilot.settings import AutopilotSettings
@@ -93,11 +101,14 @@ class FlightLogic:
         self.home_ned = self.vehicle.position_ned_m.copy()
         """Where the vehicle armed last (local NED (3,), m)."""
         self.battery = Battery(settings.battery)
-        self.battery_action_due: tuple[FlightMode, float] | None = None
+        self.battery_action_due: BatteryActionDue | None = None
         """A low-battery action and the simulation time it is due (COM_BAT_ACT_T)."""
-        self.battery_thresholds = failsafes.battery_thresholds(self)
-        """BAT_LOW_THR, BAT_CRIT_THR, BAT_EMERGEN_THR in force (refreshed on PARAM_SET)."""
-        self.mission = MissionRunner()
+        self.failsafe_params = FailsafeParams.of(self.param)
+        """The failsafes' parameters in force (refreshed on PARAM_SET)."""
+        self.mission = MissionRunner(
+            MissionFrame(settings.geo_origin, self.origin_xy_m, self.limits.ground_down_m),
+            self.system_id,
+        )
         """The uploaded plan and its progress (flown in MISSION)."""
         self.offboard_sp: Guidance | None = None
         self.last_setpoint_s = -math.inf
@@ -117,13 +128,13 @@ class FlightLogic:
         """Push a changed parameter into the live limits."""
         if name in LIMIT_FIELDS:
             self.limits = replace(self.limits, **{LIMIT_FIELDS[name]: self.params[name].value})
-        self.battery_thresholds = failsafes.battery_thresholds(self)
+        self.failsafe_params = FailsafeParams.of(self.param)
 
     def step(self, now_s: float, dt_s: float) -> None:
         """Advance to simulation time `now_s` (s) by `dt_s` (s): failsafes, physics, battery,
         land detector, then a new snapshot."""
         self.now_s = now_s
-        failsafes.check_failsafes(self)
+        self._check_failsafes()
         v0 = self.vehicle
         if not self.armed:
             if self.height_m() > 0.0:
@@ -139,12 +150,57 @@ class FlightLogic:
         self.yaw_rate_rps = wrap_pi(v1.yaw_rad - v0.yaw_rad) / dt_s
         vn, ve, vd = v1.velocity_ned_mps.tolist()
         level = self.battery.step(
-            dt_s, self.armed, math.hypot(vn, ve), -vd, self.battery_thresholds
+            dt_s, self.armed, math.hypot(vn, ve), -vd, self.failsafe_params.thresholds
         )
         if level is not None:
-            failsafes.on_battery_warning(self, level)
+            status = self._failsafe_status()
+            self._apply(failsafes.battery_warning(level, status, self.failsafe_params))
         self._update_land_detector()
         self.state = self.snapshot()
+
+    def _failsafe_status(self) -> FailsafeStatus:
+        """What the failsafes read of the vehicle now."""
+        return FailsafeStatus(
+            system_id=self.system_id,
+            now_s=self.now_s,
+            mode=self.mode,
+            armed=self.armed,
+            landed=self.landed,
+            armed_at_s=self.armed_at_s,
+            landed_at_s=self.landed_at_s,
+            last_setpoint_s=self.last_setpoint_s,
+            last_client_heartbeat_s=self.last_client_heartbeat_s,
+            gcs_lost=self.gcs_lost,
+            battery_action_due=self.battery_action_due,
+            battery_warning=self.battery.warning,
+            battery_remaining=self.battery.remaining,
+        )
+
+    def _check_failsafes(self) -> None:
+        """Every failsafe check in order, each on the status the decisions before it left."""
+        status = self._failsafe_status()
+        for check in failsafes.CHECKS:
+            decision = check(status, self.failsafe_params)
+            if decision is not None:
+                self._apply(decision)
+                status = self._failsafe_status()
+
+    def _apply(self, d: FailsafeDecision) -> None:
+        """Carry out a failsafe's decision (in `FailsafeDecision`'s order)."""
+        if d.gcs_lost:
+            self.gcs_lost = True
+        if d.drop_battery_action:
+            self.battery_action_due = None
+        if d.mode is not None:
+            self.set_mode(d.mode, d.reason)
+        if d.disarm:
+            self.disarm(d.reason)
+        if d.statustext is not None:
+            self.say(*d.statustext)
+        if d.battery_action_due is not None:
+            self.battery_action_due = d.battery_action_due
+        if d.gcs_lost:
+            self.state = self.snapshot()
 
     def height_m(self) -> float:
         """Height above the ground, m."""
@@ -168,7 +224,7 @@ class FlightLogic:
         """What the armed vehicle tracks this step; None = motors idle (stay put)."""
         mode = self.mode
         if mode is FlightMode.MISSION:
-            return self.mission.guidance(self)
+            return self._mission_guidance()
         if self.landed and mode in (FlightMode.HOLD, FlightMode.LAND, FlightMode.RTL):
             return None
         if mode is FlightMode.TAKEOFF:
@@ -181,6 +237,26 @@ class FlightLogic:
             guidance = self.rtl.guidance(self.vehicle, self.now_s)
             return guidance if guidance is not None else self.land_here(self.rtl.home_ned_m[:2])
         return self.offboard_sp
+
+    def _mission_guidance(self) -> Guidance | None:
+        """MISSION's guidance this step: the mission's decision, applied."""
+        decision = self.mission.fly(
+            MissionVehicle(
+                now_s=self.now_s,
+                position_ned_m=self.vehicle.position_ned_m,
+                landed=self.landed,
+                home_ned_m=self.home_ned,
+                cruise_mps=self.cruise_mps(),
+                acceptance_radius_m=self.param("NAV_ACC_RAD"),
+                altitude_radius_m=self.param("NAV_MC_ALT_RAD"),
+            )
+        )
+        if decision.mode is not None:
+            self.set_mode(decision.mode, decision.reason)
+            return None
+        if decision.land_xy_ned_m is not None:
+            return self.land_here(decision.land_xy_ned_m)
+        return decision.guidance
 
     def set_mode(self, mode: FlightMode, reason: str) -> None:
         """Switch to `mode` (HOLD holds at the stopping point, LAND lands below it, RTL returns
@@ -200,7 +276,7 @@ class FlightLogic:
                 self.cruise_mps(),
             )
         elif mode is FlightMode.MISSION:
-            self.mission.resume(self, stop)
+            self.mission.resume(stop)
         if mode is not self.mode:
             logger.info(
                 "vehicle %d: mode %s -> %s (%s)",
@@ -260,7 +336,7 @@ class FlightLogic:
             self.landed_at_s = self.now_s
             logger.info("vehicle %d: landed", self.system_id)
             if self.mode is FlightMode.MISSION:
-                self.mission.touched_down(self)
+                self.mission.touched_down(self.vehicle.position_ned_m)
         to_go_m = abs(float(self._takeoff_ned[2] - self.vehicle.position_ned_m[2]))
         if self.mode is FlightMode.TAKEOFF and not self.landed and to_go_m < _TAKEOFF_DONE_M:
             self.set_mode(FlightMode.HOLD, "takeoff complete")
