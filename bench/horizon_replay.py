@@ -1,5 +1,5 @@
 """The horizon's IPOPT solves of one closed loop, recorded and solved again under other IPOPT
-options (docs/performance.md, "The KKT matrix unscaled").
+options (docs/decisions/0016-horizon-kkt-unscaled.md).
 
 One fleet of bench/horizon_fleet.py (M UAVs, the live settings) flies `--slots` slots with the
 horizon, interpreted, and every call of its IPOPT problems is recorded (start, parameters,
@@ -16,7 +16,7 @@ Run: python bench/horizon_replay.py [--size 24] [--slots 30] [--seed 1]
          [--variant NAME='{"ipopt option": value, ...}' ...]
      (default variants: the planner's options, and IPOPT's default MUMPS scalings; the key
      "hess_lag": null builds the variant with CasADi's automatic Hessian instead of the
-     planner's, docs/performance.md, "The Hessian through the information")
+     planner's, docs/decisions/0019-hessian-through-the-information.md)
 """
 
 from __future__ import annotations
@@ -73,6 +73,7 @@ def record(m: int, slots: int, seed: int) -> Recorded:
 
     import isac_mission.planning.nlp_model as nlp_model
     from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
+    from isac_mission.planning.registry import planner
     from isac_mission.planning.slot import SolverKit
 
     recorded = Recorded()
@@ -87,7 +88,7 @@ def record(m: int, slots: int, seed: int) -> Recorded:
 
     s = fleet_scenario(m, slots)
     kit = SolverKit(s, ipopt=factory)
-    kit.warm_up("horizon")
+    planner("horizon").prepare(kit)
     recorded.calls.clear()
     run_closed_loop(s, "horizon", draw_run_noise(s, seed), kit, lambda _: None)
     return recorded

@@ -7,7 +7,7 @@ safety_margin_m on top of the scenario's safety rule (`planner.safety_margin`; 0
 rule's margins, the same offline and live) and, without the vehicle model, each waypoint
 reachable with accel_fraction x a_max (`planner.accel_limit_mps2`; 0: off).
 `simulate --live-settings` plans on exactly this scenario, so that an offline study holds for the
-service. The defaults were chosen by live missions (docs/performance.md, Table 12).
+service. The defaults were chosen by live missions (docs/decisions/0010-live-settings.md).
 
 Pure: plain numbers in, a Scenario out (no CLI options, no I/O).
 """

@@ -327,7 +327,7 @@ class HorizonConfig(Section):
         "is planned on two problems with the rows of only the pairs up to pair_band and up to "
         "2 pair_band apart in an order of the fleet that every pair within reach fits; a slot "
         "whose pairs within reach fit neither flies the per-slot plan (planning/pairs.py; "
-        "docs/model.md, 'Receding horizon: the pairs within reach').",
+        "docs/model.md, 'The pairs within reach').",
     )
 
 

@@ -10,7 +10,7 @@ Nothing here writes a file unless asked: `save_png(fig, path, dpi=...)` does, at
 pixels (the CLI's commands call it). Inputs are traces as read by
 `isac_mission.records.read_trace`; the config keys used are bs_xy, d_th, area and
 uav_start_xy (all optional except bs_xy for the trajectory plot). The tracks picture reads a
-tracks trace (docs/trace.md, "Multi-target traces") with `read_tracks_trace`.
+tracks trace (docs/trace.md, "Lines of a tracker of several tracks") with `read_tracks_trace`.
 """
 
 from __future__ import annotations

@@ -7,8 +7,8 @@ every run has its tracks' figures (`track_metrics`: GOSPA, each target's error a
 track's bound); a run whose one track is labelled (a single track in every slot, updated with
 its own measurement variances: `TrackEstimate.variances`) also has that track's per-slot arrays
 (`closed_loop.RunResult`), and its trace is the slot records of docs/trace.md. A run whose
-tracks are found and followed from unlabelled reports is traced as docs/trace.md, "Multi-target
-traces", describes (records/tracks.py).
+tracks are found and followed from unlabelled reports is traced as docs/trace.md, "Lines of a
+tracker of several tracks", describes (records/tracks.py).
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ from isac_mission.config import Scenario
 from isac_mission.experiment.closed_loop import RunResult, SlotOutcome, fly_offline
 from isac_mission.experiment.track_metrics import RunFigures, track_figures
 from isac_mission.nlp_cache import CompiledNlpCache
-from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method
 from isac_mission.records import SlotRecord, TraceWriter
 from isac_mission.records import tracks as tracks_trace
 from isac_mission.tracking.factory import draw_noise, keep_out_tracks, scene_for, tracker_for

@@ -3,7 +3,7 @@
 A pair's separation rows (14i at every leg sample of the horizon) can only bind if the two UAVs
 can come within the rows' distance inside the horizon. Every plan that meets the horizon's other
 rows keeps each UAV m within reach_m[m] of its start (the step rows 14h and, on the vehicle
-model, the velocity control points; docs/model.md, "Receding horizon: the pairs within reach"),
+model, the velocity control points; docs/model.md, "The pairs within reach"),
 so the rows of a pair whose start distance is at least their distance plus both reaches are
 implied by the rest: dropping them changes neither the problem's feasible set nor its solutions.
 

@@ -124,7 +124,7 @@ RESUME_FIELDS = ("plan_eta", "tracker")
 
 def resume_fields(o: TracksSlot) -> dict[str, Any]:
     """The fields a live slot line adds so that a restart continues after it (docs/trace.md,
-    "Multi-target traces"): `plan_eta`, the shares of the slot's plan (the next plan starts from
+    "Lines of a tracker of several tracks"): `plan_eta`, the shares of the slot's plan (the next plan starts from
     them), and `tracker`, what the tracker carries to the next slot beside the `tracks` (each
     track's information J, hits and misses in a row, and pending refutation; the internal
     candidates; the next track ID). {} without a tracker state (offline)."""

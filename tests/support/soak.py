@@ -15,7 +15,7 @@ statistically the same mission, and slower than the UAVs, which must keep D_s fr
 360-gon (sides 7.9 m, 0.02 m inside the circle), whose corners step the velocity by 0.26 m/s
 twice a slot. An earlier loop, a 24-gon of radius 900 m, stepped it by 3.9 m/s at each corner,
 an acceleration beyond any bound, and most of its infeasible slots came right after a corner
-(docs/performance.md, Table 14). The scenario's own CV target
+(docs/performance.md, "The soak: safety over 3600 slots"). The scenario's own CV target
 (`target="cv"`) reflects off the area's walls, but its velocity is a random walk (kappa = 0.5
 m^2/s^3: an rms speed of about 67 m/s after 3600 s), so its later quarters are a harder problem
 and their planning time says nothing about leaks.

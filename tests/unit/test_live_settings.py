@@ -86,8 +86,8 @@ def test_changes_list_every_changed_setting(paper: Scenario) -> None:
 
 
 def test_the_live_defaults_are_the_vehicle_model_and_the_safety_rule(paper: Scenario) -> None:
-    """Chosen by live missions (docs/performance.md, Table 12): the scenario's safety rule, no
-    fixed margin on D_s, and the vehicle model."""
+    """Chosen by live missions (docs/decisions/0010-live-settings.md): the scenario's safety
+    rule, no fixed margin on D_s, and the vehicle model."""
     live = LIVE_SETTINGS.apply(paper)
     assert live.planner.vehicle_model and live.planner.safety_margin == "covariance"
     assert live.d_safe == paper.d_safe

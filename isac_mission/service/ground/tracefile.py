@@ -281,7 +281,7 @@ def track_set_slot(g: GroundSlot) -> TracksSlot:
 
 
 class TrackSetOutput:
-    """The trace of tracks (docs/trace.md, "Multi-target traces")."""
+    """The trace of tracks (docs/trace.md, "Lines of a tracker of several tracks")."""
 
     report_type = DetectionSetMsg
     truth_type = TruthSetMsg
