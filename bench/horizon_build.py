@@ -37,6 +37,7 @@ def main() -> None:
 
     import isac_mission.planning.nlp_model as nlp_model
     from isac_mission.planning.horizon import horizon_nlp, kit_pair_bands
+    from isac_mission.planning.registry import planner
     from isac_mission.planning.slot import SolverKit
 
     shares = "like" in inspect.signature(nlp_model.plain_ipopt).parameters
@@ -63,7 +64,7 @@ def main() -> None:
             warm = next(v for k, v in builds.items() if k.endswith("_warm"))
             print(f"{m:>3} {band:>4} {cold:>7.2f} {warm:>7.2f} {spent:>7.2f}")
         started = time.perf_counter()
-        kit.warm_up("horizon")
+        planner("horizon").prepare(kit)
         warm_up_s = time.perf_counter() - started
         print(f"{m:>3}  all {'':>7} {'':>7} {total:>7.2f}  + warm-up {warm_up_s:.2f} s")
 

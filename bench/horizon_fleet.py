@@ -6,7 +6,7 @@ M // 2) random BSs, N_a = ceil(M / K) + 1, the paper's bandwidth per UAV (B = 20
 planned with the live settings (vehicle model on). Each cell is one closed-loop mission per
 method and seed (the same noise for both methods), run in a subprocess of its own.
 
-Per M and method: build (SolverKit.warm_up, cold: there is no disk cache), median and p95 of the
+Per M and method: build (the method's prepare, cold: there is no disk cache), median and p95 of the
 plan time (report.solve_s), and for `horizon` IPOPT's iterations (median, max) and the slots
 converged (its answer flown), stopped at the iteration cap on a feasible, lower iterate (flown),
 at the cap otherwise (the per-slot plan flown instead) and fallen back for another reason; the
@@ -99,6 +99,7 @@ def run_cell(
 ) -> dict[str, dict[str, object]]:
     """The methods' closed loops at M = m, seed `seed`: what the table needs, as JSON values."""
     from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run_closed_loop
+    from isac_mission.planning.registry import planner
     from isac_mission.planning.slot import SolverKit
 
     s = fleet_scenario(m, slots)
@@ -111,7 +112,7 @@ def run_cell(
         else:
             kit = SolverKit(s)
         t0 = time.perf_counter()
-        kit.warm_up(method)
+        planner(method).prepare(kit)
         build_s = time.perf_counter() - t0
         outcomes: list[SlotOutcome] = []
         result = run_closed_loop(s, method, draw_run_noise(s, seed), kit, outcomes.append)
@@ -216,7 +217,7 @@ def table(rows: list[tuple[str, int, dict[str, list[MethodRun]]]]) -> None:
                 f"{pcrb / proposed_pcrb:>7.3f} {np.median(times) / proposed_ms:>9.1f}"
             )
     print(
-        "build: SolverKit.warm_up, median over seeds (cold s: the largest; compiled: the first "
+        "build: the method's prepare, median over seeds (cold s: the largest; compiled: the first "
         "seed compiles); it: IPOPT's iterations; conv: "
         "IPOPT converged, its answer flown; kept: IPOPT at max_iterations, its feasible, lower "
         "last iterate flown; cap: at max_iterations, the per-slot plan flown; other: "

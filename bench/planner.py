@@ -8,7 +8,7 @@ produces (one run, seed 100).
 Cells per M: the five strategies with the default kit (position subproblem by CLARABEL called
 directly), then the proposed method with the position subproblem through cvxpy (CLARABEL, SCS),
 and `reference`: the proposed method with SolverKit(fast=False), every subproblem through cvxpy
-as before the performance work (docs/performance.md). OSQP, HIGHS and SCIPY cannot solve the
+as before the fast paths (docs/decisions/0004-planner-fast-paths.md). OSQP, HIGHS and SCIPY cannot solve the
 SOCP and ECOS is not installed.
 
 Time: plan_slot's own clock (report.solve_s), median and p95 over slots. Memory: tracemalloc peak
@@ -62,8 +62,9 @@ import numpy as np
 
 from isac_mission.config import Scenario, parse_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs, run_closed_loop
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.positions import PositionSubproblem
-from isac_mission.planning.slot import METHODS, Method, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import METHODS, Method, SlotInput, plan_slot, warm_up
 
 SIZES = ((3, 5), (6, 8), (12, 12), (24, 20))
 DEFAULT_METHODS = tuple(m for m in ("proposed", "sd", "aba", "crb", "horizon") if m in METHODS)
@@ -135,7 +136,7 @@ def peak_memory_kib(inputs: list[SlotInput], kit: SolverKit, method: Method) -> 
 def run_cell(m: int, k: int, slots: int, method: Method, solver: str) -> Cell:
     s = scenario(m, k, math.ceil(m / k) + 1, slots)
     kit = make_kit(s, solver)
-    kit.warm_up(method)  # the method's own problems built before timing
+    warm_up(kit, method)  # the method's own problems built before timing
     s = kit.scenario
     times, ok, inputs = recorded_run(s, method, kit)
     return Cell(m, k, method, solver, times, ok, peak_memory_kib(inputs, kit, method), inputs)
@@ -160,6 +161,7 @@ import json, sys
 import numpy as np
 from isac_mission.config import parse_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
+from isac_mission.planning.registry import planner
 from isac_mission.planning.slot import SolverKit
 m, k, n_a, slots = map(int, sys.argv[1:5])
 method = sys.argv[5]
@@ -169,7 +171,7 @@ s = parse_scenario({"timing": {"duration_s": slots, "slot_s": 1.0},
                     "radio": {"bs_capacity": n_a}, "base_stations": {"count": k},
                     "uavs": {"start_xy_m": start.round(1).tolist()}}, "bench")
 kit = SolverKit(s)
-kit.warm_up(method)
+planner(method).prepare(kit)
 print(json.dumps(run_closed_loop(s, method, draw_run_noise(s, 100), kit).solve_s.tolist()))
 """
 
@@ -226,7 +228,7 @@ def profile(m: int, slots: int) -> None:
     k = dict(SIZES).get(m, max(5, m))
     s = scenario(m, k, math.ceil(m / k) + 1, slots)
     kit = SolverKit(s)
-    kit.warm_up()
+    warm_up(kit)
     prof = cProfile.Profile()
     prof.enable()
     result = run_closed_loop(s, "proposed", draw_run_noise(s, 100), kit)
@@ -386,7 +388,7 @@ def polish_table(cells: list[Cell], repeats: int = 3) -> None:
             continue
         s = scenario(c.m, c.k, math.ceil(c.m / c.k) + 1, len(c.times_s))
         kit = SolverKit(s)
-        kit.warm_up()
+        warm_up(kit)
         t_sca, t_pol, iters, gain, kept = [], [], [], [], []
         for inp in c.inputs:
             a_s, b_s = [], []

@@ -36,9 +36,10 @@ from bench.planner import scenario as ring_scenario  # noqa: E402
 from isac_mission.config import Scenario, load_scenario  # noqa: E402
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs  # noqa: E402
 from isac_mission.planning.feasibility import SlotConstraints, operating_area  # noqa: E402
+from isac_mission.planning.kit import SolverKit  # noqa: E402
 from isac_mission.planning.margins import MIN_SHARE, RATE_MARGIN, SOLVER_MARGIN_M  # noqa: E402
 from isac_mission.planning.per_slot import polish_nlp  # noqa: E402
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot  # noqa: E402
+from isac_mission.planning.slot import SlotInput, plan_slot  # noqa: E402
 from isac_mission.tracking.pcrb import PlanningObjective  # noqa: E402
 
 Solve = Callable[[np.ndarray, np.ndarray, PlanningObjective, SlotConstraints], np.ndarray]

@@ -62,7 +62,8 @@ from threadpoolctl import threadpool_limits
 from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
 from isac_mission.planning.feasibility import SlotConstraints
-from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method, SlotInput, plan_slot, warm_up
 from isac_mission.tracking.pcrb import PlanningObjective, SensingParams
 from isac_mission.types import FloatArray, SlotPlan
 
@@ -372,9 +373,9 @@ def replay(s: Scenario, slots: int, seeds: int, repeats: int, log: bool = True) 
     replay its sampled slots: `proposed-sca` and `proposed` with the polish on, interleaved in
     alternating order, `repeats` times each (the time is the minimum)."""
     kit = SolverKit(s)
-    kit.warm_up()
+    warm_up(kit)
     kit_on = kit if s.planner.polish else SolverKit(with_polish(s, True))
-    kit_on.warm_up()
+    warm_up(kit_on)
     per_seed = math.ceil(slots / seeds)
     out: list[Slot] = []
     for r in range(seeds):

@@ -40,8 +40,9 @@ from isac_mission.experiment.closed_loop import (  # noqa: E402
     draw_run_noise,
     run_closed_loop,
 )
+from isac_mission.planning.kit import SolverKit  # noqa: E402
 from isac_mission.planning.registry import live_default_method  # noqa: E402
-from isac_mission.planning.slot import METHODS, SolverKit  # noqa: E402
+from isac_mission.planning.slot import METHODS  # noqa: E402
 from isac_mission.quiet import quiet_highs_banner  # noqa: E402
 from isac_mission.service.mission_result import summarize_live  # noqa: E402
 from sim.target import ScriptedTarget  # noqa: E402

@@ -31,7 +31,7 @@ _EXPORTS: dict[str, str] = {
     "parse_scenario": "isac_mission.config",
     "scenario_names": "isac_mission.config",
     "SlotInput": "isac_mission.planning.slot",
-    "SolverKit": "isac_mission.planning.slot",
+    "SolverKit": "isac_mission.planning.kit",
     "SlotPlan": "isac_mission.types",
     "ClosedLoopRun": "isac_mission.api",
     "build_kit": "isac_mission.api",
@@ -85,7 +85,8 @@ if TYPE_CHECKING:
     from isac_mission.errors import ConfigError, IsacError, MessageError
     from isac_mission.experiment.montecarlo import run_monte_carlo, summarize
     from isac_mission.experiment.plots import plot_bandwidth, plot_performance, plot_trajectories
-    from isac_mission.planning.slot import SlotInput, SolverKit
+    from isac_mission.planning.kit import SolverKit
+    from isac_mission.planning.slot import SlotInput
     from isac_mission.records import Trace, read_trace
     from isac_mission.types import SlotPlan
 

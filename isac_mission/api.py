@@ -16,7 +16,8 @@ from isac_mission.config import Scenario
 from isac_mission.experiment.closed_loop import RunResult, SlotOutcome, draw_run_noise
 from isac_mission.experiment.closed_loop import run_closed_loop as _fly
 from isac_mission.experiment.montecarlo import outcome_record
-from isac_mission.planning.slot import Method, SlotInput, SolverKit
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method, SlotInput, warm_up
 from isac_mission.planning.slot import plan_slot as _plan
 from isac_mission.records import SlotRecord, Trace
 from isac_mission.tracking.cycle import CycleModel, TrackState, predict
@@ -28,7 +29,7 @@ def build_kit(scenario: Scenario) -> SolverKit:
     """The scenario's convex problems, built once (DPP) and warmed up; pass it to `plan_slot`
     and `run_closed_loop` to re-solve without rebuilding."""
     kit = SolverKit(scenario)
-    kit.warm_up()
+    warm_up(kit)
     return kit
 
 

@@ -1,5 +1,6 @@
 """Deprecations: renamed public fields keep their old names until `REMOVAL_VERSION`, each use
-warning (DeprecationWarning) with the release that removes it."""
+warning (DeprecationWarning); the old name's docstring and CHANGELOG.md ("Deprecated") name the
+release that removes it."""
 
 from __future__ import annotations
 
@@ -34,10 +35,14 @@ def renamed_fields(**old_to_new: str) -> Callable[[T], T]:
 
         cls.__init__ = init_with_old_names  # type: ignore[misc]
         for old, new in old_to_new.items():
-            setattr(cls, old, property(_reader(cls.__name__, old, new), doc=f"Deprecated: {new}."))
+            setattr(cls, old, property(_reader(cls.__name__, old, new), doc=_doc(new)))
         return cls
 
     return wrap
+
+
+def _doc(new: str) -> str:
+    return f"Deprecated, removed in {REMOVAL_VERSION}: {new}."
 
 
 def _reader(owner: str, old: str, new: str) -> Callable[[Any], Any]:
@@ -50,8 +55,5 @@ def _reader(owner: str, old: str, new: str) -> Callable[[Any], Any]:
 
 def _warn(owner: str, old: str, new: str, stacklevel: int = 3) -> None:
     warnings.warn(
-        f"{owner}.{old} is deprecated: use {owner}.{new} ({owner}.{old} is removed in "
-        f"{REMOVAL_VERSION})",
-        DeprecationWarning,
-        stacklevel=stacklevel,
+        f"{owner}.{old} is deprecated: use {owner}.{new}", DeprecationWarning, stacklevel=stacklevel
     )

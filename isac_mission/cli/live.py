@@ -394,8 +394,8 @@ def compile_problems(
     from isac_mission.config.live_settings import LIVE_SETTINGS
     from isac_mission.nlp_cache import CompiledNlpCache
     from isac_mission.planning.fleet import prepare_fleet
+    from isac_mission.planning.kit import SolverKit
     from isac_mission.planning.registry import METHODS
-    from isac_mission.planning.slot import SolverKit
     from isac_mission.planning.tracks import live_method
     from isac_mission.tracking.factory import keep_out_tracks
 

@@ -24,7 +24,8 @@ from isac_mission.model.run_noise import RunNoise
 from isac_mission.model.run_noise import draw_run_noise as draw_run_noise
 from isac_mission.model.scene import Scene
 from isac_mission.model.scene import true_trajectory as true_trajectory
-from isac_mission.planning.slot import Method, SlotInput, SolverKit
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method, SlotInput
 from isac_mission.planning.tracks import plan_tracks
 from isac_mission.tracking.factory import keep_out_tracks, scene_for, tracker_for
 from isac_mission.tracking.pcrb import Bound

@@ -20,7 +20,7 @@ from isac_mission.planning.problem import PlansOnceToWarmUp, SlotInput, build_sl
 from isac_mission.types import SlotPlan, SolveReport
 
 if TYPE_CHECKING:
-    from isac_mission.planning.slot import SolverKit
+    from isac_mission.planning.kit import SolverKit
 
 
 class StaticDeployment(PlansOnceToWarmUp):

@@ -22,7 +22,7 @@ one of them, along the direction that moves it away from all of them the most (`
 p1 = p0 + (v0 + v1) dt / 2, the parabola a cubic Hermite leg with these ends is (|a| <= a_max all
 along it, its speed largest at an end, <= V_max). Pushing along the miss vector instead, which
 grows the miss distance faster in theory, lost to V_max on the measured M = 12 trap (27.7 m of
-D_s = 30; docs/performance.md).
+D_s = 30; docs/model.md, "Evasion under the vehicle model").
 
 The target cannot be outbraked when it is faster than V_max, but it can be dodged:
 `target_escape` asks whether a UAV can still keep the clearance from every target motion within

@@ -21,8 +21,9 @@ import numpy as np
 
 from isac_mission.config import Scenario
 from isac_mission.planning.fallback import NO_BS, OPERATOR_HOLD, hold_plan
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.registry import planner
-from isac_mission.planning.slot import Method, SolverKit, plan_slot
+from isac_mission.planning.slot import Method, plan_slot, warm_up
 from isac_mission.planning.tracks import Planner as Planner
 from isac_mission.planning.tracks import TracksPlan, plan_tracks
 from isac_mission.tracking.beliefs import TargetBelief
@@ -70,7 +71,7 @@ class KitCache:
         kit = self._kits.get(active)
         if kit is None:
             kit = self._sub_kit(active)
-            kit.warm_up(self.method)
+            warm_up(kit, self.method)
             self._kits[active] = kit
         return kit
 
@@ -322,5 +323,5 @@ def prepare_fleet(
     fleets the mission can reach when vehicles leave the plan (KitCache.build_ahead, within
     budget_s; base_keep_out as KitCache's). Returns the fleet sizes built ahead: no plan of the
     mission builds an IPOPT problem until more vehicles than those leave the plan."""
-    kit.warm_up(method)
+    warm_up(kit, method)
     return KitCache(kit, method, base_keep_out).build_ahead(budget_s)

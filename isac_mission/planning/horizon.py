@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,12 +30,8 @@ from isac_mission.model.channel import min_share
 from isac_mission.model.vehicle import end_accelerations, velocity_control_points
 from isac_mission.planning.fallback import per_slot_instead
 from isac_mission.planning.feasibility import SlotConstraints, operating_area
-from isac_mission.planning.horizon_nlp import (
-    HorizonNLP,
-    HorizonSlotData,
-    HorizonSolution,
-    horizon_weights,
-)
+from isac_mission.planning.horizon_nlp import HorizonNLP, HorizonSlotData, HorizonSolution
+from isac_mission.planning.horizon_problem import horizon_weights
 from isac_mission.planning.legs import chord_point_clearance_m
 from isac_mission.planning.margins import (
     LEG_LIMIT_TOLERANCE,
@@ -70,7 +67,7 @@ from isac_mission.types import (
 )
 
 if TYPE_CHECKING:
-    from isac_mission.planning.slot import SolverKit
+    from isac_mission.planning.kit import SolverKit
 
 
 def horizon_bound_traces(
@@ -299,7 +296,296 @@ def ordered_nlp(
 
 
 Start = tuple[FloatArray, FloatArray, FloatArray]
-"""A horizon start: waypoints [L, M, 2], velocities [L, M, 2], shares [L, M]."""
+"""A horizon start: waypoints [L, M, 2] (m), velocities [L, M, 2] (m/s), shares [L, M]."""
+
+
+class PerSlotPlan:
+    """The slot's per-slot plan (`proposed`), computed on first need and kept: a start of the
+    horizon and its fallback (docs/model.md, "Start points")."""
+
+    def __init__(self, compute: Callable[[], SlotPlan], started_s: float) -> None:
+        """compute: plans it; started_s: the perf_counter time the slot's planning started."""
+        self._compute = compute
+        self._started_s = started_s
+        self.computed: SlotPlan | None = None
+        """The plan, once computed (None: it was not needed)."""
+
+    def get(self) -> SlotPlan:
+        """The plan, computed now if it was not yet."""
+        if self.computed is None:
+            self.computed = self._compute()
+        return self.computed
+
+    def instead(self, why: str, kind: str) -> SlotPlan:
+        """The plan flown instead of the horizon's answer, saying why (planning/fallback.py,
+        `per_slot_instead`; kind: the fallback kind the summaries count)."""
+        plan = self.get()
+        return per_slot_instead(plan, "horizon", why, kind, time.perf_counter() - self._started_s)
+
+
+@dataclass(frozen=True)
+class HorizonValue:
+    """The horizon objective of a plan (xy [L, M, 2] m, eta [L, M]): sum_l weights_l tr(PCRB_l)
+    by the bound's recursion from the lead target's prediction x_pred [4] and prior information
+    J_pred [4, 4] (`horizon_bound_traces`)."""
+
+    s: Scenario
+    weights: FloatArray
+    x_pred: FloatArray
+    J_pred: FloatArray
+    sensing: SensingParams
+
+    @classmethod
+    def of(
+        cls, s: Scenario, x_pred: FloatArray, J_pred: FloatArray, sensing: SensingParams
+    ) -> HorizonValue:
+        """The value of s's horizon (its weights, `horizon_weights`) for the lead target's
+        prediction x_pred [4] and prior information J_pred [4, 4]."""
+        cfg = s.planner.horizon
+        weights = horizon_weights(cfg.length, cfg.discount, cfg.terminal_weight)
+        return cls(s, weights, x_pred, J_pred, sensing)
+
+    def traces(self, xy: FloatArray, eta: FloatArray) -> FloatArray:
+        """tr(PCRB) [L] along the plan."""
+        return horizon_bound_traces(self.s, self.J_pred, self.x_pred, xy, eta, self.sensing)
+
+    def __call__(self, xy: FloatArray, eta: FloatArray) -> float:
+        return float(self.weights @ self.traces(xy, eta))
+
+
+@dataclass(frozen=True)
+class RankedStarts:
+    """A slot's horizon starts, ranked. starts: each with shares that meet 14a (the fleet's
+    order); in_order: the same in the NLP's order; data, ordered: the slot's NLP data in the
+    fleet's and the NLP's order; bs_of_uav [M]: the association the horizon keeps; scores:
+    (rank, value, index) sorted, feasible starts first (rank 0), then, under the vehicle model,
+    the nearer to feasible (rank: the largest row missed), else the lower objective
+    (docs/model.md, "Start points"); shifted: the index of last slot's horizon shifted among
+    the starts, None if it is not one."""
+
+    starts: list[Start]
+    in_order: list[Start]
+    data: HorizonSlotData
+    ordered: HorizonSlotData
+    bs_of_uav: IntArray
+    scores: list[tuple[float, float, int]]
+    shifted: int | None
+
+
+@dataclass(frozen=True)
+class HorizonSlot:
+    """What each step of one slot's horizon plan reads: the scenario s, the slot's input inp,
+    the NLP and the fleet's order for it (UAV order[a] in the NLP's UAV slot a), the velocity
+    [M, 2] (m/s) the first legs start with (`planned_start_velocity`), the lead target's
+    predicted covariance [4, 4] and the horizon objective."""
+
+    s: Scenario
+    inp: SlotInput
+    nlp: HorizonNLP
+    order: IntArray
+    start_velocity_mps: FloatArray
+    target_cov_pred: FloatArray
+    value: HorizonValue
+
+    def slot_data(self, bs_of_uav: IntArray, waypoints_xy_m: FloatArray) -> HorizonSlotData:
+        """The NLP's data with the association bs_of_uav [M] and the control BSs nearest
+        waypoints_xy_m [M, 2] (`horizon_slot_data`)."""
+        inp, velocity, cov = self.inp, self.start_velocity_mps, self.target_cov_pred
+        length = self.nlp.length
+        return horizon_slot_data(self.s, inp, velocity, cov, bs_of_uav, waypoints_xy_m, length)
+
+    def velocities(self, v: FloatArray | None) -> FloatArray | None:
+        """v for the NLP: itself under the vehicle model, else None."""
+        return v if self.nlp.vehicle_model else None
+
+    def ranked(
+        self,
+        candidates: list[Start],
+        data: HorizonSlotData,
+        bs_of_uav: IntArray,
+        shifted: int | None,
+    ) -> RankedStarts:
+        """The candidates, their shares moved to meet 14a (`_shares_meeting_rates`), ranked."""
+        s, nlp, order = self.s, self.nlp, self.order
+        link_m = nlp.margins.link_m
+        starts = [
+            (q, v, _shares_meeting_rates(s, q, e, data.serving_xy, link_m))
+            for q, v, e in candidates
+        ]
+        # A permutation of the UAV axis, which the value ignores.
+        in_order = [(q[:, order], v[:, order], e[:, order]) for q, v, e in starts]
+        ordered = data.in_order(order)
+        scores = []
+        for i, (q, v, e) in enumerate(in_order):
+            miss = nlp.violation(q, self.velocities(v), e, ordered)
+            rank = 0.0 if miss <= START_FEASIBILITY_TOL else miss if nlp.vehicle_model else 1.0
+            scores.append((rank, self.value(q, e), i))
+        return RankedStarts(starts, in_order, data, ordered, bs_of_uav, sorted(scores), shifted)
+
+
+def shifted_alone(slot: HorizonSlot, kit: SolverKit, shifted: Start) -> RankedStarts | None:
+    """Last slot's horizon shifted as the only start, with the slot's own association, where
+    it meets the rows (None otherwise): the per-slot plan was the lower start on few slots
+    (docs/model.md, "Start points") and costs a third of a slot."""
+    assoc = slot_association(slot.inp, kit)
+    ranked = slot.ranked([shifted], slot.slot_data(assoc, shifted[0][0]), assoc, 0)
+    return None if ranked.scores[0][0] > 0 else ranked
+
+
+def with_per_slot(slot: HorizonSlot, base: SlotPlan, shifted: Start | None) -> RankedStarts:
+    """The per-slot plan `base` continued at constant velocity (`_continue`) and, if there is
+    one, last slot's horizon shifted, ranked, with base's association. An infeasible per-slot
+    plan (its best effort) is a start too: the horizon's legs reach farther in one slot than
+    the per-slot method's (a_max against a_max / 4 of velocity change), and its answer flies
+    only if its first slot passes the exact check."""
+    s = slot.s
+    L, dt = slot.nlp.length, s.dt
+    data = slot.slot_data(base.bs_of_uav, base.uav_xy_m)
+    v1 = (
+        base.uav_velocity_mps
+        if base.uav_velocity_mps is not None
+        else (base.uav_xy_m - data.prev_xy) / dt
+    )
+    candidates = [_continue(base.uav_xy_m, v1, base.bandwidth_share, L, dt, s)]
+    if shifted is None:
+        return slot.ranked(candidates, data, base.bs_of_uav, None)
+    return slot.ranked([*candidates, shifted], data, base.bs_of_uav, len(candidates))
+
+
+def solve_best(slot: HorizonSlot, ranked: RankedStarts) -> HorizonSolution:
+    """The NLP solved from the best-ranked start (in its order), from last slot's multipliers
+    when that start is last slot's horizon shifted and they are of the same order."""
+    first = ranked.scores[0][2]
+    start = ranked.in_order[first]
+    prev_plan = slot.inp.prev_plan
+    duals = None
+    if ranked.shifted == first and prev_plan is not None and prev_plan.horizon is not None:
+        duals = prev_plan.horizon.duals
+    if duals is not None and not np.array_equal(duals.order, slot.order):
+        duals = None
+    return slot.nlp.solve(start[0], slot.velocities(start[1]), start[2], ranked.ordered, duals)
+
+
+@dataclass(frozen=True)
+class HorizonAnswer:
+    """The horizon plan to fly if its first slot passes the checks: sol in the fleet's order,
+    the multipliers for the next slot's warm start (None when the start was kept), and what the
+    report says of the solve."""
+
+    sol: HorizonSolution
+    duals: HorizonDuals | None
+    note: str
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """Why the horizon's answer is not flown (per_slot_instead's why and kind)."""
+
+    why: str
+    kind: str
+
+
+def answer(
+    slot: HorizonSlot, ranked: RankedStarts, sol: HorizonSolution
+) -> HorizonAnswer | Refusal:
+    """IPOPT's answer sol (the NLP's order) kept if it succeeded or stopped at its cap on a
+    better feasible iterate (`kept_at_cap`), in the fleet's order; its start instead where it
+    ended above a feasible start (a local solver may: the start is a valid horizon then)."""
+    nlp, order = slot.nlp, slot.order
+    start_miss, start_value, first = ranked.scores[0]
+    start_infeasible = start_miss > 0
+    note = f"IPOPT {sol.status} in {sol.iterations} it"
+    if not sol.success:
+        if not kept_at_cap(nlp, sol, ranked.ordered, start_infeasible, start_value, slot.value):
+            return Refusal(f"IPOPT {sol.status} after {sol.iterations} it", f"IPOPT {sol.status}")
+        note += f", {AT_CAP_NOTE}"
+    duals: HorizonDuals | None = HorizonDuals(
+        sol.lam_x, sol.lam_g, sol.f_scale, nlp.pair_band, order
+    )
+    sol = sol.in_order(np.argsort(order))
+    start = ranked.starts[first]
+    if not start_infeasible and slot.value(sol.uav_xy_m, sol.bandwidth_share) > start_value:
+        sol = replace(
+            sol,
+            uav_xy_m=start[0],
+            uav_velocity_mps=slot.velocities(start[1]),
+            bandwidth_share=start[2],
+        )
+        duals = None
+        note += ", its start kept (lower)"
+    return HorizonAnswer(sol, duals, note)
+
+
+def first_slot_refusal(
+    slot: HorizonSlot, data: HorizonSlotData, sol: HorizonSolution
+) -> Refusal | None:
+    """Why the plan's first slot may not fly (the exact check of 14a-14j, SlotConstraints, as
+    every method's plan passes it; the vehicle model's leg limits, `legs_ok`), None if it may."""
+    s = slot.s
+    xy1, eta1 = sol.uav_xy_m[0], sol.bandwidth_share[0]
+    cons = SlotConstraints(
+        data.prev_xy,
+        data.serving_xy,
+        s.bs_xy,
+        data.x_pred[:2],
+        s,
+        keep_out_xy=slot.inp.keep_out_xy_m,
+        target_clearance_m=float(predicted_clearances(s, slot.target_cov_pred, 1)[0]),
+        target_velocity_mps=data.x_pred[2:4],
+    )
+    if not bool(cons.feasible(xy1[None], eta1[None])[0]):
+        bad = ", ".join(cons.describe_violations(xy1, eta1))
+        return Refusal(f"IPOPT's answer violates {bad}", "answer infeasible")
+    if sol.uav_velocity_mps is not None:
+        velocity1 = sol.uav_velocity_mps[0]
+        if not legs_ok(s, data.prev_xy, slot.start_velocity_mps, xy1, velocity1):
+            return Refusal("IPOPT's first leg breaks the vehicle limits", "leg limits")
+    return None
+
+
+def horizon_slot_plan(
+    slot: HorizonSlot,
+    ranked: RankedStarts,
+    kept: HorizonAnswer,
+    base: SlotPlan | None,
+    started_s: float,
+) -> SlotPlan:
+    """The slot's plan: the horizon's first slot flown, the whole horizon carried for the next
+    slot's warm start; its report the per-slot plan's (base, None if it was not computed) with
+    the horizon's summary and solve_s since started_s (perf_counter, s)."""
+    sol = kept.sol
+    start_value = ranked.scores[0][1]
+    traces = slot.value.traces(sol.uav_xy_m, sol.bandwidth_share)
+    summary = (
+        f"horizon: {kept.note}, objective {start_value:.6g} -> "
+        f"{float(slot.value.weights @ traces):.6g}"
+    )
+    base_report = base.report if base is not None else SolveReport(status="ok")
+    report = replace(
+        base_report,
+        status="ok",  # also where the per-slot plan was its best effort
+        fallback="",
+        reason="",
+        solve_s=time.perf_counter() - started_s,
+        polish=summary if base is not None else f"{summary}, from the shifted horizon alone",
+        objective_history=(*base_report.objective_history, float(traces[0])),
+    )
+    velocity = sol.uav_velocity_mps
+    return SlotPlan(
+        uav_xy_m=sol.uav_xy_m[0],
+        bs_of_uav=ranked.bs_of_uav,
+        bandwidth_share=sol.bandwidth_share[0],
+        pcrb_trace=float(traces[0]),
+        report=report,
+        uav_velocity_mps=None if velocity is None else velocity[0],
+        horizon=HorizonPlan(
+            uav_xy_m=sol.uav_xy_m,
+            uav_velocity_mps=sol.uav_velocity_mps,
+            bandwidth_share=sol.bandwidth_share,
+            pcrb_trace=traces,
+            duals=kept.duals,
+        ),
+    )
 
 
 def plan_horizon(
@@ -313,166 +599,39 @@ def plan_horizon(
     when last slot's horizon shifted is none or does not meet the horizon's rows, and as the
     fallback (docs/model.md, "Receding horizon", "Start points"); started_s: the perf_counter
     time the slot's planning started (for solve_s)."""
-    sensing = kit.sensing
-    lead, prev_plan = inp.lead, inp.prev_plan
-    x_pred, J_pred, cov = lead.state_pred, lead.prior_information, lead.cov_pred
-    target_cov_pred = scaled_inverse(J_pred) if cov is None else cov
     s = kit.scenario
-    M, L, dt = s.M, s.planner.horizon.length, s.dt
+    base = PerSlotPlan(per_slot, started_s)
+    lead, prev_plan = inp.lead, inp.prev_plan
+    J_pred, cov = lead.prior_information, lead.cov_pred
+    target_cov_pred = scaled_inverse(J_pred) if cov is None else cov
     v = inp.prev_velocity_mps
-    prev_v = np.zeros((M, 2)) if v is None else np.asarray(v)
+    prev_v = np.zeros((s.M, 2)) if v is None else np.asarray(v)
     prev_v = planned_start_velocity(s, inp.prev_xy_m, prev_v, prev_plan)
-    computed: list[SlotPlan] = []
-
-    def base_plan() -> SlotPlan:
-        if not computed:
-            computed.append(per_slot())
-        return computed[0]
-
-    def fall_back(why: str, kind: str) -> SlotPlan:
-        plan = base_plan()
-        return per_slot_instead(plan, "horizon", why, kind, time.perf_counter() - started_s)
-
-    weights = horizon_weights(L, s.planner.horizon.discount, s.planner.horizon.terminal_weight)
-
-    def value(xy: FloatArray, eta: FloatArray) -> float:
-        return float(weights @ horizon_bound_traces(s, J_pred, x_pred, xy, eta, sensing))
-
     # The NLP and the fleet's order depend on the UAVs' start only (not on the association).
     nlp, order, width = ordered_nlp(kit, prev_xy_m=inp.prev_xy_m, prev_velocity_mps=prev_v)
-
-    def velocities(v: FloatArray | None) -> FloatArray | None:
-        return v if nlp is not None and nlp.vehicle_model else None
-
-    def scored(
-        candidates: list[Start], data: HorizonSlotData
-    ) -> tuple[list[Start], list[Start], HorizonSlotData, list[tuple[float, float, int]]]:
-        """(the starts with shares that meet 14a; the same and the data in the NLP's order of the
-        fleet; their (rank, value, index), feasible starts first (rank 0); then, under the
-        vehicle model, the nearer to feasible (rank: the largest row missed), else the lower
-        objective (docs/model.md, "Start points")."""
-        assert nlp is not None
-        link_m = nlp.margins.link_m
-        starts = [
-            (q, v, _shares_meeting_rates(s, q, e, data.serving_xy, link_m))
-            for q, v, e in candidates
-        ]
-        # A permutation of the UAV axis, which the value ignores.
-        in_order = [(q[:, order], v[:, order], e[:, order]) for q, v, e in starts]
-        ordered = data.in_order(order)
-        scores = []
-        for i, (q, v, e) in enumerate(in_order):
-            miss = nlp.violation(q, velocities(v), e, ordered)
-            rank = 0.0 if miss <= START_FEASIBILITY_TOL else miss if nlp.vehicle_model else 1.0
-            scores.append((rank, value(q, e), i))
-        return starts, in_order, ordered, sorted(scores)
-
+    if nlp is None:
+        why = f"its pairs within reach need a band of {width} (pair_band {kit_pair_bands(kit)})"
+        return base.instead(why, "pairs beyond the band")
+    value = HorizonValue.of(s, lead.state_pred, J_pred, kit.sensing)
+    slot = HorizonSlot(s, inp, nlp, order, prev_v, target_cov_pred, value)
     shifted = None
     if prev_plan is not None and prev_plan.horizon is not None:
-        shifted = _shifted(prev_plan.horizon, L, M, dt, s)
-    ranked = None
-    if shifted is not None and nlp is not None:
-        # Last slot's horizon shifted, alone, where it meets the rows: the per-slot plan was the
-        # lower start on few slots (docs/model.md, "Start points") and costs a third of a slot.
-        assoc = slot_association(inp, kit)
-        data = horizon_slot_data(s, inp, prev_v, target_cov_pred, assoc, shifted[0][0], L)
-        ranked = scored([shifted], data)
-        if ranked[3][0][0] > 0:
-            ranked = None
+        shifted = _shifted(prev_plan.horizon, nlp.length, s.M, s.dt, s)
+    ranked = None if shifted is None else shifted_alone(slot, kit, shifted)
     if ranked is None:
-        # An infeasible per-slot plan (its best effort) is a start too: the horizon's legs
-        # reach farther in one slot than the per-slot method's (a_max against a_max / 4 of
-        # velocity change), and its answer flies only if its first slot passes the exact check.
-        base = base_plan()
-        if nlp is None:
-            why = f"its pairs within reach need a band of {width} (pair_band {kit_pair_bands(kit)})"
-            return fall_back(why, "pairs beyond the band")
-        assoc = base.bs_of_uav
-        data = horizon_slot_data(s, inp, prev_v, target_cov_pred, assoc, base.uav_xy_m, L)
-        v1 = (
-            base.uav_velocity_mps
-            if base.uav_velocity_mps is not None
-            else (base.uav_xy_m - data.prev_xy) / dt
-        )
-        candidates = [_continue(base.uav_xy_m, v1, base.bandwidth_share, L, dt, s)]
-        ranked = scored(candidates + ([shifted] if shifted is not None else []), data)
-    assert nlp is not None
-    starts, starts_ordered, ordered, scores = ranked
-    start_miss, start_value, first = scores[0]
-    start_infeasible = start_miss > 0
-    start = starts_ordered[first]
-    from_shifted = shifted is not None and first == len(starts) - 1
-    duals = prev_plan.horizon.duals if from_shifted and prev_plan and prev_plan.horizon else None
-    if duals is not None and not np.array_equal(duals.order, order):
-        duals = None
-    sol = nlp.solve(start[0], velocities(start[1]), start[2], ordered, duals)
-    note = f"IPOPT {sol.status} in {sol.iterations} it"
-    if not sol.success:
-        if not kept_at_cap(nlp, sol, ordered, start_infeasible, start_value, value):
-            why = f"IPOPT {sol.status} after {sol.iterations} it"
-            return fall_back(why, f"IPOPT {sol.status}")
-        note += f", {AT_CAP_NOTE}"
-    solved_duals: HorizonDuals | None = HorizonDuals(
-        sol.lam_x, sol.lam_g, sol.f_scale, nlp.pair_band, order
-    )
-    sol = sol.in_order(np.argsort(order))
-    start = starts[first]
-    if not start_infeasible and value(sol.uav_xy_m, sol.bandwidth_share) > start_value:
-        # A local solver may end above a feasible start: the start is a valid horizon then.
-        sol = replace(
-            sol,
-            uav_xy_m=start[0],
-            uav_velocity_mps=velocities(start[1]),
-            bandwidth_share=start[2],
-        )
-        solved_duals = None
-        note += ", its start kept (lower)"
-    xy1, eta1 = sol.uav_xy_m[0], sol.bandwidth_share[0]
-    cons = SlotConstraints(
-        data.prev_xy,
-        data.serving_xy,
-        s.bs_xy,
-        data.x_pred[:2],
-        s,
-        keep_out_xy=inp.keep_out_xy_m,
-        target_clearance_m=float(predicted_clearances(s, target_cov_pred, 1)[0]),
-        target_velocity_mps=data.x_pred[2:4],
-    )
-    if not bool(cons.feasible(xy1[None], eta1[None])[0]):
-        bad = ", ".join(cons.describe_violations(xy1, eta1))
-        return fall_back(f"IPOPT's answer violates {bad}", "answer infeasible")
-    velocity1 = None
-    if sol.uav_velocity_mps is not None:
-        velocity1 = sol.uav_velocity_mps[0]
-        if not legs_ok(s, data.prev_xy, prev_v, xy1, velocity1):
-            return fall_back("IPOPT's first leg breaks the vehicle limits", "leg limits")
-    traces = horizon_bound_traces(s, J_pred, x_pred, sol.uav_xy_m, sol.bandwidth_share, sensing)
-    summary = f"horizon: {note}, objective {start_value:.6g} -> {float(weights @ traces):.6g}"
-    base_report = computed[0].report if computed else SolveReport(status="ok")
-    report = replace(
-        base_report,
-        status="ok",  # also where the per-slot plan was its best effort
-        fallback="",
-        reason="",
-        solve_s=time.perf_counter() - started_s,
-        polish=summary if computed else f"{summary}, from the shifted horizon alone",
-        objective_history=(*base_report.objective_history, float(traces[0])),
-    )
-    return SlotPlan(
-        uav_xy_m=xy1,
-        bs_of_uav=assoc,
-        bandwidth_share=eta1,
-        pcrb_trace=float(traces[0]),
-        report=report,
-        uav_velocity_mps=velocity1,
-        horizon=HorizonPlan(
-            uav_xy_m=sol.uav_xy_m,
-            uav_velocity_mps=sol.uav_velocity_mps,
-            bandwidth_share=sol.bandwidth_share,
-            pcrb_trace=traces,
-            duals=solved_duals,
-        ),
-    )
+        ranked = with_per_slot(slot, base.get(), shifted)
+    kept = answer(slot, ranked, solve_best(slot, ranked))
+    if isinstance(kept, Refusal):
+        return base.instead(kept.why, kept.kind)
+    refusal = first_slot_refusal(slot, ranked.data, kept.sol)
+    if refusal is not None:
+        return base.instead(refusal.why, refusal.kind)
+    return horizon_slot_plan(slot, ranked, kept, base.computed, started_s)
+
+
+def proposed_plan(inp: SlotInput, kit: SolverKit) -> SlotPlan:
+    """The `proposed` plan of inp with its end velocity (the horizon's per-slot plan)."""
+    return with_end_velocity(Proposed().plan(inp, kit), inp, kit.scenario)
 
 
 class Horizon(PlansOnceToWarmUp):
@@ -481,11 +640,7 @@ class Horizon(PlansOnceToWarmUp):
 
     def plan(self, inp: SlotInput, kit: SolverKit) -> SlotPlan:
         started_s = time.perf_counter()
-
-        def per_slot() -> SlotPlan:
-            return with_end_velocity(Proposed().plan(inp, kit), inp, kit.scenario)
-
-        return plan_horizon(inp, per_slot, kit, started_s)
+        return plan_horizon(inp, partial(proposed_plan, inp, kit), kit, started_s)
 
     def prepare(self, kit: SolverKit) -> None:
         """The polish's NLP and the horizon's built (the warm-up slot need not reach the

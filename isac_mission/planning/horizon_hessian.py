@@ -13,7 +13,7 @@ chain rule the slot's block of the Hessian is
 with Y_m = dT_m / dx_m [10 x 3] and mu = dPhi / dy [10]: 3M x 3M dense entries, each a
 10-term sum. CasADi's automatic Hessian of the same Lagrangian finds the same numbers without the
 bottleneck: 1.94 million operations for the horizon's problem at M = 24 against 0.75 million
-here (docs/performance.md, "The Hessian through the information"). Everything else (the
+here (docs/decisions/0019-hessian-through-the-information.md). Everything else (the
 per-UAV, pair and terminal rows) keeps CasADi's sparse automatic Hessian.
 
 Pure CasADi; no I/O.
@@ -135,7 +135,7 @@ def bottleneck_hessian(x: ca.SX, rest: ca.SX, stages: Sequence[CoupledStage]) ->
 
 LiftedSlot = Callable[[ca.SX], tuple[ca.SX, ca.SX | None]]
 """One horizon slot's lifted terms as a function of its J_M [4, 4]: (its objective term, its
-lifted equalities [16], None on the last slot) (planning/horizon_nlp.lifted_slot, the rest
+lifted equalities [16], None on the last slot) (planning/horizon_problem.lifted_slot, the rest
 bound)."""
 
 

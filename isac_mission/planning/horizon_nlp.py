@@ -1,73 +1,37 @@
-"""The receding-horizon problem of slots n..n+L-1 as one NLP, built once and solved by IPOPT.
+"""The receding-horizon NLP as a solver: IPOPT around the symbolic problem, a slot's numbers in
+and its plan out.
 
-    min  sum_l w_l tr(C_l),  C_l = (J_pred,l + J_M(Q_l, eta_l; x_l))^-1,
-         J_pred,1 = the slot's prior information, J_pred,l+1 = (F C_l F^T + W)^-1,
-         x_l = F^(l-1) x_pred (the constant-velocity prediction)
-    s.t. for every horizon slot l and UAV m (slot n's association kept over the horizon):
-         eta_lm R~(|q_lm - w_k(m)| + e) >= R_th                       (14a, with the link margin)
-         |q_lm - w_c(m)| + e <= d_th                                   (14b)
-         sum_m eta_lm = 1, eta_lm >= 0                                 (14c, 14d)
-         |q_lm - q_l-1,m| <= V_max dt                                  (14h)
-         vehicle model: also the Hermite leg (q, v)_l-1 -> (q, v)_l within a_max and V_max
-         at leg_samples points s of each leg: |q_m(s) - p(s)| >= c_l   (14j, c_l the clearance)
-                                              |q_i(s) - q_j(s)| >= D_s + 2e, |q_m(s) - k| >= D_s + 2e
-         0 <= q_lm <= area                                             (operating area, bounds)
-
-with w_l = discount^(l-1) (times terminal_weight on the last slot). The derivatives are exact:
-CasADi's automatic differentiation, but the Lagrangian's Hessian is assembled through each
-slot's information (planning/horizon_hessian.py: the same matrix at 0.4 of the operations at
-M = 24). Everything that changes per slot is a parameter: the UAVs' positions and velocities, the
-serving and control BSs, the keep-out points, the predicted state, the prior information, the
-clearances c_l and the objective's scale.
-
-Lifted: what IPOPT solves has the scaled predicted covariance Pt_l = E_l P_l+1 E_l of every horizon
-slot but the last as 16 variables, with the explicit equality Pt_l = E_l (F C_l F^T + W) E_l, and
-slot l + 1 builds its prior on E_l Pt_l^-1 E_l: the same problem (eliminating Pt gives it back),
-whose Hessian has one block per slot instead of one dense block over the horizon (docs/model.md,
-"Receding horizon"). `objective` and `gradient` are the eliminated form.
-
-Scaling: q_lm = q_m,n-1 + S z_lm with S = V_max dt; v_lm = V_max u_lm; D_l = diag(1 / sqrt(diag
-J_l)) and E_l = diag(1 / sqrt(diag P_l+1)) taken at the start point (parameters); the objective
-is divided by its value at the start point. Distances are constrained squared in units of S^2,
-tightened by SOLVER_MARGIN_M.
+The problem itself (variables, objective, rows, their bounds: CasADi expressions of the
+scenario, built once) is planning/horizon_problem.py. Here, per slot: the plan and the slot's
+data (HorizonSlotData) packed into the NLP's scaled variables and parameters (`pack`, `lifted`;
+positions in units of S = V_max dt from where the UAVs are, velocities in units of V_max, the
+Jacobi scalings taken at the start point) and back (`unpack`), the variables' bounds
+(`bounds`), the objective's scale and the start clipped into the bounds, last slot's
+multipliers shifted as a warm start (`warm_duals`), and IPOPT's call under the solve lock
+(`solve`). `violation` and `satisfies` evaluate the rows and bounds at a plan.
 """
 
 from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass, replace
-from functools import partial
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from isac_mission.config import Scenario
-from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
-from isac_mission.planning.horizon_hessian import LiftedSlot, horizon_hess_lag, vech
-from isac_mission.planning.legs import chord_point_clearance_m
-from isac_mission.planning.margins import (
-    MIN_SHARE,
-    SafetyMargins,
-    sag_m,
-)
+from isac_mission.planning.feasibility import operating_area
+from isac_mission.planning.horizon_problem import HorizonProblem, build_horizon_problem
+from isac_mission.planning.margins import MIN_SHARE
 from isac_mission.planning.nlp_model import (
     IpoptFactory,
-    NlpRows,
     NlpSolver,
     SolveLock,
-    add_clearance_row,
-    add_uav_rows,
-    information_terms,
     lower_at_rate,
     plain_ipopt,
-    scaled_inverse_sx,
-    straight_leg_point,
 )
-from isac_mission.tracking.pcrb import (
-    SensingParams,
-    bound_along,
-)
+from isac_mission.tracking.pcrb import SensingParams, bound_along
 from isac_mission.types import FloatArray, HorizonDuals, IntArray
 
 IPOPT_OPTIONS: dict[str, Any] = {
@@ -92,7 +56,7 @@ IPOPT_OPTIONS: dict[str, Any] = {
     # MUMPS without its own scalings of the KKT matrix (IPOPT's defaults: chosen automatically,
     # a permutation by weighted matching and a scaling): the same iterates to 1e-6 in the
     # scaled variables and iteration counts on recorded slots of the 24-UAV fleet, at 20 ms an
-    # iteration instead of 34 (docs/performance.md, "The KKT matrix unscaled").
+    # iteration instead of 34 (docs/decisions/0016-horizon-kkt-unscaled.md).
     "mumps_permuting_scaling": 0,
     "mumps_scaling": 0,
 }
@@ -111,36 +75,6 @@ its plan (`warm_duals`): from the shifted plan alone IPOPT took a median 77 iter
 soak's tracking phase (docs/model.md, "Start points"). A cold start (no multipliers, or another
 problem's) keeps IPOPT's own initialisation: with zero multipliers pushed to these bounds the
 starts from rest stalled."""
-
-
-def lifted_slot(
-    J_prior: ca.SX,
-    scale_j: ca.SX,
-    scale_p: ca.SX,
-    Pt: ca.SX | None,
-    weight: float,
-    F: FloatArray,
-    W: FloatArray,
-    J_info: ca.SX,
-) -> tuple[ca.SX, ca.SX | None]:
-    """One slot of the lifted recursion: (weight tr(C), vec(E (F C F^T + W) E - Pt) [16], None on
-    the last slot: Pt None) with C = (J_prior + J_info)^-1 [4, 4] (Jacobi-scaled by scale_j [4])
-    and E = diag(scale_p [4])."""
-    J = J_prior + J_info
-    C = scaled_inverse_sx(0.5 * (J + J.T), scale_j)
-    term = weight * ca.trace(C)
-    if Pt is None:
-        return term, None
-    E = ca.diag(scale_p)
-    P = ca.mtimes(ca.mtimes(ca.DM(F), C), ca.DM(F.T)) + ca.DM(W)
-    return term, ca.vec(ca.mtimes(ca.mtimes(E, P), E) - Pt)
-
-
-def horizon_weights(length: int, discount: float, terminal_weight: float) -> FloatArray:
-    """w [L]: discount^l (l = 0..L-1), the last one times terminal_weight."""
-    w = discount ** np.arange(length, dtype=float)
-    w[-1] *= terminal_weight
-    return np.asarray(w)
 
 
 @dataclass(frozen=True)
@@ -204,7 +138,11 @@ class HorizonSolution:
 
 
 class HorizonNLP:
-    """The horizon problem for the scenario's M UAVs and n_keep_out keep-out points."""
+    """The horizon problem for the scenario's M UAVs and n_keep_out keep-out points, as a solver:
+    the symbolic problem (planning/horizon_problem.py) with IPOPT around it, and a slot's numbers
+    (HorizonSlotData, a plan [L, M, 2] of positions in m and velocities in m/s, shares [L, M])
+    packed into its variables and parameters, its bounds, its start and warm start, its answer
+    unpacked."""
 
     def __init__(
         self,
@@ -218,203 +156,42 @@ class HorizonNLP:
         what builds the solver (SolverKit.ipopt); pair_band: the UAV-UAV rows only of the UAV
         slots a < b with b - a <= pair_band (planning/pairs.py; the caller orders the fleet so
         that every pair within reach is among them), None: every pair."""
-        lock = lock if lock is not None else contextlib.nullcontext()
-        s = scenario
-        cfg = s.planner.horizon
-        M, L, K = s.M, cfg.length, cfg.leg_samples
-        self.scenario = s
+        problem = build_horizon_problem(scenario, n_keep_out, pair_band)
+        self.problem = problem
+        self.scenario = scenario
         self.n_keep_out = n_keep_out
-        self.pair_band = band = M - 1 if pair_band is None else min(pair_band, M - 1)
-        self.length = L
-        self.vehicle_model = s.planner.vehicle_model
-        self.step_m = S = s.v_max * s.dt
-        margins = SafetyMargins.of(s)
-        self.margins = margins
-        self._sensing = SensingParams.from_scenario(s)
-        dt = s.dt
-        motion = s.motion
-        F = motion.transition(dt)
-        W = motion.process_noise(dt)
-
-        z = ca.SX.sym("z", L * M * 2)
-        u = ca.SX.sym("u", L * M * 2) if self.vehicle_model else ca.SX.sym("u", 0)
-        eta = ca.SX.sym("eta", L * M)
-        prev = ca.SX.sym("prev", M * 2)
-        v0 = ca.SX.sym("v0", M * 2)
-        serving = ca.SX.sym("serving", M * 2)
-        control = ca.SX.sym("control", M * 2)
-        keep_out = ca.SX.sym("keep_out", n_keep_out * 2)
-        x_pred = ca.SX.sym("x_pred", 4)
-        j_pred = ca.SX.sym("j_pred", 4, 4)
-        clearance = ca.SX.sym("clearance", L)
-        # Jacobi scalings (numbers taken at the start point, so no derivative runs through
-        # them): 1 / sqrt(diag J_l) and 1 / sqrt(diag P_l+1) of the bound's recursion.
-        scale_j = ca.SX.sym("scale_j", 4 * L)
-        scale_p = ca.SX.sym("scale_p", 4 * L)
-        f_scale = ca.SX.sym("f_scale")
-        params = [prev, v0, serving, control, keep_out, x_pred, ca.reshape(j_pred, 16, 1)]
-        params += [clearance, scale_j, scale_p, f_scale]
-        self._param_sizes = [int(p.numel()) for p in params]
-
-        def q(h: int, m: int) -> ca.SX:  # position [2] at the end of horizon slot h (0-based)
-            if h < 0:
-                return prev[2 * m : 2 * m + 2]
-            i = 2 * (h * M + m)
-            return prev[2 * m : 2 * m + 2] + S * z[i : i + 2]
-
-        def v(h: int, m: int) -> ca.SX:  # velocity [2] there (vehicle model only)
-            if h < 0:
-                return v0[2 * m : 2 * m + 2]
-            i = 2 * (h * M + m)
-            return s.v_max * u[i : i + 2]
-
-        def along(h: int, m: int, frac: float) -> ca.SX:  # position on leg h at fraction frac
-            if self.vehicle_model:
-                leg = hermite_position(q(h - 1, m), v(h - 1, m), q(h, m), v(h, m), dt, frac)
-                return ca.SX(leg)
-            return straight_leg_point(q(h - 1, m), q(h, m), frac)
-
-        def sq(d: ca.SX) -> ca.SX:
-            return ca.sumsqr(d) / S**2
-
-        rows = NlpRows()
-        add = rows.add
-
-        e = margins.link_m
-        # Between two samples a leg may come closer than at either (docs/model.md, "Safety"):
-        # the samples keep the chord's distance, plus the curve's sag off its chord.
-        gap_s = dt / K
-        sag = sag_m(s.a_max, gap_s) if self.vehicle_model else 0.0
-        sep = margins.separation_m if s.d_safe > 0 else 0.0
-        keep2 = ((float(chord_point_clearance_m(sep, s.v_max * gap_s)) + sag) / S) ** 2
-        self.pair_clearance_m = float(chord_point_clearance_m(sep, 2 * s.v_max * gap_s)) + 2 * sag
+        self.pair_band = problem.pair_band
+        self.length = problem.length
+        self.vehicle_model = problem.vehicle_model
+        self.step_m = problem.step_m
+        self.margins = problem.margins
+        self.pair_clearance_m = problem.pair_clearance_m
         """The distance the UAV-UAV rows keep at each leg sample, m."""
-        pair2 = (self.pair_clearance_m / S) ** 2
-        fracs = [(k + 1) / K for k in range(K)]
-        weights = horizon_weights(L, cfg.discount, cfg.terminal_weight)
-        # The bound's recursion lifted (docs/model.md, "Receding horizon"): the scaled predicted
-        # covariance Pt_h = E_h (F C_h F^T + W) E_h of every slot but the last is a variable, tied
-        # by that equality (the covariance's own dynamics, explicit), and slot h + 1 builds on
-        # its inverse. Eliminated, every tr(C_l) depends on all earlier slots through nested
-        # inverses: a dense Hessian that took 53 % of a solve at M = 3 and most of the build;
-        # lifted, each slot's terms couple its own UAVs with 16 numbers.
-        lift = ca.SX.sym("lift", 16 * (L - 1))
-        n_z, n_u = int(z.numel()), int(u.numel())
-        stages: list[tuple[list[Any], LiftedSlot]] = []
-        n_lift = int(lift.numel())
-        ones4 = ca.SX.ones(4)
-        lifted_rows: list[ca.SX] = []
-        lifted_objective = ca.SX(0.0)
-        objective = ca.SX(0.0)
-        J_prior = j_pred
-        J_prior_lifted = j_pred
-        for h in range(L):
-            x_l = ca.mtimes(ca.DM(np.linalg.matrix_power(F, h)), x_pred)
-            J = J_prior
-            J_info = ca.SX.zeros(4, 4)
-            members = []
-            for m in range(M):
-                qm = q(h, m)
-                em = eta[h * M + m]
-                terms = information_terms(qm, em, x_l, self._sensing)
-                J_info = J_info + terms
-                i = 2 * (h * M + m)
-                index = np.array([i, i + 1, n_z + n_u + h * M + m])
-                members.append((index, ca.vertcat(z[i], z[i + 1], em), vech(terms)))
-                limits = []
-                if self.vehicle_model:
-                    legs = (q(h - 1, m), v(h - 1, m), q(h, m), v(h, m), dt)
-                    limits += [ca.sumsqr(acc) / s.a_max**2 for acc in end_accelerations(*legs)]
-                    limits += [
-                        ca.sumsqr(vc) / s.v_max**2 for vc in velocity_control_points(*legs)[1:]
-                    ]
-                # 14h also on the vehicle model: a vehicle faster than V_max now (the live
-                # planner's V_max is 0.9 of the vehicles') would otherwise cover more than
-                # V_max dt in its first slot.
-                step2 = sq(qm - q(h - 1, m))
-                bs = slice(2 * m, 2 * m + 2)
-                add_uav_rows(rows, s, qm, em, serving[bs], control[bs], step2, e, S, limits)
-                for frac in fracs:
-                    p = motion.position_after(x_pred, (h - 1 + frac) * dt)
-                    add_clearance_row(rows, along(h, m, frac) - p, (clearance[h] / S) ** 2, S)
-                    for k in range(n_keep_out):
-                        gap = along(h, m, frac) - keep_out[2 * k : 2 * k + 2]
-                        add_clearance_row(rows, gap, keep2, S)
-            for i in range(M):
-                for j in range(i + 1, min(M, i + band + 1)):
-                    for frac in fracs:
-                        add_clearance_row(rows, along(h, i, frac) - along(h, j, frac), pair2, S)
-            add(ca.sum1(eta[h * M : (h + 1) * M]), 1.0, 1.0)
-            J = J + J_info
-            dj, dp = scale_j[4 * h : 4 * h + 4], scale_p[4 * h : 4 * h + 4]
-            C = scaled_inverse_sx(0.5 * (J + J.T), dj)
-            objective = objective + weights[h] * ca.trace(C)
-            Pt = ca.reshape(lift[16 * h : 16 * h + 16], 4, 4) if h + 1 < L else None
-            slot = partial(lifted_slot, J_prior_lifted, dj, dp, Pt, weights[h], F, W)
-            term, row = slot(J_info)
-            stages.append((members, slot))
-            lifted_objective = lifted_objective + term
-            if h + 1 < L:
-                assert row is not None and Pt is not None
-                lifted_rows.append(row)
-                P = ca.mtimes(ca.mtimes(ca.DM(F), C), ca.DM(F.T)) + ca.DM(W)
-                J_prior = scaled_inverse_sx(0.5 * (P + P.T), dp)
-                E = ca.diag(dp)
-                Pt_inv = scaled_inverse_sx(0.5 * (Pt + Pt.T), ones4)
-                J_prior_lifted = ca.mtimes(ca.mtimes(E, Pt_inv), E)
-
-        # The terminal row (docs/model.md, "The terminal row"): at the end of the horizon,
-        # |r| - |w|^2 / (2 a_max) >= c_L for the offset r from the predicted target and the
-        # velocity w relative to it. Braking w at a_max keeps it, so the plan shifted by one
-        # slot can be continued; without it the horizon ended where no next slot could keep the
-        # clearance, and the shifted starts of the soak's tracking phase missed their rows.
-        self.n_terminal = 0
-        if self.vehicle_model and cfg.terminal_braking:
-            target_end = motion.position_after(x_pred, (L - 1) * dt)
-            brake = s.a_max * dt**2 / S  # in units of S per slot squared
-            for m in range(M):
-                offset = (q(L - 1, m) - target_end) / S
-                relative = (v(L - 1, m) - x_pred[2:4]) * dt / S
-                stopping = ca.sumsqr(relative) / (2 * brake)
-                add(ca.norm_2(offset) - stopping - clearance[L - 1] / S, 0.0, float("inf"))
-                self.n_terminal += 1
-        x = ca.vertcat(z, u, eta)
-        p = ca.vertcat(*params)
-        self.n_x = int(x.numel())
-        self.n_lift = n_lift
-        self._lbg, self._ubg = rows.bounds()
-        self._rate_rows = np.array(rows.rate_rows, dtype=int)
-        g = ca.vertcat(*rows.rows)
-        g_lifted = ca.vertcat(*lifted_rows)
-        n_eq = int(g_lifted.numel())
+        self.n_terminal = problem.n_terminal
+        self.n_x = problem.n_x
+        self.n_lift = problem.n_lift
+        self.hess_lag = problem.hess_lag
+        self._sensing = SensingParams.from_scenario(scenario)
+        self._param_sizes = problem.param_sizes
+        self._lbg, self._ubg = problem.lbg, problem.ubg
+        self._rate_rows = problem.rate_rows
+        n_eq = int(problem.g_lifted.numel())
         self._solver_lbg = np.concatenate([self._lbg, np.zeros(n_eq)])
         self._solver_ubg = np.concatenate([self._ubg, np.zeros(n_eq)])
-        self.hess_lag = horizon_hess_lag(ca.vertcat(x, lift), p, g, lift, stages, f_scale)
-        nlp = {
-            "x": ca.vertcat(x, lift),
-            "p": p,
-            "f": lifted_objective / f_scale,
-            "g": ca.vertcat(g, g_lifted),
-        }
-        opts: dict[str, Any] = {
-            "print_time": False,
-            "hess_lag": self.hess_lag,
-            "ipopt": {**IPOPT_OPTIONS, "max_iter": cfg.max_iterations},
-        }
-        with lock:
-            name = "horizon" if band == M - 1 else f"horizon_band{band}"
-            self.solver: NlpSolver = ipopt(name, nlp, opts)
-            warm_opts = {**opts, "ipopt": {**opts["ipopt"], **WARM_START_OPTIONS}}
-            # The same NLP: the warm instance takes the cold one's derivative functions.
-            self.warm_solver: NlpSolver = ipopt(f"{name}_warm", nlp, warm_opts, like=self.solver)
-        self.lock: SolveLock = lock
+        self.lock: SolveLock = lock if lock is not None else contextlib.nullcontext()
+        self.solver, self.warm_solver = _ipopt_solvers(problem, scenario, self.lock, ipopt)
+        x, lift, p = problem.x, problem.lift, problem.p
         # For tests and the start point's scale: the weighted objective itself and its gradient.
-        self.objective = ca.Function("f", [x, p], [objective])
-        self.gradient = ca.Function("df", [x, p], [ca.gradient(objective, x)])
-        self.constraints = ca.Function("g", [x, p], [g])
+        self.objective = ca.Function("f", [x, p], [problem.objective])
+        self.gradient = ca.Function("df", [x, p], [ca.gradient(problem.objective, x)])
+        self.constraints = ca.Function("g", [x, p], [problem.g])
         # The lifted objective and equalities (the solver's, before the division by f_scale).
         self.lifted_problem = ca.Function(
-            "lifted", [x, lift, p], [lifted_objective, g_lifted], ["x", "lift", "p"], ["f", "g"]
+            "lifted",
+            [x, lift, p],
+            [problem.lifted_objective, problem.g_lifted],
+            ["x", "lift", "p"],
+            ["f", "g"],
         )
 
     @property
@@ -535,8 +312,6 @@ class HorizonNLP:
         V_max implies; shares in [MIN_SHARE, 1]. The implied boxes change no solution; without
         them IPOPT took steps of kilometres in the acceleration phase and hit its cap on a
         fifth of the live slots."""
-        from isac_mission.planning.feasibility import operating_area
-
         s = self.scenario
         L, M = self.length, s.M
         lo, hi = operating_area(s)
@@ -620,16 +395,17 @@ class HorizonNLP:
         offsets = np.cumsum([0, *(L * w for w in widths)])[:-1]
         return [(int(o), w) for o, w in zip(offsets, widths, strict=True)]
 
-    def solve(
+    def start_point(
         self,
         xy0: FloatArray,
         velocity0: FloatArray | None,
         eta0: FloatArray,
         data: HorizonSlotData,
-        duals: HorizonDuals | None = None,
-    ) -> HorizonSolution:
-        """Solve from the start (xy0 [L, M, 2], velocity0, eta0 [L, M]); duals: last slot's
-        multipliers when the start is its plan shifted (`warm_duals`), else a cold start."""
+    ) -> StartPoint:
+        """The start (xy0 [L, M, 2] m, velocity0 [L, M, 2] m/s or None, eta0 [L, M]) as IPOPT
+        takes it: the objective's scale f_scale (its value there, 1 if not finite and positive),
+        the parameters packed with it, the variables clipped into their bounds, and the lifted
+        variables of the clipped plan."""
         x0, p = self.pack(xy0, velocity0, eta0, data)
         f0 = float(self.objective(x0, p))
         f_scale = f0 if np.isfinite(f0) and f0 > 0 else 1.0
@@ -638,22 +414,39 @@ class HorizonNLP:
         x0 = np.clip(x0, lbx, ubx)
         xy0, _, eta0 = self.unpack(x0, data)
         lift0 = self.lifted(xy0, eta0, data, p)
+        return StartPoint(x0, lift0, p, lbx, ubx, f_scale)
+
+    def _run(
+        self,
+        start: StartPoint,
+        data: HorizonSlotData,
+        warm: tuple[FloatArray, FloatArray] | None,
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
+        """IPOPT's answer and stats from `start` (the lifted variables free, the rows' lower
+        bounds at the slot's R_th, the lifted equalities = 0): the cold solver, or with warm
+        (lam_x0 [n_x + n_lift], lam_g0 [n_rows + n_lift]) the warm-start one."""
         free = np.full(self.n_lift, np.inf)
-        warm = None if duals is None else self.warm_duals(duals, f_scale)
         solver, multipliers = self.solver, {}
         if warm is not None:
             solver, multipliers = self.warm_solver, {"lam_x0": warm[0], "lam_g0": warm[1]}
         with self.lock:
             sol = solver(
-                x0=np.concatenate([x0, lift0]),
-                p=p,
-                lbx=np.concatenate([lbx, -free]),
-                ubx=np.concatenate([ubx, free]),
+                x0=np.concatenate([start.x0, start.lift0]),
+                p=start.p,
+                lbx=np.concatenate([start.lbx, -free]),
+                ubx=np.concatenate([start.ubx, free]),
                 lbg=np.concatenate([self._lower(data), self._solver_lbg[len(self._lbg) :]]),
                 ubg=self._solver_ubg,
                 **multipliers,
             )
             stats = solver.stats()
+        return sol, stats
+
+    def _solution(
+        self, sol: dict[str, Any], stats: dict[str, Any], data: HorizonSlotData, f_scale: float
+    ) -> HorizonSolution:
+        """IPOPT's answer `sol` unpacked (shares clipped at 0, each slot's renormalised to sum
+        1), with its status from `stats` and its multipliers."""
         x_opt = np.asarray(sol["x"], dtype=float).ravel()[: self.n_x]
         xy, velocity, eta = self.unpack(x_opt, data)
         eta = np.maximum(eta, 0.0)
@@ -669,6 +462,56 @@ class HorizonNLP:
             lam_g=np.asarray(sol["lam_g"], dtype=float).ravel(),
             f_scale=f_scale,
         )
+
+    def solve(
+        self,
+        xy0: FloatArray,
+        velocity0: FloatArray | None,
+        eta0: FloatArray,
+        data: HorizonSlotData,
+        duals: HorizonDuals | None = None,
+    ) -> HorizonSolution:
+        """Solve from the start (xy0 [L, M, 2], velocity0, eta0 [L, M]); duals: last slot's
+        multipliers when the start is its plan shifted (`warm_duals`), else a cold start."""
+        start = self.start_point(xy0, velocity0, eta0, data)
+        warm = None if duals is None else self.warm_duals(duals, start.f_scale)
+        sol, stats = self._run(start, data, warm)
+        return self._solution(sol, stats, data, start.f_scale)
+
+
+@dataclass(frozen=True)
+class StartPoint:
+    """A start as IPOPT takes it (HorizonNLP.start_point): x0 [n_x] (scaled, within the bounds
+    lbx, ubx [n_x]), lift0 [n_lift], the parameters p packed with f_scale, the objective's
+    divisor."""
+
+    x0: FloatArray
+    lift0: FloatArray
+    p: FloatArray
+    lbx: FloatArray
+    ubx: FloatArray
+    f_scale: float
+
+
+def _ipopt_solvers(
+    problem: HorizonProblem, s: Scenario, lock: SolveLock, ipopt: IpoptFactory
+) -> tuple[NlpSolver, NlpSolver]:
+    """The cold and the warm-start IPOPT solvers of `problem` (built under lock; the warm one
+    takes the cold one's derivative functions), named "horizon" (every pair) or
+    "horizon_band<b>"."""
+    opts: dict[str, Any] = {
+        "print_time": False,
+        "hess_lag": problem.hess_lag,
+        "ipopt": {**IPOPT_OPTIONS, "max_iter": s.planner.horizon.max_iterations},
+    }
+    band = problem.pair_band
+    with lock:
+        name = "horizon" if band == s.M - 1 else f"horizon_band{band}"
+        solver = ipopt(name, problem.nlp, opts)
+        warm_opts = {**opts, "ipopt": {**opts["ipopt"], **WARM_START_OPTIONS}}
+        # The same NLP: the warm instance takes the cold one's derivative functions.
+        warm_solver = ipopt(f"{name}_warm", problem.nlp, warm_opts, like=solver)
+    return solver, warm_solver
 
 
 def _shift_slots(values: FloatArray, n_slots: int) -> FloatArray:

@@ -45,7 +45,7 @@ from isac_mission.tracking.pcrb import PlanningObjective
 from isac_mission.types import FloatArray, SlotPlan, SolveReport
 
 if TYPE_CHECKING:
-    from isac_mission.planning.slot import SolverKit
+    from isac_mission.planning.kit import SolverKit
 
 EARLY_POLISH_GAIN = 1e-6
 """The early polish (after AO iteration 1) is kept only if it lowers tr(PCRB) by more than this

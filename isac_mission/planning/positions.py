@@ -146,7 +146,7 @@ class PositionSubproblem:
         # A tighter duality gap than clarabel's default (1e-8): a linear objective on disks is
         # flat along the boundary, so a 1e-8 gap leaves the point millimetres from the optimum.
         # Feasibility stays at 1e-8: tighter, clarabel stalls at M = 24 (AlmostSolved after
-        # 100-200 iterations). docs/performance.md has the measurements.
+        # 100-200 iterations). The measurements: docs/decisions/0004-planner-fast-paths.md.
         self._settings.tol_gap_abs = 1e-11
         self._settings.tol_gap_rel = 1e-11
 

@@ -29,7 +29,7 @@ from isac_mission.tracking.pcrb import Objective, PlanningObjective, SensingPara
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 
 if TYPE_CHECKING:
-    from isac_mission.planning.slot import SolverKit
+    from isac_mission.planning.kit import SolverKit
 
 
 @renamed_fields(

@@ -16,8 +16,8 @@ from functools import cache
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
+    from isac_mission.planning.kit import SolverKit
     from isac_mission.planning.problem import SlotInput
-    from isac_mission.planning.slot import SolverKit
     from isac_mission.types import SlotPlan
 
 
@@ -27,7 +27,7 @@ class SlotPlanner(Protocol):
     `plan` plans one slot (pure: no clock but the plan's timer, no RNG, no I/O; an infeasible
     slot returns its best effort with report.status "infeasible", planning/fallback.py);
     `prepare` builds and solves once whatever `plan` needs, so that no real slot pays for a
-    build (SolverKit.warm_up; planning/problem.PlansOnceToWarmUp plans one slot).
+    build (planning/slot.warm_up; planning/problem.PlansOnceToWarmUp plans one slot).
     """
 
     def plan(self, inp: SlotInput, kit: SolverKit) -> SlotPlan: ...

@@ -20,8 +20,9 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.planning.association import association_costs, optimal_assignment
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.registry import METHODS, live_default_method, max_targets
-from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import Method, SlotInput, plan_slot
 from isac_mission.tracking.factory import KEEP_OUT_TRACKS, keep_out_tracks
 from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport

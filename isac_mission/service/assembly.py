@@ -38,7 +38,8 @@ from isac_mission.mavwire.ports import (
 from isac_mission.mavwire.serial_link import parse_vehicle_links
 from isac_mission.nlp_cache import CompiledNlpCache
 from isac_mission.planning.fleet import prepare_fleet
-from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method
 from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.bridge.clock_time import ClockSimTime
 from isac_mission.service.bridge.fleet import BridgeFleet

@@ -24,7 +24,6 @@ import numpy as np
 from pydantic import TypeAdapter, ValidationError
 from pydantic_core import PydanticSerializationError
 
-from isac_mission.deprecation import REMOVAL_VERSION
 from isac_mission.errors import MessageError
 from isac_mission.types import Detections, FloatArray
 from isac_mission.wire.control_models import MAX_ID_CHARS, ControlMsg, ControlReplyMsg
@@ -155,11 +154,7 @@ def read_request(payload: Payload, *, n_uavs: int | None = None) -> RequestRead:
 
 
 def _deprecated(old: str, new: str) -> None:
-    warnings.warn(
-        f"wire.{old} is deprecated: use wire.{new} (wire.{old} is removed in {REMOVAL_VERSION})",
-        DeprecationWarning,
-        stacklevel=3,
-    )
+    warnings.warn(f"wire.{old} is deprecated: use wire.{new}", DeprecationWarning, stacklevel=3)
 
 
 def encode_control(msg: ControlMsg) -> bytes:

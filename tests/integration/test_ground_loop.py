@@ -13,7 +13,8 @@ from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.fleet import Planner
-from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method, SlotInput, plan_slot
 from isac_mission.records import read_trace
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.report import GroundReport

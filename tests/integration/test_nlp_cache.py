@@ -18,8 +18,9 @@ from isac_mission.config.live_settings import LIVE_SETTINGS
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
 from isac_mission.nlp_cache import COMPILE_ENV, COMPILER_ENV, CompiledNlpCache, UpgradingSolver
 from isac_mission.planning.horizon import horizon_nlp
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.per_slot import polish_nlp
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import SlotInput, plan_slot
 from isac_mission.types import SlotPlan
 from tests.support.live_cli import cli
 

@@ -15,7 +15,7 @@ from isac_mission.config import Scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.radar import measure
-from isac_mission.planning.slot import SolverKit
+from isac_mission.planning.kit import SolverKit
 from isac_mission.tracking.ekf import ekf_predict, ekf_update
 from isac_mission.tracking.pcrb import Bound, SensingParams, bound_step
 from isac_mission.types import Gaussian

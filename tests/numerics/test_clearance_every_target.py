@@ -9,8 +9,9 @@ import pytest
 
 from isac_mission.config import Scenario
 from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.problem import belief_clearance_m, build_slot_problem
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import SlotInput, plan_slot
 from isac_mission.tracking.beliefs import TargetBelief
 
 

@@ -36,9 +36,9 @@ from isac_mission.planning.evasion import (
     unviable_pairs,
 )
 from isac_mission.planning.fallback import kept_viable
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.margins import SafetyMargins
 from isac_mission.planning.problem import SlotInput
-from isac_mission.planning.slot import SolverKit
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import SensingParams
 from isac_mission.types import SlotPlan, SolveReport

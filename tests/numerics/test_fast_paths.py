@@ -16,8 +16,9 @@ from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.association import AssociationLP, round_association, unique_optimum
 from isac_mission.planning.bandwidth import BandwidthSubproblem
 from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.positions import PositionSubproblem
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import SlotInput, plan_slot
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, predict_information
 

@@ -28,16 +28,13 @@ from isac_mission.planning.horizon import (
     plan_horizon,
     planned_start_velocity,
 )
-from isac_mission.planning.horizon_nlp import (
-    IPOPT_OPTIONS,
-    HorizonNLP,
-    HorizonSlotData,
-    horizon_weights,
-)
+from isac_mission.planning.horizon_nlp import IPOPT_OPTIONS, HorizonNLP, HorizonSlotData
+from isac_mission.planning.horizon_problem import horizon_weights
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.per_slot import Proposed, polish_nlp
 from isac_mission.planning.polish import PolishNLP
 from isac_mission.planning.problem import slot_clearance_m, with_end_velocity
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import SlotInput, plan_slot, warm_up
 from isac_mission.records import read_trace
 from isac_mission.tracking.pcrb import SensingParams
 from isac_mission.types import SlotPlan
@@ -524,7 +521,7 @@ def test_a_fleet_size_reached_mid_mission_plans_without_a_build_inside_the_plan(
     if ahead:
         assert prepare_fleet(kit, "horizon") == [2, 1]  # every smaller fleet, within the budget
     else:
-        kit.warm_up("horizon")  # the full fleet only: the control that this test can fail
+        warm_up(kit, "horizon")  # the full fleet only: the control that this test can fail
     builds: list[str] = []
     for cls in (HorizonNLP, PolishNLP):
         init = cls.__init__
@@ -557,7 +554,7 @@ def test_a_fleet_size_reached_mid_mission_plans_without_a_build_inside_the_plan(
 def test_the_build_ahead_budget_stops_after_the_one_out_fleet() -> None:
     s = _vehicle(load_scenario("paper"))
     kit = SolverKit(s)
-    kit.warm_up("proposed")
+    warm_up(kit, "proposed")
     assert KitCache(kit, "proposed").build_ahead(budget_s=0.0) == [2]  # the one-out fleet always
     assert KitCache(kit, "proposed").build_ahead(budget_s=60.0) == [2, 1]
 

@@ -9,9 +9,10 @@ import pytest
 from isac_mission.config import Scenario, parse_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
 from isac_mission.planning.horizon import horizon_nlp, kit_pair_bands
-from isac_mission.planning.horizon_nlp import horizon_weights
+from isac_mission.planning.horizon_problem import horizon_weights
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.pairs import band_pair_count
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import SlotInput, plan_slot
 
 CENTRES_XY_M = ((700.0, 700.0), (1500.0, 2300.0), (2300.0, 700.0))
 

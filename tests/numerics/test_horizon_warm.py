@@ -1,6 +1,6 @@
 """The horizon's warm start from one slot to the next: last slot's multipliers shifted with its
-plan, and the terminal row that lets the shifted plan continue (docs/model.md, "Receding
-horizon: the terminal row", "Start points"); each checked against something computed
+plan, and the terminal row that lets the shifted plan continue (docs/model.md, "The
+terminal row", "Start points"); each checked against something computed
 independently."""
 
 from __future__ import annotations
@@ -16,10 +16,11 @@ from isac_mission.config import Scenario, load_scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
 from isac_mission.planning.horizon import horizon_nlp, plan_horizon
 from isac_mission.planning.horizon_nlp import HorizonNLP, HorizonSlotData
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.nlp_model import NlpSolver, plain_ipopt, shared_derivatives
 from isac_mission.planning.per_slot import Proposed
 from isac_mission.planning.problem import with_end_velocity
-from isac_mission.planning.slot import SlotInput, SolverKit
+from isac_mission.planning.slot import SlotInput
 from isac_mission.types import HorizonDuals
 
 

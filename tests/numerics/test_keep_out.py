@@ -10,8 +10,9 @@ from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
 from isac_mission.planning.feasibility import SlotConstraints
 from isac_mission.planning.fleet import NO_BS, KitCache, PlanningJob
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.positions import PositionSubproblem
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import SlotInput, plan_slot
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.wire import PlanMsg, decode, encode
 from tests.support.ground_steps import predictions_of

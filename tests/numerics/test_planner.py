@@ -19,8 +19,9 @@ from isac_mission.model.channel import rate_radius
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.bandwidth import BandwidthSubproblem, lp_vertex
 from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.positions import SOLVER_MARGIN_M, PositionSubproblem
-from isac_mission.planning.slot import METHODS, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import METHODS, SlotInput, plan_slot
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import Bound, PlanningObjective, predict_information
 

@@ -19,9 +19,10 @@ from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
 from isac_mission.experiment.report import LABELS as REPORT_LABELS
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.problem import SlotInput, warm_up_input
 from isac_mission.planning.registry import LABELS, METHODS, REGISTRY, check_method, planner
-from isac_mission.planning.slot import SolverKit, plan_slot
+from isac_mission.planning.slot import plan_slot, warm_up
 from isac_mission.records import SlotRecord, read_trace
 from isac_mission.service.ground.settings import GroundSettings
 from tests.support.independent.constraints import check_constraints
@@ -164,7 +165,7 @@ def test_the_documented_example_method_plans(
     registry.planner.cache_clear()
     try:
         kit = SolverKit(paper)
-        kit.warm_up("chase")
+        warm_up(kit, "chase")
         plan = plan_slot(warm_up_input(kit), kit, "chase")
     finally:
         registry.planner.cache_clear()

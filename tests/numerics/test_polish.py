@@ -27,8 +27,9 @@ from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inpu
 from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
 from isac_mission.planning import per_slot
 from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.per_slot import polish_nlp
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.slot import SlotInput, plan_slot
 from isac_mission.tracking.pcrb import PlanningObjective
 from tests.numerics.test_planner import _independent_violations
 from tests.support.independent.constraints import check_constraints

@@ -44,8 +44,8 @@ from isac_mission.experiment.closed_loop import (
     run_closed_loop,
 )
 from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.margins import target_clearance_m
-from isac_mission.planning.slot import SolverKit
 from isac_mission.types import FloatArray
 
 HORIZON = 5

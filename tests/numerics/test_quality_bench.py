@@ -15,7 +15,8 @@ import pytest
 
 from isac_mission.config import Scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, record_slot_inputs
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import SlotInput, plan_slot
 from isac_mission.tracking.pcrb import PlanningObjective, SensingParams
 from isac_mission.types import SlotPlan, SolveReport
 

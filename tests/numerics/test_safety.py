@@ -35,6 +35,7 @@ from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import hermite_position
 from isac_mission.planning.feasibility import SlotConstraints
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.legs import (
     chord_shortfall,
     leg_accel_bound_mps2,
@@ -43,7 +44,7 @@ from isac_mission.planning.legs import (
     uav_leg_points,
 )
 from isac_mission.planning.margins import SafetyMargins, slot_sigma_max_m, target_clearance_m
-from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.planning.slot import Method
 from isac_mission.records import SlotRecord, read_trace
 from tests.support.independent.constraints import check_constraints
 

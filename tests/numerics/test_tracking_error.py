@@ -21,7 +21,8 @@ from isac_mission.config.live_settings import LIVE_SETTINGS, LiveSettings
 from isac_mission.config.sections import PlannerConfig
 from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run_closed_loop
 from isac_mission.model.vehicle import VehicleModel
-from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method
 from tests.support.flight import Flight, fly
 
 TOLERANCE_M = PlannerConfig().tracking_margin_m

@@ -13,7 +13,8 @@ from isac_mission.config import Scenario
 from isac_mission.experiment.closed_loop import draw_run_noise, run_closed_loop
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.model.vehicle import VehicleModel, hermite_position
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import SlotInput, plan_slot
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import Bound, predict_information
 

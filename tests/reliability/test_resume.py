@@ -28,10 +28,11 @@ import pytest
 import yaml
 
 import isac_mission.records.writer as trace_mod
+from isac_mission import __version__
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
 from isac_mission.errors import MessageError
-from isac_mission.planning.slot import SolverKit
+from isac_mission.planning.kit import SolverKit
 from isac_mission.records import TRACE_FORMAT, SlotRecord, Trace, TraceWriter, read_trace
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings
@@ -120,7 +121,11 @@ def test_torn_last_line_is_dropped_and_the_resumed_trace_is_clean_json_lines(
     _assert_every_slot_once(back, 6)
     assert back.slots[4] == slot_record(5)
     lines = _strict_json_lines(path)
-    assert lines[0] == {"format": TRACE_FORMAT, "config": config}
+    assert lines[0] == {
+        "format": TRACE_FORMAT,
+        "isac_mission_version": __version__,
+        "config": config,
+    }
     assert [ln["slot"] for ln in lines[1:]] == [1, 2, 3, 4, 5, 6]
 
 

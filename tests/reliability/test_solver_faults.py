@@ -19,7 +19,8 @@ import numpy as np
 
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
-from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method, SlotInput, plan_slot
 from isac_mission.records import read_trace
 from isac_mission.service.ground.loop import GroundLoop
 from isac_mission.service.ground.settings import GroundSettings

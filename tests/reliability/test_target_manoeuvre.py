@@ -20,7 +20,8 @@ from isac_mission.config import Scenario, load_scenario
 from isac_mission.config.live_settings import LiveSettings
 from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run_closed_loop
 from isac_mission.model.vehicle import hermite_position
-from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method
 from tests.support.soak import pursuit_path, run_soak
 
 ROOT = Path(__file__).resolve().parents[2]

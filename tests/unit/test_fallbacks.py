@@ -13,7 +13,8 @@ from isac_mission.config import Scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo, summarize, trace_path
 from isac_mission.experiment.trace_figures import trace_figures
 from isac_mission.planning.fleet import KitCache, PlanningJob
-from isac_mission.planning.slot import SlotInput, SolverKit, plan_slot
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import SlotInput, plan_slot
 from isac_mission.records import SlotRecord, read_trace
 from isac_mission.service.ground.report import MissionTotals
 from isac_mission.tracking.beliefs import TargetBelief

@@ -13,7 +13,8 @@ from isac_mission.config import Scenario
 from isac_mission.model.kinematics import process_noise, transition_matrix
 from isac_mission.planning.association import associate
 from isac_mission.planning.fleet import NO_BS, active_part
-from isac_mission.planning.slot import Method, SlotInput, SolverKit, plan_slot
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method, SlotInput, plan_slot
 from isac_mission.service.ground.mission import MissionState
 from isac_mission.tracking.cycle import TrackState
 from isac_mission.types import Detections, Gaussian, HorizonPlan, SlotPlan

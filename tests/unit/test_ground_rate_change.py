@@ -10,9 +10,9 @@ from typing import Any
 from isac_mission.config import load_scenario
 from isac_mission.planning.fleet import prepare_fleet
 from isac_mission.planning.horizon import horizon_nlp
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.nlp_model import NlpSolver, plain_ipopt
 from isac_mission.planning.per_slot import polish_nlp
-from isac_mission.planning.slot import SolverKit
 from isac_mission.planning.tracks import multi_target_kit
 from isac_mission.service.ground.mission import MissionState
 from isac_mission.types import Gaussian

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from isac_mission.config import Scenario
-from isac_mission.planning.slot import SolverKit
+from isac_mission.planning.kit import SolverKit
 from isac_mission.service.ground import exclusion
 from isac_mission.service.ground.exclusion import VehicleWatch
 from isac_mission.service.ground.mission import MissionState

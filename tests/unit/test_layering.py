@@ -1,7 +1,8 @@
 """Layering: the tree is the block diagram (docs/architecture.md, "What may import what").
 
-Pure math never imports I/O; each I/O library has exactly one adapter package; `sim/` and the
-service are peers on the neutral layer and import neither each other nor the command line
+Pure math never imports I/O; each I/O library has exactly one adapter package; no module
+imports itself round a circle (imports under TYPE_CHECKING included: a circle of types is still a
+circle of design); `sim/` and the service are peers on the neutral layer and import neither each other nor the command line
 (the embedded entry alone imports `sim`; the command line calls the service's assembly, never
 the other way round); no module holds two jobs' worth of lines.
 
@@ -245,8 +246,71 @@ def console_violations(root: Path) -> list[str]:
     return out
 
 
+def import_graph(root: Path) -> dict[str, set[str]]:
+    """Module -> the modules of the packages it imports (every import statement, lazy and
+    TYPE_CHECKING ones included). An imported name that is not a module counts as its module
+    (`from a.b import f` -> `a.b`); a package's own ancestors are no edge (importing `a.b.c`
+    runs `a/__init__` first whatever imports it)."""
+    modules = {module_name(path, root): path for path in python_files(root)}
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        edges: set[str] = set()
+        for target in imported_modules(path, root):
+            while target and target not in modules:
+                target = target.rpartition(".")[0]
+            if target and target != name and not within(name, target):
+                edges.add(target)
+        graph[name] = edges
+    return graph
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    circles: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(circles)
+
+
+def circle_violations(root: Path) -> list[str]:
+    """One line per import circle among the modules of isac_mission and sim."""
+    return ["circle: " + " <-> ".join(c) for c in import_circles(import_graph(root))]
+
+
 # --------------------------------------------------------------------------------------------
 # The repository keeps the rules
+
+
+def test_no_module_imports_itself_round_a_circle() -> None:
+    assert len(import_graph(ROOT)) > 100
+    assert circle_violations(ROOT) == []
 
 
 @pytest.mark.parametrize("path", list(python_files(ROOT, PURE)), ids=lambda p: _rel(p, ROOT))
@@ -380,6 +444,28 @@ def test_each_rule_reports_a_violation(tmp_path: Path) -> None:
     ]
 
 
+def test_the_circle_rule_finds_circles_of_types_and_lazy_imports(tmp_path: Path) -> None:
+    root = _tree(
+        tmp_path,
+        {
+            "isac_mission/__init__.py": "from isac_mission.planning import slot\n",
+            "isac_mission/planning/__init__.py": "from isac_mission.planning.slot import Kit\n",
+            "isac_mission/planning/slot.py": "from isac_mission.planning.registry import get\n",
+            "isac_mission/planning/registry.py": (
+                "from typing import TYPE_CHECKING\n"
+                "if TYPE_CHECKING:\n    from isac_mission.planning.slot import Kit\n"
+            ),
+            "sim/a.py": "def f():\n    from sim import b\n",
+            "sim/b.py": "from sim.a import f\n",
+            "sim/c.py": "from sim.a import f\n",
+        },
+    )
+    assert circle_violations(root) == [
+        "circle: isac_mission.planning.registry <-> isac_mission.planning.slot",
+        "circle: sim.a <-> sim.b",
+    ]
+
+
 def test_a_clean_tree_has_no_violations(tmp_path: Path) -> None:
     root = _tree(
         tmp_path,
@@ -398,3 +484,4 @@ def test_a_clean_tree_has_no_violations(tmp_path: Path) -> None:
     assert sim_importer_violations(root) == []
     assert neutral_violations(root) == []
     assert service_violations(root) == []
+    assert circle_violations(root) == []

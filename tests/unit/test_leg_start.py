@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from isac_mission.config import Scenario
-from isac_mission.planning.slot import SolverKit
+from isac_mission.planning.kit import SolverKit
 from isac_mission.service.ground.mission import LEG_CHAIN_WITHIN_M, MissionState, leg_start_state
 from isac_mission.types import Detections, Gaussian, SlotPlan, SolveReport
 from isac_mission.wire import detection_messages

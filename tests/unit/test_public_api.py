@@ -13,7 +13,8 @@ import isac_mission as im
 from isac_mission import api
 from isac_mission.config import load_scenario
 from isac_mission.experiment.montecarlo import run_monte_carlo, trace_path
-from isac_mission.planning.slot import SolverKit, plan_slot
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import plan_slot
 from isac_mission.records import read_trace
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -18,7 +18,8 @@ from isac_mission import wire
 from isac_mission.config import load_scenario
 from isac_mission.deprecation import REMOVAL_VERSION
 from isac_mission.errors import MessageError
-from isac_mission.records import TraceWriter, read_trace
+from isac_mission.planning.problem import SlotInput
+from isac_mission.records import SlotRecord, TraceWriter, read_trace
 from isac_mission.records.header import TRACE_FORMAT, VERSION_KEY, parse_header, written_by
 from tests.support.trace_files import slot_record
 
@@ -63,25 +64,31 @@ def test_a_trace_without_the_release_reads_and_a_bad_one_is_refused(tmp_path: Pa
         parse_header({"format": TRACE_FORMAT, VERSION_KEY: "0.4.0", "config": config, "x": 1})
 
 
-def test_a_renamed_field_warns_with_the_release_that_removes_it() -> None:
+def test_a_renamed_field_warns_and_its_doc_names_the_release_that_removes_it() -> None:
     record = slot_record(1)
-    with pytest.warns(DeprecationWarning, match=rf"removed in {re.escape(REMOVAL_VERSION)}"):
+    with pytest.warns(
+        DeprecationWarning, match="SlotRecord.uav_xy is deprecated: use SlotRecord.uav_xy_m"
+    ):
         old = record.uav_xy  # type: ignore[attr-defined]
     assert old is record.uav_xy_m
-    with pytest.warns(DeprecationWarning, match=rf"SlotRecord.eta is removed in {REMOVAL_VERSION}"):
+    with pytest.warns(DeprecationWarning, match="SlotRecord.eta is deprecated"):
         changed = dataclasses.replace(record, eta=record.bandwidth_share * 0.5)  # type: ignore[call-arg]
     assert changed.bandwidth_share[0] == pytest.approx(record.bandwidth_share[0] * 0.5)
+    for cls, old_name in ((SlotRecord, "uav_xy"), (SlotRecord, "eta"), (SlotInput, "prev_xy")):
+        doc = getattr(cls, old_name).__doc__
+        assert doc.startswith(f"Deprecated, removed in {REMOVAL_VERSION}: "), (cls, old_name, doc)
 
 
-def test_a_deprecated_wire_call_warns_with_the_release_that_removes_it() -> None:
+def test_a_deprecated_wire_call_warns_and_its_doc_names_the_release_that_removes_it() -> None:
     msg = wire.ControlMsg(-1, 0.0, "op-1", "hold", uav=1)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        wire.encode_control(msg)
+        assert wire.encode_control(msg) == wire.encode(msg)
     assert [str(w.message) for w in caught] == [
-        f"wire.encode_control is deprecated: use wire.encode (wire.encode_control is removed in "
-        f"{REMOVAL_VERSION})"
+        "wire.encode_control is deprecated: use wire.encode"
     ]
+    for fn in (wire.encode_control, wire.decode_control_reply):
+        assert (fn.__doc__ or "").startswith(f"Deprecated, removed in {REMOVAL_VERSION}: "), fn
 
 
 def test_the_changelog_lists_what_the_next_minor_removes() -> None:

@@ -31,7 +31,8 @@ from isac_mission.experiment.sweep.grid import (
     load_grid,
 )
 from isac_mission.experiment.track_metrics import RunFigures
-from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method
 from isac_mission.planning.tracks import method_problem
 
 

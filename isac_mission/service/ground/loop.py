@@ -32,7 +32,7 @@ from isac_mission.config import Scenario
 from isac_mission.errors import ConfigError
 from isac_mission.planning.fallback import OPERATOR_HOLD
 from isac_mission.planning.fleet import PlanningJob
-from isac_mission.planning.slot import SolverKit
+from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.tracks import TracksPlan
 from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.ground.assembler import DetectionAssembler

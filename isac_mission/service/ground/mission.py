@@ -21,7 +21,8 @@ import numpy as np
 from isac_mission.config import Scenario
 from isac_mission.model.detections import UavReport
 from isac_mission.planning.fleet import KitCache, PlanningJob, active_part
-from isac_mission.planning.slot import Method, SolverKit
+from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.slot import Method
 from isac_mission.planning.tracks import TracksPlan, check_method
 from isac_mission.timebase import SlotTimeline
 from isac_mission.tracking.factory import keep_out_tracks, tracker_for
