@@ -81,7 +81,7 @@ PHASE_KEYS = (
     "pcrb", "pcrb_from11", "loc_mse", "loc_mse_from11", "step_m", "step_from11_m", "fallbacks",
 )  # fmt: skip
 TARGETS = {"pcrb_from11": 0.20, "step_from11_m": 0.10}
-"""Live within this fraction of simulate's mean over seeds (issue 22's targets)."""
+"""Live within this fraction of simulate's mean over seeds (the live service's targets)."""
 TARGET_HEADS = {"pcrb_from11": "tr(PCRB) 11..N", "step_from11_m": "step 11..N"}
 
 

@@ -1,4 +1,4 @@
-"""Live against offline on a multi-target mission (issue 26): does `simulate` predict the
+"""Live against offline on a multi-target mission: does `simulate` predict the
 service, phase by phase?
 
 For each method and seed: the live mission in this process (`run_embedded`: the simulated world,

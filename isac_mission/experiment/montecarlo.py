@@ -10,7 +10,7 @@ location RMSE = sqrt(mean over runs and slots 1..N of ||p_hat - p||^2), velocity
 tr(PCRB) position and velocity parts over the same runs and slots (the first slots, where the
 bound is still large, dominate that mean, so the position part over the second half of the
 mission is reported too); the efficiency ratio
-E||p_hat - p||^2 / tr(PCRB_pos) over slots 2..N. The figures issue 13 asks for (the whole
+E||p_hat - p||^2 / tr(PCRB_pos) over slots 2..N. The phase figures (the whole
 tr(PCRB) over slots 11..N and over the second half, RMSEs over slots 2..N) are the `*_from11`,
 `pcrb_late` and `*_from2` fields (experiment/comparison.py, which also gives every method's
 reduction against `proposed` with paired bootstrap intervals).

@@ -100,10 +100,12 @@ def broken_links(root: Path) -> list[str]:
 
 
 def work_items(root: Path) -> list[str]:
-    """Lines of the documents that name a work item ("issue 13", "item 2")."""
+    """Lines of the documents and the shipped scenarios that name a work item ("issue 13",
+    "item 2")."""
+    scenarios = sorted((root / "isac_mission" / "scenarios").glob("*.yaml"))
     return [
         f"{_rel(doc, root)}:{n}: {line.strip()}"
-        for doc in documents(root)
+        for doc in [*documents(root), *scenarios]
         for n, line in enumerate(doc.read_text(encoding="utf-8").splitlines(), 1)
         if _WORK_ITEM.search(line)
     ]
