@@ -22,6 +22,7 @@ from isac_mission.planning.slot import plan_slot as _plan
 from isac_mission.records import SlotRecord, Trace
 from isac_mission.tracking.cycle import CycleModel, TrackState, predict
 from isac_mission.tracking.pcrb import Bound
+from isac_mission.tracking.priorities import scripted_priorities
 from isac_mission.types import Gaussian, SlotPlan
 
 
@@ -91,7 +92,9 @@ def run_closed_loop(
     records: list[SlotRecord] = []
 
     def keep(outcome: SlotOutcome) -> None:
-        records.append(outcome_record(outcome))
+        records.append(
+            outcome_record(outcome, scripted_priorities(scenario.priority_changes, outcome.slot))
+        )
 
     result = _fly(
         scenario,

@@ -192,3 +192,18 @@ def free_udp_port() -> int:
 def free_tcp_port() -> int:
     """A TCP port on 127.0.0.1 that was free a moment ago (tests/support/ports.py)."""
     return ports.free_tcp_port()
+
+
+@pytest.fixture
+def horizon_plans_one_target(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The method registry as if `horizon` planned one target (`max_targets=1`), as a method a
+    user registers for one target: no shipped method plans one target only, and the tests of
+    how such a method is refused on a scenario of several targets use this one."""
+    from dataclasses import replace
+
+    from isac_mission.planning import registry
+
+    patched = tuple(
+        replace(r, max_targets=1) if r.name == "horizon" else r for r in registry.REGISTRY
+    )
+    monkeypatch.setattr(registry, "REGISTRY", patched)

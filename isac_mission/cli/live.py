@@ -256,7 +256,7 @@ MethodOpt = Annotated[
     str | None,
     typer.Option(
         help=f"Planning method: {methods_help()}. Default: horizon; on a multi-target scenario "
-        "proposed (horizon plans one target)."
+        "proposed (horizon plans every track there too, not yet better)."
     ),
 ]
 

@@ -11,8 +11,9 @@ tracker under `multi:`); the deprecated `target:` and `multi_target:` are read u
 
 Modules: `units` (dB/dBm), `sections` (timing ... planner, the tracker and the targets' motion),
 `targets` (`targets:` entries, `detection:`), `signing` (MAVLink signing and its key),
-`security` (Zenoh users, roles, TLS), `scenario` (`ScenarioFile`, `Scenario`), `resolve`
-(derived constants and cross-field checks), `loading` (files, mappings, names).
+`security` (Zenoh users, roles, TLS), `priorities` (`priorities:`, the scripted changes of the
+tracks' priorities), `scenario` (`ScenarioFile`, `Scenario`), `resolve` (derived constants and
+cross-field checks), `loading` (files, mappings, names).
 """
 
 from isac_mission.config.impairment import (
@@ -30,6 +31,7 @@ from isac_mission.config.loading import (
     scenario_names,
     scenario_path,
 )
+from isac_mission.config.priorities import PriorityEntry
 from isac_mission.config.resolve import radar_crb_alphas, random_bs_layout, resolve
 from isac_mission.config.scenario import (
     SCHEMA_REMOVAL_VERSION,
@@ -87,6 +89,7 @@ __all__ = [
     "MavlinkSigningKey",
     "MultiTrackerConfig",
     "PlannerConfig",
+    "PriorityEntry",
     "RadioConfig",
     "Scenario",
     "ScenarioFile",

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from isac_mission.config.priorities import priority_problems
 from isac_mission.config.scenario import Scenario, ScenarioFile, multi_target_reasons
 from isac_mission.config.signing import mavlink_signing_key
 from isac_mission.config.targets import DetectionSpec, TargetSpec
@@ -125,8 +126,10 @@ def resolve(spec: ScenarioFile) -> Scenario:
         detection=resolve_detection(spec),
         multi_tracker=spec.tracker.multi,
         tracker_kind=spec.tracker.kind,
+        priority_changes=tuple(e.change() for e in spec.priorities),
     )
     problems = _cross_field_problems(scenario, n_slots, single_section)
+    problems += priority_problems(spec.priorities, scenario.N)
     if problems:
         raise ConfigError("\n".join(problems))
     return scenario

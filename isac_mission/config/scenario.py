@@ -19,6 +19,7 @@ from pydantic import Field, model_validator
 
 from isac_mission.config.impairment import ImpairmentConfig
 from isac_mission.config.links import LinksConfig
+from isac_mission.config.priorities import PriorityEntry
 from isac_mission.config.sections import (
     AreaConfig,
     BaseStationConfig,
@@ -45,6 +46,7 @@ from isac_mission.config.targets import (
 )
 from isac_mission.deprecation import REMOVAL_VERSION
 from isac_mission.model.motion import ConstantVelocity, MotionModel
+from isac_mission.tracking.priorities import PriorityChange
 from isac_mission.types import FloatArray
 
 SCHEMA_REMOVAL_VERSION = REMOVAL_VERSION
@@ -85,6 +87,11 @@ class ScenarioFile(Section):
     security: SecurityConfig = SecurityConfig()
     impairment: ImpairmentConfig = ImpairmentConfig()
     links: LinksConfig = LinksConfig()
+    priorities: list[PriorityEntry] = Field(
+        default_factory=list,
+        description="Scripted changes of the tracks' priorities (config/priorities.py): "
+        "[{slot, track, weight}, ...]; none by default (every track weighs 1).",
+    )
     target: TargetConfig | None = Field(
         None,
         description=f"Deprecated, removed in {SCHEMA_REMOVAL_VERSION}: one target "
@@ -237,6 +244,9 @@ class Scenario:
     tracker_kind: TrackerKind = "auto"
     """tracker.kind: auto (the rule of `multi_target`), labelled (resolve refused it for a
     scenario that needs the multi-target tracker) or multi (the multi-target tracker always)."""
+    priority_changes: tuple[PriorityChange, ...] = ()
+    """The scripted priority changes (priorities:; tracking/priorities.py), in the file's
+    order; () by default."""
 
     @property
     def multi_target(self) -> bool:
@@ -320,6 +330,16 @@ class Scenario:
             "ekf_iterations": self.ekf_iterations,
             "planner": self.planner.model_dump(),
             **(self._multi_target_config() if self.multi_target else {}),
+            **(self._priorities_config() if self.priority_changes else {}),
+        }
+
+    def _priorities_config(self) -> dict[str, Any]:
+        """The scripted priority changes as the trace config states them (absent: none)."""
+        return {
+            "priorities": [
+                {"slot": c.slot, "track": c.track_id, "weight": c.priority}
+                for c in self.priority_changes
+            ]
         }
 
     def _multi_target_config(self) -> dict[str, Any]:

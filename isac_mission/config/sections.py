@@ -9,9 +9,16 @@ deprecated single-target section (docs/decisions/0001-one-scenario-schema.md).
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SerializerFunctionWrapHandler,
+    model_serializer,
+    model_validator,
+)
 
 from isac_mission.tracking.gospa import CUTOFF_M
 
@@ -391,7 +398,26 @@ class PlannerConfig(Section):
         "bridge's setpoints (0.72 m, lockstep; tests/numerics/test_tracking_error.py), rounded "
         "up (docs/model.md, 'Vehicle model').",
     )
+    newcomer_weight: float = Field(
+        1.0,
+        ge=0,
+        le=1,
+        description="A tentative track's weight in the objective, times its existence (its hits "
+        "over the hits that confirm it) and its priority: the fleet places a newcomer before "
+        "it is confirmed (docs/model.md, 'Planning for several targets'); 0 = tentative tracks "
+        "are only kept clear of, as before the key existed (a trace's config without it).",
+    )
     horizon: HorizonConfig = HorizonConfig()
     feasibility_tol_m: float = Field(
         1e-6, gt=0, description="Slack allowed when re-checking 14a-14j on a returned plan."
     )
+
+    @model_serializer(mode="wrap")
+    def _newcomer_weight_when_set(self, handler: SerializerFunctionWrapHandler) -> Any:
+        """The section as dumped (the trace's config): newcomer_weight left out at 0, so that a
+        trace without it reads as what it is, planned with tentative tracks kept clear of only
+        (as every trace written before the key existed)."""
+        out = handler(self)
+        if isinstance(out, dict) and out.get("newcomer_weight") == 0.0:
+            del out["newcomer_weight"]
+        return out

@@ -3,8 +3,9 @@ WebSocket that pushes updates.
 
 Routes: `GET /` the page; `GET /static/...` its assets (package data, nothing from the
 internet); `GET /api/snapshot` the current picture; `GET /api/replay` the traces of `view`;
-`POST /api/login` {"password"}; `POST /api/control` {"command", "uav"?, "params"?} with the
-header `X-Console-Token` when security is on; `WS /ws` a snapshot, then batches of updates.
+`POST /api/login` {"password"}; `POST /api/control` {"command", "uav"?, "params"?,
+"track"?} with the header `X-Console-Token` when security is on; `WS /ws` a snapshot, then
+batches of updates.
 Every request is validated (`console.requests`); a bad one gets a 4xx JSON `{"error": text,
 "field": name}` whose text names the field, and nothing is sent on the bus.
 """

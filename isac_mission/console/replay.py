@@ -24,6 +24,7 @@ from isac_mission.records import read_trace
 from isac_mission.records.slot import SlotRecord
 from isac_mission.records.trace import Trace
 from isac_mission.records.tracks import TrackLine, TracksLine
+from isac_mission.wire import DEFAULT_PRIORITY
 
 
 def _finite(x: float | None) -> float | None:
@@ -40,12 +41,14 @@ def frame(line: TracksLine, rec: SlotRecord | None = None) -> dict[str, Any]:
     tracks, those of the track the plan followed (else the first confirmed) and its nearest
     target."""
     raw = line.line
+    priorities = _priorities(raw)
     tracks = [
         {
             "id": t.track_id,
             "confirmed": t.confirmed,
             "x": [_finite(float(v)) for v in t.x],
             "ellipse": ellipse_2sigma(t.P),
+            "priority": priorities.get(t.track_id, DEFAULT_PRIORITY),
         }
         for t in line.tracks
     ]
@@ -91,6 +94,22 @@ def frame(line: TracksLine, rec: SlotRecord | None = None) -> dict[str, Any]:
         "tracks": tracks,
         "truths": truths,
     }
+
+
+def _priorities(raw: dict[str, Any]) -> dict[int, float]:
+    """Track id -> the priority its slot line records (a line without one: none; the page
+    shows DEFAULT_PRIORITY, what every track was planned with before an operator set one)."""
+    out: dict[int, float] = {}
+    tracks = raw.get("tracks")
+    for entry in tracks if isinstance(tracks, list) else []:
+        if not isinstance(entry, dict):
+            continue
+        track_id, priority = entry.get("id"), entry.get("priority")
+        if isinstance(priority, bool) or not isinstance(priority, int | float):
+            continue
+        if isinstance(track_id, int) and math.isfinite(priority):
+            out[track_id] = float(priority)
+    return out
 
 
 def _lead(line: TracksLine) -> TrackLine | None:

@@ -16,12 +16,13 @@ from typing import Any, Final, Literal, TypeVar
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from isac_mission.errors import MessageError
+from isac_mission.wire.control_models import MAX_TRACK_ID
 from isac_mission.wire.envelope import dumps, envelope
 from isac_mission.wire.models import MODELS
 from isac_mission.wire.refusal import message_error
 
 MAX_BODY_BYTES: Final = 4096
-COMMANDS: Final = ("set", "hold", "resume", "land", "release")
+COMMANDS: Final = ("set", "hold", "resume", "land", "release", "priority")
 """The fleet commands of `control` (docs/bus.md); the bus model decides which it accepts."""
 
 
@@ -51,12 +52,14 @@ class LoginRequest(BaseModel):
 
 class ControlRequest(BaseModel):
     """`POST /api/control`: one fleet command. uav: one vehicle (absent: every vehicle, where
-    the command allows it); params: `set` only, e.g. {"rate_min_mbps": 20} (R_th, Mbit/s)."""
+    the command allows it); params: `set`, e.g. {"rate_min_mbps": 20} (R_th, Mbit/s), and
+    `priority`, {"weight": 5} (0 to 10); track: `priority` only, the track id."""
 
     model_config = _STRICT
-    command: Literal["set", "hold", "resume", "land", "release"]
+    command: Literal["set", "hold", "resume", "land", "release", "priority"]
     uav: int | None = Field(default=None, ge=0, le=255)
     params: dict[str, float] | None = None
+    track: int | None = Field(default=None, ge=1, le=MAX_TRACK_ID)
 
 
 def _first_error(err: ValidationError) -> str:
@@ -102,6 +105,8 @@ def control_payload(
         obj["uav"] = req.uav
     if req.params is not None:
         obj["params"] = req.params
+    if req.track is not None:
+        obj["track"] = req.track
     model = MODELS["control"]
     try:
         model.model_validate(obj, strict=True, context={"n_uavs": n_uavs})

@@ -13,7 +13,9 @@ and a `truth_set` (docs/bus.md) give them directly; a single-target `track` give
 of a one-entry `track_set` (track id 1, confirmed, `pcrb_position_trace` the position part of
 tr(J^-1)) and `truth` the `truths` of a one-state `truth_set`, unless a `track_set` (a
 `truth_set`) of the same or a later slot has arrived: a ground that publishes both sends its
-lead track as `track` beside the `track_set`, which wins. Once the slot's truth is known,
+lead track as `track` beside the `track_set`, which wins. Every track carries its `priority`
+(the operator's weight of it in the planner's objective, 0 to 10; 1 when the message has none).
+Once the slot's truth is known,
 `tracks` also holds the targets present then (`truths_of_slot`), each present target's distance
 to the nearest confirmed track (`target_errors`), and per confirmed track its distance to the
 nearest present target (`error_m`) and the target it follows (`target`). Per confirmed track,
@@ -37,6 +39,7 @@ from pydantic import ValidationError
 
 from isac_mission.console.geometry import ellipse_2sigma, pcrb_parts, position_error_m
 from isac_mission.errors import MessageError
+from isac_mission.wire import DEFAULT_PRIORITY
 from isac_mission.wire.envelope import loads, rejection_reason
 from isac_mission.wire.models import MODELS
 from isac_mission.wire.refusal import message_error
@@ -140,6 +143,7 @@ class MissionView:
 
     def _track(self, d: dict[str, Any], now: float) -> list[Update]:
         n = int(d["slot"])
+        d.setdefault("priority", DEFAULT_PRIORITY)  # written only when it is not 1
         d["ellipse"] = ellipse_2sigma(d["P"])
         parts = pcrb_parts(d["J"])
         d["pcrb_pos"], d["pcrb_vel"] = parts if parts is not None else (None, None)
@@ -190,6 +194,7 @@ class MissionView:
         n = int(d["slot"])
         for track in d["tracks"]:
             track["ellipse"] = ellipse_2sigma(track["P"])
+            track.setdefault("priority", DEFAULT_PRIORITY)  # written only when it is not 1
         d["received_wall_s"] = now
         self.confirmed_by_slot[n] = [list(tr["x"]) for tr in d["tracks"] if tr["confirmed"]]
         _trim(self.confirmed_by_slot, n)
@@ -341,6 +346,7 @@ def _one_track_set(track: dict[str, Any]) -> dict[str, Any]:
         "x": list(track["x"]),
         "P": [list(row) for row in track["P"]],
         "pcrb_position_trace": track["pcrb_pos"],
+        "priority": track.get("priority", DEFAULT_PRIORITY),
     }
     return {
         "schema": track["schema"],

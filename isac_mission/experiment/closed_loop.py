@@ -29,6 +29,7 @@ from isac_mission.planning.slot import Method, SlotInput
 from isac_mission.planning.tracks import plan_tracks
 from isac_mission.tracking.factory import keep_out_tracks, scene_for, tracker_for
 from isac_mission.tracking.pcrb import Bound
+from isac_mission.tracking.priorities import scripted_priorities
 from isac_mission.tracking.tracker import SlotTracking, Tracker, TrackEstimate, TrackPrediction
 from isac_mission.types import FloatArray, IntArray, SlotPlan
 
@@ -162,6 +163,7 @@ def fly_offline(
             velocity,
             plan,
             keep_out_tracks=keep_out_tracks(s),
+            priorities=scripted_priorities(s.priority_changes, n),
         )
         plan = planned.plan
         if plan.uav_velocity_mps is not None:

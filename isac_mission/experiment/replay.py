@@ -18,8 +18,9 @@ slot n with a plan this module rebuilds the planner's input and answers three qu
    against the recorded `planned_step_m`, both from the previous plan's waypoint).
 
 The replay plans as the live ground loop does (planning/fleet.py, PlanningJob: the vehicles a plan left
-out, `planned_around`, held and kept out), chaining its own replayed plans as each slot's previous
-plan. Pure computation on a trace and a scenario (no I/O: `read_trace` is the caller's).
+out, `planned_around`, held and kept out; the operator's priorities each track's `priority` in the
+line records, `line_priorities`), chaining its own replayed plans as each slot's previous plan.
+Pure computation on a trace and a scenario (no I/O: `read_trace` is the caller's).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from isac_mission.records.tracks import TracksLine, resume_point
 from isac_mission.tracking.cycle import CycleModel, TrackState, predict
 from isac_mission.tracking.factory import keep_out_tracks, restored_tracker
 from isac_mission.tracking.pcrb import Bound
+from isac_mission.tracking.priorities import Priorities, scripted_priorities
 from isac_mission.tracking.tracker import LABELLED_TRACK_ID, TrackPrediction
 from isac_mission.types import FloatArray, Gaussian, SlotPlan
 
@@ -154,7 +156,8 @@ def replay_trace(
         predictions = _predictions(line, prev, records, s, model)
         if predictions is None:
             continue
-        job = _live_job(line, prev, records, s, kits, method, predictions, replayed)
+        priorities = line_priorities(line, prev, s)
+        job = _live_job(line, prev, records, s, kits, method, predictions, replayed, priorities)
         plan = job.run()
         replayed[line.slot] = (job.active, plan)
         if wanted is not None and line.slot not in wanted:
@@ -164,7 +167,8 @@ def replay_trace(
         rec = records.get(line.slot)
         gap = float("nan")  # a line of tracks records no prediction
         if rec is not None:
-            gap = float(np.max(np.abs(np.asarray(rec.target_pred) - job.targets[0].state_pred)))
+            predicted = job.predictions[0].prediction.x
+            gap = float(np.max(np.abs(np.asarray(rec.target_pred) - predicted)))
         plan_xy = _array(raw, "plan_xy")
         start_v_live = _array(raw, "plan_start_velocity", np.zeros((s.M, 2)))
         out.append(
@@ -182,6 +186,19 @@ def replay_trace(
             )
         )
     return out
+
+
+def line_priorities(line: TracksLine, prev: TracksLine | None, s: Scenario) -> Priorities:
+    """The operator's priorities slot line.slot was planned with: each track's `priority` in the
+    line (what the slot's plan was made with), for a track the line no longer has (deleted by
+    the slot's update) the previous line's, and for any other the scenario's script at the
+    slot (`scripted_priorities`; 1 without one)."""
+    table = scripted_priorities(s.priority_changes, line.slot)
+    for source in (prev, line):
+        if source is not None:
+            for t in source.tracks:
+                table = table.with_priority(t.track_id, t.priority)
+    return table
 
 
 def _fields(line: TracksLine, records: dict[int, SlotRecord]) -> dict[str, Any]:
@@ -247,9 +264,11 @@ def _live_job(
     method: Method,
     predictions: tuple[TrackPrediction, ...],
     replayed: dict[int, tuple[tuple[int, ...], SlotPlan]],
+    priorities: Priorities,
 ) -> PlanningJob:
     """The planning job of slot line.slot as the ground loop built it (mission.next_job): the
-    recorded start, the previous plan's shares and BSs, the vehicles it planned around."""
+    recorded start, the previous plan's shares and BSs, the vehicles it planned around, the
+    operator's priorities."""
     raw = _fields(line, records)
     if prev is None:
         eta, assoc = np.full(s.M, 1.0 / s.M), None
@@ -277,6 +296,7 @@ def _live_job(
         predictions=predictions,
         excluded=excluded,
         prev_plan=prev_plan,
+        priorities=priorities,
     )
 
 

@@ -8,7 +8,9 @@ track's bound); a run whose one track is labelled (a single track in every slot,
 its own measurement variances: `TrackEstimate.variances`) also has that track's per-slot arrays
 (`closed_loop.RunResult`), and its trace is the slot records of docs/trace.md. A run whose
 tracks are found and followed from unlabelled reports is traced as docs/trace.md, "Lines of a
-tracker of several tracks", describes (records/tracks.py).
+tracker of several tracks", describes (records/tracks.py). Each track of a line carries the
+operator's priority the slot's plan was made with (the scenario's scripted `priorities:`, the
+same table `closed_loop.fly_offline` plans with: `tracking/priorities.scripted_priorities`).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from isac_mission.planning.slot import Method
 from isac_mission.records import SlotRecord, TraceWriter
 from isac_mission.records import tracks as tracks_trace
 from isac_mission.tracking.factory import draw_noise, keep_out_tracks, scene_for, tracker_for
+from isac_mission.tracking.priorities import Priorities, PriorityChange, scripted_priorities
 from isac_mission.types import FloatArray
 
 
@@ -57,11 +60,11 @@ def labelled_arrays(run: MissionRun | RunResult) -> RunResult:
 
 def has_labelled_track(outcomes: Sequence[SlotOutcome]) -> bool:
     """Whether every slot had one track, updated with its own measurement variances (the
-    labelled tracker's) and planned for."""
+    labelled tracker's) and planned for (or held because its priority was 0)."""
     return all(
         len(o.tracking.tracks) == 1
         and o.tracking.tracks[0].variances is not None
-        and o.slot_input is not None
+        and (o.slot_input is not None or o.planned_for == 0)
         for o in outcomes
     )
 
@@ -71,11 +74,12 @@ def labelled_result(method: str, seed: int, outcomes: Sequence[SlotOutcome]) -> 
     return RunResult.of_outcomes(method, seed, outcomes)
 
 
-def outcome_record(o: SlotOutcome) -> SlotRecord:
-    """The trace line of one slot of the labelled target (docs/trace.md)."""
+def outcome_record(o: SlotOutcome, priorities: Priorities | None = None) -> SlotRecord:
+    """The trace line of one slot of the labelled target (docs/trace.md); priorities: those
+    the slot's plan was made with (None: every track 1). A slot the fleet held (the target at
+    priority 0) has no planner input: no plan_start_xy."""
     rep = o.plan.report
     inp = o.slot_input
-    assert inp is not None  # the labelled target is planned for in every slot
     return SlotRecord(
         slot=o.slot,
         method=o.method,
@@ -96,8 +100,8 @@ def outcome_record(o: SlotOutcome) -> SlotRecord:
         plan_velocity=o.plan.uav_velocity_mps,
         reason=rep.reason,
         fallback=rep.fallback or None,
-        plan_start_xy=inp.prev_xy_m,
-        plan_start_velocity=inp.prev_velocity_mps,
+        plan_start_xy=None if inp is None else inp.prev_xy_m,
+        plan_start_velocity=None if inp is None else inp.prev_velocity_mps,
         extra={
             "pcrb_pos": o.bound.position_trace,
             "pcrb_vel": o.bound.velocity_trace,
@@ -105,12 +109,15 @@ def outcome_record(o: SlotOutcome) -> SlotRecord:
             "position_iterations": rep.position_iterations,
             "bandwidth_iterations": rep.bandwidth_iterations,
         }
-        | tracks_trace.tracks_fields(o.planned_for, o.truth, o.tracking.tracks, o.reports),
+        | tracks_trace.tracks_fields(
+            o.planned_for, o.truth, o.tracking.tracks, o.reports, priorities
+        ),
     )
 
 
-def tracks_slot(o: SlotOutcome) -> tracks_trace.TracksSlot:
-    """A slot as the tracks trace records it (records/tracks.py)."""
+def tracks_slot(o: SlotOutcome, priorities: Priorities | None = None) -> tracks_trace.TracksSlot:
+    """A slot as the tracks trace records it (records/tracks.py); priorities: those the slot's
+    plan was made with (None: every track 1)."""
     inp = o.slot_input
     return tracks_trace.TracksSlot(
         o.slot,
@@ -124,6 +131,7 @@ def tracks_slot(o: SlotOutcome) -> tracks_trace.TracksSlot:
         o.planned_for,
         start_xy=None if inp is None else inp.prev_xy_m,
         start_velocity=None if inp is None else inp.prev_velocity_mps,
+        priorities=priorities,
     )
 
 
@@ -132,13 +140,19 @@ def trace_path(trace_dir: Path, method: str, run: int) -> Path:
     return trace_dir / f"{method}_run{run:03d}.jsonl"
 
 
-def write_trace(path: Path, config: dict[str, Any], outcomes: Sequence[SlotOutcome]) -> None:
+def write_trace(
+    path: Path,
+    config: dict[str, Any],
+    outcomes: Sequence[SlotOutcome],
+    priority_changes: Sequence[PriorityChange] = (),
+) -> None:
     """The run's trace: the labelled track's slot records, or the lines of tracks (module
-    doc)."""
+    doc); priority_changes: the scenario's scripted priorities the run was flown with."""
     labelled = has_labelled_track(outcomes)
     with TraceWriter(path, config) as writer:
         for o in outcomes:
-            writer.write_slot(outcome_record(o) if labelled else tracks_slot(o))
+            table = scripted_priorities(priority_changes, o.slot)
+            writer.write_slot(outcome_record(o, table) if labelled else tracks_slot(o, table))
 
 
 def scenario_kit(s: Scenario) -> SolverKit:
@@ -187,5 +201,5 @@ def fly_run(s: Scenario, method: Method, run: int, seed: int, trace_dir: Path | 
     outcomes = fly_outcomes(s, method, seed + run, kit_for(s))
     if trace_dir is not None:
         config = s.trace_config() | {"seed": seed + run, "method": method}
-        write_trace(trace_path(trace_dir, method, run), config, outcomes)
+        write_trace(trace_path(trace_dir, method, run), config, outcomes, s.priority_changes)
     return mission_run(s, method, seed + run, outcomes)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -25,8 +25,9 @@ from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.registry import planner
 from isac_mission.planning.slot import Method, plan_slot, warm_up
 from isac_mission.planning.tracks import Planner as Planner
-from isac_mission.planning.tracks import TracksPlan, plan_tracks
+from isac_mission.planning.tracks import TracksPlan, plan_tracks, planned_beliefs
 from isac_mission.tracking.beliefs import TargetBelief
+from isac_mission.tracking.priorities import Priorities
 from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, HorizonPlan, IntArray, SlotPlan
 
@@ -119,7 +120,8 @@ class PlanningJob:
     (tracking/tracker.py; none confirmed: the fleet holds); excluded: vehicles outside the plan
     (sorted); operator_held: those of them an operator's `hold` or `land` took out; prev_plan:
     last slot's plan of the same active vehicles, over those vehicles only (`active_part`), None
-    when there is none or the active set changed.
+    when there is none or the active set changed; priorities: the operator's priority of each
+    track (tracking/priorities.py; the default: every track 1).
     """
 
     slot: int
@@ -133,6 +135,7 @@ class PlanningJob:
     excluded: tuple[int, ...] = ()
     prev_plan: SlotPlan | None = None
     operator_held: tuple[int, ...] = ()
+    priorities: Priorities = field(default_factory=Priorities)
 
     @property
     def active(self) -> tuple[int, ...]:
@@ -141,9 +144,9 @@ class PlanningJob:
 
     @property
     def targets(self) -> tuple[TargetBelief, ...]:
-        """The confirmed tracks as the planner takes them (what a hold is judged by)."""
-        motion = self.kits.scenario.motion
-        return tuple(p.belief(motion) for p in self.predictions if p.confirmed)
+        """The confirmed tracks planned for, weighed as the planner weighs them (what a hold is
+        judged by; `tracks.planned_beliefs`)."""
+        return planned_beliefs(self.kits.scenario, self.predictions, self.priorities)
 
     def run(self, planner: Planner = plan_slot) -> SlotPlan:
         """The plan of `run_tracks`."""
@@ -179,6 +182,7 @@ class PlanningJob:
             extra_keep_out_xy=self.uav_xy[list(self.excluded)] if self.excluded else None,
             keep_out_tracks=self.kits.base_keep_out,
             planner=planner,
+            priorities=self.priorities,
         )
         if not self.excluded:
             return planned

@@ -12,6 +12,12 @@ Each slot (docs/model.md, "Receding horizon"):
    other method's plan passes too) and the vehicle model's leg limits; otherwise the per-slot
    plan is returned, saying why.
 
+Several targets (SlotInput.targets): the NLP is the one built for their count T, planning the
+sum over the targets of weight times each one's horizon objective and keeping 14j from each along
+its own predicted path; the targets enter it ordered by track ID (`nlp_targets`), so that last
+slot's multipliers still belong to their targets when the lead changes. A changed count is
+another NLP: its start is cold (docs/model.md, "Receding horizon", "Several targets").
+
 Pure: no clock, no RNG, no I/O.
 """
 
@@ -49,9 +55,11 @@ from isac_mission.planning.per_slot import Proposed, polish_nlp
 from isac_mission.planning.problem import (
     PlansOnceToWarmUp,
     SlotInput,
+    moving_targets,
     slot_association,
     with_end_velocity,
 )
+from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.tracking.pcrb import (
     SensingParams,
     bound_along,
@@ -150,6 +158,19 @@ def _shifted(
     return xy_new, v_new, eta_new
 
 
+def belief_cov_pred(belief: TargetBelief) -> FloatArray:
+    """The target's predicted covariance [4, 4] for its clearances: the tracker's, or the bound's
+    own (prior_information^-1) without one."""
+    cov = belief.cov_pred
+    return scaled_inverse(belief.prior_information) if cov is None else cov
+
+
+def nlp_targets(inp: SlotInput) -> tuple[TargetBelief, ...]:
+    """The slot's targets in the NLP's order: by track ID (stable from slot to slot when the lead
+    changes, so that last slot's multipliers stay with their targets)."""
+    return tuple(sorted(inp.targets, key=lambda b: b.track_id))
+
+
 def horizon_slot_data(
     s: Scenario,
     inp: SlotInput,
@@ -158,14 +179,17 @@ def horizon_slot_data(
     bs_of_uav: IntArray,
     waypoints_xy_m: FloatArray,
     length: int,
+    targets: tuple[TargetBelief, ...] | None = None,
 ) -> HorizonSlotData:
     """The horizon NLP's data for this slot: the association bs_of_uav [M] kept (serving BS),
     the BS nearest waypoints_xy_m [M, 2] (the first slot's of the start) as the control BS
     (14b), the clearances along the horizon; start_velocity_mps [M, 2]: what the first legs
-    start with (`planned_start_velocity`)."""
+    start with (`planned_start_velocity`). targets: with several, the NLP's targets in its order
+    (`nlp_targets`; each its state, prior, clearances from its own covariance and weight);
+    None: the lead alone, its covariance target_cov_pred [4, 4]."""
     nearest = np.argmin(np.linalg.norm(waypoints_xy_m[:, None, :] - s.bs_xy[None], axis=-1), axis=1)
     keep_out, x_pred = inp.keep_out_xy_m, inp.lead.state_pred
-    return HorizonSlotData(
+    data = HorizonSlotData(
         rate_min_bps=s.r_th,
         prev_xy=np.asarray(inp.prev_xy_m, dtype=float),
         prev_velocity=np.asarray(start_velocity_mps, dtype=float)
@@ -177,6 +201,19 @@ def horizon_slot_data(
         x_pred=np.asarray(x_pred, dtype=float),
         J_pred=np.asarray(inp.lead.prior_information, dtype=float),
         clearance_m=sample_clearances(s, predicted_clearances(s, target_cov_pred, length), x_pred),
+    )
+    if targets is None or len(targets) == 1:
+        return data
+    clearances = [
+        sample_clearances(s, predicted_clearances(s, belief_cov_pred(b), length), b.state_pred)
+        for b in targets
+    ]
+    return replace(
+        data,
+        x_pred=np.array([b.state_pred for b in targets], dtype=float),
+        J_pred=np.array([b.prior_information for b in targets], dtype=float),
+        clearance_m=np.array(clearances),
+        target_weight=np.array([b.weight for b in targets], dtype=float),
     )
 
 
@@ -258,14 +295,19 @@ def kept_at_cap(
     return start_infeasible or value(sol.uav_xy_m, sol.bandwidth_share) < start_value
 
 
-def horizon_nlp(kit: SolverKit, pair_band: int | None = None) -> HorizonNLP:
+def horizon_nlp(kit: SolverKit, pair_band: int | None = None, n_targets: int = 1) -> HorizonNLP:
     """The kit's receding-horizon NLP (planning/horizon_nlp.py) with the UAV-UAV rows of
-    pair_band (None: every pair), built on first use and kept."""
+    pair_band (None: every pair) for n_targets targets, built on first use and kept."""
     M = kit.scenario.M
     band = M - 1 if pair_band is None else min(pair_band, M - 1)
+    key = "horizon" if band == M - 1 else f"horizon-band{band}"
+    if n_targets > 1:
+        key += f"-targets{n_targets}"
     return kit.built(
-        "horizon" if band == M - 1 else f"horizon-band{band}",
-        lambda: HorizonNLP(kit.scenario, kit.n_keep_out, kit.solve_lock, kit.ipopt, band),
+        key,
+        lambda: HorizonNLP(
+            kit.scenario, kit.n_keep_out, kit.solve_lock, kit.ipopt, band, n_targets
+        ),
     )
 
 
@@ -276,23 +318,23 @@ def kit_pair_bands(kit: SolverKit) -> tuple[int, ...]:
 
 
 def ordered_nlp(
-    kit: SolverKit, *, prev_xy_m: FloatArray, prev_velocity_mps: FloatArray
+    kit: SolverKit, *, prev_xy_m: FloatArray, prev_velocity_mps: FloatArray, n_targets: int = 1
 ) -> tuple[HorizonNLP | None, IntArray, int]:
-    """(the NLP of the narrowest band that the pairs within reach of the UAVs at prev_xy_m
-    [M, 2] flying prev_velocity_mps [M, 2] fit, or None if none does; the fleet's order for it:
-    UAV order[a] in the NLP's UAV slot a; the order's bandwidth). A fleet with the full problem
-    alone keeps its own order."""
+    """(the NLP for n_targets targets of the narrowest band that the pairs within reach of the
+    UAVs at prev_xy_m [M, 2] flying prev_velocity_mps [M, 2] fit, or None if none does; the
+    fleet's order for it: UAV order[a] in the NLP's UAV slot a; the order's bandwidth). A fleet
+    with the full problem alone keeps its own order."""
     s = kit.scenario
     bands = kit_pair_bands(kit)
     if bands == (s.M - 1,):
-        return horizon_nlp(kit), np.arange(s.M), s.M - 1
-    narrowest = horizon_nlp(kit, bands[0])
+        return horizon_nlp(kit, n_targets=n_targets), np.arange(s.M), s.M - 1
+    narrowest = horizon_nlp(kit, bands[0], n_targets)
     velocity = prev_velocity_mps if s.planner.vehicle_model else np.zeros((s.M, 2))
     reach = horizon_reach_m(velocity, s.v_max, s.dt, narrowest.length)
     within = pairs_within_reach(prev_xy_m, reach, narrowest.pair_clearance_m)
     order, width = banded_order(within)
     fits = [band for band in bands if band >= width]
-    return (horizon_nlp(kit, fits[0]) if fits else None), order, width
+    return (horizon_nlp(kit, fits[0], n_targets) if fits else None), order, width
 
 
 Start = tuple[FloatArray, FloatArray, FloatArray]
@@ -326,14 +368,16 @@ class PerSlotPlan:
 @dataclass(frozen=True)
 class HorizonValue:
     """The horizon objective of a plan (xy [L, M, 2] m, eta [L, M]): sum_l weights_l tr(PCRB_l)
-    by the bound's recursion from the lead target's prediction x_pred [4] and prior information
-    J_pred [4, 4] (`horizon_bound_traces`)."""
+    by the bound's recursion (`horizon_bound_traces`) from each target's prediction x_pred
+    [T, 4] and prior information J_pred [T, 4, 4], the targets' traces summed with their
+    weights target_weight [T] (None: one target, unweighted)."""
 
     s: Scenario
     weights: FloatArray
     x_pred: FloatArray
     J_pred: FloatArray
     sensing: SensingParams
+    target_weight: FloatArray | None = None
 
     @classmethod
     def of(
@@ -345,9 +389,41 @@ class HorizonValue:
         weights = horizon_weights(cfg.length, cfg.discount, cfg.terminal_weight)
         return cls(s, weights, x_pred, J_pred, sensing)
 
+    @classmethod
+    def of_targets(
+        cls, s: Scenario, targets: tuple[TargetBelief, ...], sensing: SensingParams
+    ) -> HorizonValue:
+        """The value for the targets: one target's `of` (its weight not applied: it scales
+        the objective only, which the NLP divides by its start value), several weighted."""
+        if len(targets) == 1:
+            return cls.of(s, targets[0].state_pred, targets[0].prior_information, sensing)
+        cfg = s.planner.horizon
+        weights = horizon_weights(cfg.length, cfg.discount, cfg.terminal_weight)
+        return cls(
+            s,
+            weights,
+            np.array([b.state_pred for b in targets], dtype=float),
+            np.array([b.prior_information for b in targets], dtype=float),
+            sensing,
+            np.array([b.weight for b in targets], dtype=float),
+        )
+
+    def target_traces(self, xy: FloatArray, eta: FloatArray) -> FloatArray:
+        """tr(PCRB) [T, L] of each target along the plan."""
+        x_pred = np.asarray(self.x_pred, dtype=float).reshape(-1, 4)
+        J_pred = np.asarray(self.J_pred, dtype=float).reshape(-1, 4, 4)
+        return np.array(
+            [
+                horizon_bound_traces(self.s, J, x, xy, eta, self.sensing)
+                for x, J in zip(x_pred, J_pred, strict=True)
+            ]
+        )
+
     def traces(self, xy: FloatArray, eta: FloatArray) -> FloatArray:
-        """tr(PCRB) [L] along the plan."""
-        return horizon_bound_traces(self.s, self.J_pred, self.x_pred, xy, eta, self.sensing)
+        """tr(PCRB) [L] along the plan: one target's, or the targets' weighted sum."""
+        if self.target_weight is None:
+            return horizon_bound_traces(self.s, self.J_pred, self.x_pred, xy, eta, self.sensing)
+        return np.asarray(self.target_weight @ self.target_traces(xy, eta))
 
     def __call__(self, xy: FloatArray, eta: FloatArray) -> float:
         return float(self.weights @ self.traces(xy, eta))
@@ -377,7 +453,8 @@ class HorizonSlot:
     """What each step of one slot's horizon plan reads: the scenario s, the slot's input inp,
     the NLP and the fleet's order for it (UAV order[a] in the NLP's UAV slot a), the velocity
     [M, 2] (m/s) the first legs start with (`planned_start_velocity`), the lead target's
-    predicted covariance [4, 4] and the horizon objective."""
+    predicted covariance [4, 4], the horizon objective and the targets in the NLP's order
+    (`nlp_targets`)."""
 
     s: Scenario
     inp: SlotInput
@@ -386,13 +463,16 @@ class HorizonSlot:
     start_velocity_mps: FloatArray
     target_cov_pred: FloatArray
     value: HorizonValue
+    targets: tuple[TargetBelief, ...] | None = None
 
     def slot_data(self, bs_of_uav: IntArray, waypoints_xy_m: FloatArray) -> HorizonSlotData:
         """The NLP's data with the association bs_of_uav [M] and the control BSs nearest
         waypoints_xy_m [M, 2] (`horizon_slot_data`)."""
         inp, velocity, cov = self.inp, self.start_velocity_mps, self.target_cov_pred
         length = self.nlp.length
-        return horizon_slot_data(self.s, inp, velocity, cov, bs_of_uav, waypoints_xy_m, length)
+        return horizon_slot_data(
+            self.s, inp, velocity, cov, bs_of_uav, waypoints_xy_m, length, self.targets
+        )
 
     def velocities(self, v: FloatArray | None) -> FloatArray | None:
         """v for the NLP: itself under the vehicle model, else None."""
@@ -520,18 +600,22 @@ def first_slot_refusal(
     slot: HorizonSlot, data: HorizonSlotData, sol: HorizonSolution
 ) -> Refusal | None:
     """Why the plan's first slot may not fly (the exact check of 14a-14j, SlotConstraints, as
-    every method's plan passes it; the vehicle model's leg limits, `legs_ok`), None if it may."""
+    every method's plan passes it, 14j against every target of the slot along its own path;
+    the vehicle model's leg limits, `legs_ok`), None if it may."""
     s = slot.s
     xy1, eta1 = sol.uav_xy_m[0], sol.bandwidth_share[0]
+    lead = np.asarray(slot.inp.lead.state_pred, dtype=float)
     cons = SlotConstraints(
         data.prev_xy,
         data.serving_xy,
         s.bs_xy,
-        data.x_pred[:2],
+        lead[:2],
         s,
         keep_out_xy=slot.inp.keep_out_xy_m,
         target_clearance_m=float(predicted_clearances(s, slot.target_cov_pred, 1)[0]),
-        target_velocity_mps=data.x_pred[2:4],
+        target_velocity_mps=lead[2:4],
+        target_motion=slot.inp.lead.motion,
+        other_targets=moving_targets(slot.inp.targets[1:], s),
     )
     if not bool(cons.feasible(xy1[None], eta1[None])[0]):
         bad = ", ".join(cons.describe_violations(xy1, eta1))
@@ -607,13 +691,20 @@ def plan_horizon(
     v = inp.prev_velocity_mps
     prev_v = np.zeros((s.M, 2)) if v is None else np.asarray(v)
     prev_v = planned_start_velocity(s, inp.prev_xy_m, prev_v, prev_plan)
+    targets = nlp_targets(inp)
     # The NLP and the fleet's order depend on the UAVs' start only (not on the association).
-    nlp, order, width = ordered_nlp(kit, prev_xy_m=inp.prev_xy_m, prev_velocity_mps=prev_v)
+    nlp, order, width = ordered_nlp(
+        kit, prev_xy_m=inp.prev_xy_m, prev_velocity_mps=prev_v, n_targets=len(targets)
+    )
     if nlp is None:
         why = f"its pairs within reach need a band of {width} (pair_band {kit_pair_bands(kit)})"
         return base.instead(why, "pairs beyond the band")
-    value = HorizonValue.of(s, lead.state_pred, J_pred, kit.sensing)
-    slot = HorizonSlot(s, inp, nlp, order, prev_v, target_cov_pred, value)
+    if len(targets) == 1:
+        value = HorizonValue.of(s, lead.state_pred, J_pred, kit.sensing)
+        slot = HorizonSlot(s, inp, nlp, order, prev_v, target_cov_pred, value)
+    else:
+        value = HorizonValue.of_targets(s, targets, kit.sensing)
+        slot = HorizonSlot(s, inp, nlp, order, prev_v, target_cov_pred, value, targets)
     shifted = None
     if prev_plan is not None and prev_plan.horizon is not None:
         shifted = _shifted(prev_plan.horizon, nlp.length, s.M, s.dt, s)
@@ -644,9 +735,17 @@ class Horizon(PlansOnceToWarmUp):
 
     def prepare(self, kit: SolverKit) -> None:
         """The polish's NLP and the horizon's built (the warm-up slot need not reach the
-        polish), then one slot planned."""
+        polish), for every target count of `prepared_target_counts`, then one slot planned."""
         if kit.scenario.planner.polish:
             polish_nlp(kit)
-        for band in kit_pair_bands(kit):
-            horizon_nlp(kit, band)
+        for n_targets in prepared_target_counts(kit.scenario):
+            for band in kit_pair_bands(kit):
+                horizon_nlp(kit, band, n_targets)
         super().prepare(kit)
+
+
+def prepared_target_counts(s: Scenario) -> range:
+    """The target counts whose NLPs `Horizon.prepare` builds ahead of a mission: 1, and on a
+    scenario of several targets every count up to its number of targets (a slot with more
+    confirmed tracks, a false one among them, builds its NLP when it first meets that count)."""
+    return range(1, len(s.targets) + 1)

@@ -146,29 +146,36 @@ def horizon_hess_lag(
     lift: ca.SX,
     stages: Sequence[tuple[Sequence[tuple[IntArray, ca.SX, ca.SX]], LiftedSlot]],
     f_scale: ca.SX,
+    n_targets: int = 1,
 ) -> ca.Function:
     """nlpsol's hess_lag (x, p, lam_f, lam_g) -> upper triangle, for the horizon's lifted NLP:
-    variables X [n] (the lifted ones `lift` [16 (L - 1)] last), parameters p, rows g [n_rows]
-    followed by the L - 1 slots' 16 lifted equalities, objective sum of the slots' terms /
-    f_scale. Per slot (`stages`): its UAVs' members (CoupledStage) and its LiftedSlot, whose
-    terms are a function of vech(J_M) and the lifted covariance before it."""
-    L = len(stages)
+    variables X [n] (the lifted ones `lift` [16 (L - 1) T] last, target-major), parameters p,
+    rows g [n_rows] followed by the (L - 1) T lifted equalities [16] (target-major), objective
+    sum of the slots' terms / f_scale. Per target and slot (`stages`, T L of them,
+    target-major): its UAVs' members (CoupledStage) and its LiftedSlot, whose terms are a
+    function of vech(that target's J_M) and its lifted covariance before it. The targets' stages
+    share the UAVs' variables: their Hessian entries add up."""
+    L = len(stages) // n_targets
     n_rows = int(g.numel())
     n_x = int(X.numel()) - int(lift.numel())
     lam_f = ca.SX.sym("lam_f")
-    lam_g = ca.SX.sym("lam_g", n_rows + 16 * (L - 1))
+    lam_g = ca.SX.sym("lam_g", n_rows + 16 * (L - 1) * n_targets)
     coupled = []
-    for h, (members, slot) in enumerate(stages):
+    for k, (members, slot) in enumerate(stages):
+        h = k % L
+        base = 16 * (k // L) * (L - 1)  # the target's first lifted block
         last = h == L - 1
-        lam_row = ca.SX(0, 1) if last else lam_g[n_rows + 16 * h : n_rows + 16 * h + 16]
+        lam_row = (
+            ca.SX(0, 1) if last else lam_g[n_rows + base + 16 * h : n_rows + base + 16 * h + 16]
+        )
 
         def phi(y: ca.SX, slot: LiftedSlot = slot, lam_row: ca.SX = lam_row) -> ca.SX:
             term, row = slot(unvech(y))
             value: ca.SX = lam_f * term / f_scale
             return value if row is None else value + ca.dot(lam_row, row)
 
-        outer = lift[16 * (h - 1) : 16 * h] if h > 0 else ca.SX(0, 1)
-        outer_index = n_x + 16 * (h - 1) + np.arange(16) if h > 0 else np.zeros(0, int)
+        outer = lift[base + 16 * (h - 1) : base + 16 * h] if h > 0 else ca.SX(0, 1)
+        outer_index = n_x + base + 16 * (h - 1) + np.arange(16) if h > 0 else np.zeros(0, int)
         coupled.append(CoupledStage(members, phi, outer, outer_index))
     hess = bottleneck_hessian(X, ca.dot(lam_g[:n_rows], g), coupled)
     return ca.Function(

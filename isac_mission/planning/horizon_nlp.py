@@ -83,9 +83,12 @@ class HorizonSlotData:
 
     prev_xy [M, 2] (m), prev_velocity [M, 2] (m/s; zeros for the paper's kinematics);
     serving_xy, control_xy [M, 2]: the serving BS (14a) and the control BS (14b) per UAV;
-    keep_out_xy [n_keep_out, 2]; x_pred [4]: slot n's predicted target state; J_pred [4, 4];
-    clearance_m [L]: the 14j distance per horizon slot; rate_min_bps: R_th (bit/s), the planning
-    scenario's (an operator may change it; the NLP takes it as a bound: `_lower`).
+    keep_out_xy [n_keep_out, 2]; x_pred [4]: slot n's predicted target state (m, m/s); J_pred
+    [4, 4]: its prior information; clearance_m [L]: the 14j distance (m) per horizon slot;
+    rate_min_bps: R_th (bit/s), the planning scenario's (an operator may change it; the NLP
+    takes it as a bound: `_lower`). For T > 1 targets (in the NLP's order of targets): x_pred
+    [T, 4], J_pred [T, 4, 4], clearance_m [T, L] and target_weight [T] (each target's weight in
+    the objective); one target has no weight (None).
     """
 
     rate_min_bps: float
@@ -97,6 +100,21 @@ class HorizonSlotData:
     x_pred: FloatArray
     J_pred: FloatArray
     clearance_m: FloatArray
+    target_weight: FloatArray | None = None
+
+    @property
+    def n_targets(self) -> int:
+        """T, the targets the data is for (1: x_pred [4])."""
+        x = np.asarray(self.x_pred)
+        return 1 if x.ndim == 1 else int(x.shape[0])
+
+    def states(self) -> FloatArray:
+        """Every target's predicted state [T, 4] (m, m/s)."""
+        return np.asarray(self.x_pred, dtype=float).reshape(-1, 4)
+
+    def priors(self) -> FloatArray:
+        """Every target's prior information [T, 4, 4]."""
+        return np.asarray(self.J_pred, dtype=float).reshape(-1, 4, 4)
 
     def in_order(self, order: IntArray) -> HorizonSlotData:
         """The same slot with UAV order[a] in the NLP's UAV slot a."""
@@ -151,15 +169,18 @@ class HorizonNLP:
         lock: SolveLock | None = None,
         ipopt: IpoptFactory = plain_ipopt,
         pair_band: int | None = None,
+        n_targets: int = 1,
     ) -> None:
         """lock: held around IPOPT's construction and every solve (SolverKit.solve_lock); ipopt:
         what builds the solver (SolverKit.ipopt); pair_band: the UAV-UAV rows only of the UAV
         slots a < b with b - a <= pair_band (planning/pairs.py; the caller orders the fleet so
-        that every pair within reach is among them), None: every pair."""
-        problem = build_horizon_problem(scenario, n_keep_out, pair_band)
+        that every pair within reach is among them), None: every pair; n_targets: the targets T
+        it plans for (horizon_problem.build_horizon_problem)."""
+        problem = build_horizon_problem(scenario, n_keep_out, pair_band, n_targets)
         self.problem = problem
         self.scenario = scenario
         self.n_keep_out = n_keep_out
+        self.n_targets = n_targets
         self.pair_band = problem.pair_band
         self.length = problem.length
         self.vehicle_model = problem.vehicle_model
@@ -224,6 +245,13 @@ class HorizonNLP:
             parts.append(np.asarray(velocity, dtype=float).reshape(-1) / self.scenario.v_max)
         parts.append(np.asarray(eta, dtype=float).reshape(-1))
         x = np.concatenate(parts)
+        if data.n_targets != self.n_targets:
+            raise ValueError(f"data of {data.n_targets} targets, the NLP has {self.n_targets}")
+        weight = []
+        if self.n_targets > 1:
+            if data.target_weight is None:
+                raise ValueError("several targets need their weights")
+            weight = [np.asarray(data.target_weight, dtype=float)]
         values = [
             data.prev_xy,
             data.prev_velocity,
@@ -231,8 +259,9 @@ class HorizonNLP:
             data.control_xy,
             data.keep_out_xy,
             data.x_pred,
-            np.asarray(data.J_pred, dtype=float).reshape(-1, order="F"),
+            np.concatenate([J.reshape(-1, order="F") for J in data.priors()]),
             data.clearance_m,
+            *weight,
             *self._along(np.asarray(xy, dtype=float), np.asarray(eta, dtype=float), data)[:2],
             np.array([f_scale]),
         ]
@@ -248,17 +277,46 @@ class HorizonNLP:
         data: HorizonSlotData,
         scales: tuple[FloatArray, FloatArray] | None = None,
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """The bound's recursion along the plan (xy [L, M, 2], eta [L, M]): (scale_j [4 L],
-        scale_p [4 L], lift [16 (L - 1)]). The scales are 1 / sqrt of the diagonals of J_l and
-        of the next slot's predicted covariance P_l+1 (the last scale_p unused: ones), or the
-        given ones; lift the lifted variables there in those scales, E_l P_l+1 E_l
-        (l < L - 1), each column-major."""
+        """The bound's recursion of every target along the plan (xy [L, M, 2], eta [L, M]):
+        (scale_j [4 L T], scale_p [4 L T], lift [16 (L - 1) T]), target-major (`_along_one`)."""
+        T, L = data.n_targets, self.length
+        states, priors = data.states(), data.priors()
+        parts = []
+        for i in range(T):
+            one_scales = None
+            if scales is not None:
+                one_scales = (
+                    scales[0][4 * L * i : 4 * L * (i + 1)],
+                    scales[1][4 * L * i : 4 * L * (i + 1)],
+                )
+            parts.append(self._along_one(xy, eta, states[i], priors[i], one_scales))
+        if T == 1:
+            return parts[0]
+        return (
+            np.concatenate([part[0] for part in parts]),
+            np.concatenate([part[1] for part in parts]),
+            np.concatenate([part[2] for part in parts]),
+        )
+
+    def _along_one(
+        self,
+        xy: FloatArray,
+        eta: FloatArray,
+        x_pred: FloatArray,
+        J_pred: FloatArray,
+        scales: tuple[FloatArray, FloatArray] | None = None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """One target's (x_pred [4], J_pred [4, 4]) bound recursion along the plan (xy
+        [L, M, 2], eta [L, M]): (scale_j [4 L], scale_p [4 L], lift [16 (L - 1)]). The scales are
+        1 / sqrt of the diagonals of J_l and of the next slot's predicted covariance P_l+1 (the
+        last scale_p unused: ones), or the given ones; lift the lifted variables there in those
+        scales, E_l P_l+1 E_l (l < L - 1), each column-major."""
         s = self.scenario
         along = bound_along(
             s.motion,
             s.dt,
-            np.asarray(data.x_pred, dtype=float),
-            np.asarray(data.J_pred, dtype=float),
+            np.asarray(x_pred, dtype=float),
+            np.asarray(J_pred, dtype=float),
             xy,
             eta,
             self._sensing,
@@ -360,21 +418,23 @@ class HorizonNLP:
         (each horizon slot's block takes the next one's, the last repeats), in the units of an
         objective divided by f_scale; None if they are of another problem (another band or
         size)."""
-        L = self.length
+        L, T = self.length, self.n_targets
         n_rows = len(self._lbg)
+        # The lifted blocks are 16 (L - 1) per target: a changed target count changes the sizes
+        # (a cold start then).
         if (
             duals.pair_band != self.pair_band
             or len(duals.lam_x) != self.n_x + self.n_lift
             or len(duals.lam_g) != n_rows + self.n_lift
         ):
             return None
-        # x is z, u (vehicle model) and eta, each L blocks of one horizon slot, then the L - 1
-        # lifted covariances; the rows are L blocks of one slot, the terminal rows, then the
-        # lifted equalities.
+        # x is z, u (vehicle model) and eta, each L blocks of one horizon slot, then each
+        # target's L - 1 lifted covariances; the rows are L blocks of one slot, the terminal
+        # rows, then each target's lifted equalities.
         lam_x = np.concatenate(
             [
                 *(_shift_slots(duals.lam_x[i : i + L * w], L) for i, w in self._slot_blocks()),
-                _shift_slots(duals.lam_x[self.n_x :], L - 1),
+                *(_shift_slots(lam, L - 1) for lam in np.split(duals.lam_x[self.n_x :], T)),
             ]
         )
         n_slot_rows = n_rows - self.n_terminal
@@ -382,7 +442,7 @@ class HorizonNLP:
             [
                 _shift_slots(duals.lam_g[:n_slot_rows], L),
                 duals.lam_g[n_slot_rows:n_rows],
-                _shift_slots(duals.lam_g[n_rows:], L - 1),
+                *(_shift_slots(lam, L - 1) for lam in np.split(duals.lam_g[n_rows:], T)),
             ]
         )
         ratio = duals.f_scale / f_scale
@@ -498,7 +558,7 @@ def _ipopt_solvers(
 ) -> tuple[NlpSolver, NlpSolver]:
     """The cold and the warm-start IPOPT solvers of `problem` (built under lock; the warm one
     takes the cold one's derivative functions), named "horizon" (every pair) or
-    "horizon_band<b>"."""
+    "horizon_band<b>", with "_targets<T>" for T > 1 targets."""
     opts: dict[str, Any] = {
         "print_time": False,
         "hess_lag": problem.hess_lag,
@@ -507,6 +567,8 @@ def _ipopt_solvers(
     band = problem.pair_band
     with lock:
         name = "horizon" if band == s.M - 1 else f"horizon_band{band}"
+        if problem.n_targets > 1:
+            name += f"_targets{problem.n_targets}"
         solver = ipopt(name, problem.nlp, opts)
         warm_opts = {**opts, "ipopt": {**opts["ipopt"], **WARM_START_OPTIONS}}
         # The same NLP: the warm instance takes the cold one's derivative functions.

@@ -1,15 +1,17 @@
 """The receding-horizon problem of slots n..n+L-1 as CasADi expressions: a pure description.
 
-    min  sum_l w_l tr(C_l),  C_l = (J_pred,l + J_M(Q_l, eta_l; x_l))^-1,
-         J_pred,1 = the slot's prior information, J_pred,l+1 = (F C_l F^T + W)^-1,
-         x_l = F^(l-1) x_pred (the constant-velocity prediction)
+    min  sum_i a_i sum_l w_l tr(C_il),  C_il = (J_pred,il + J_M(Q_l, eta_l; x_il))^-1,
+         J_pred,i1 = target i's prior information, J_pred,il+1 = (F C_il F^T + W)^-1,
+         x_il = F^(l-1) x_pred,i (the motion model's prediction), over the T targets i
+         (a_i their weights; one target: no weight, the single-target problem as it was)
     s.t. for every horizon slot l and UAV m (slot n's association kept over the horizon):
          eta_lm R~(|q_lm - w_k(m)| + e) >= R_th                       (14a, with the link margin)
          |q_lm - w_c(m)| + e <= d_th                                   (14b)
          sum_m eta_lm = 1, eta_lm >= 0                                 (14c, 14d)
          |q_lm - q_l-1,m| <= V_max dt                                  (14h)
          vehicle model: also the Hermite leg (q, v)_l-1 -> (q, v)_l within a_max and V_max
-         at leg_samples points s of each leg: |q_m(s) - p(s)| >= c_l   (14j, c_l the clearance)
+         at leg_samples points s of each leg: |q_m(s) - p_i(s)| >= c_il (14j from every
+                                              target i along its own path, c_il its clearance)
                                               |q_i(s) - q_j(s)| >= D_s + 2e, |q_m(s) - k| >= D_s + 2e
          0 <= q_lm <= area                                             (operating area, bounds)
 
@@ -17,11 +19,12 @@ with w_l = discount^(l-1) (times terminal_weight on the last slot). The derivati
 CasADi's automatic differentiation, but the Lagrangian's Hessian is assembled through each
 slot's information (planning/horizon_hessian.py: the same matrix at 0.4 of the operations at
 M = 24). Everything that changes per slot is a parameter: the UAVs' positions and velocities, the
-serving and control BSs, the keep-out points, the predicted state, the prior information, the
-clearances c_l and the objective's scale.
+serving and control BSs, the keep-out points, each target's predicted state, prior information
+and clearances c_il, the targets' weights (T > 1) and the objective's scale.
 
 Lifted: what IPOPT solves has the scaled predicted covariance Pt_l = E_l P_l+1 E_l of every horizon
-slot but the last as 16 variables, with the explicit equality Pt_l = E_l (F C_l F^T + W) E_l, and
+slot but the last as 16 variables (per target: target-major, target i's L - 1 blocks after
+target i - 1's), with the explicit equality Pt_l = E_l (F C_l F^T + W) E_l, and
 slot l + 1 builds its prior on E_l Pt_l^-1 E_l: the same problem (eliminating Pt gives it back),
 whose Hessian has one block per slot instead of one dense block over the horizon (docs/model.md,
 "Receding horizon"). `HorizonProblem.objective` is the eliminated form.
@@ -31,8 +34,8 @@ J_l)) and E_l = diag(1 / sqrt(diag P_l+1)) taken at the start point (parameters)
 is divided by its value at the start point. Distances are constrained squared in units of S^2,
 tightened by SOLVER_MARGIN_M.
 
-`build_horizon_problem` depends on the scenario, the number of keep-out points and the pair band
-only (no slot's numbers, no solver): the same arguments build the same expressions, which is
+`build_horizon_problem` depends on the scenario, the number of keep-out points, the pair band
+and the number of targets T only (no slot's numbers, no solver): the same arguments build the same expressions, which is
 what a compiled problem's key hashes (isac_mission/nlp_cache.py). The numeric solver around it
 (a slot's numbers packed, bounds, start points, IPOPT, the answer unpacked) is
 planning/horizon_nlp.py.
@@ -73,7 +76,7 @@ def lifted_slot(
     scale_j: ca.SX,
     scale_p: ca.SX,
     Pt: ca.SX | None,
-    weight: float,
+    weight: float | ca.SX,
     F: FloatArray,
     W: FloatArray,
     J_info: ca.SX,
@@ -104,11 +107,13 @@ class HorizonSymbols:
 
     Variables: z [L M 2] (positions in units of step_m S = V_max dt from prev: q = prev + S z),
     u [L M 2] (velocities in units of V_max; [0] without the vehicle model), eta [L M] (shares),
-    lift [16 (L - 1)] (the lifted covariances, each 4 x 4 column-major); index 2 (h M + m) + axis
-    for UAV m at the end of horizon slot h (eta: h M + m). Parameters: prev [M 2] (m), v0 [M 2]
-    (m/s), serving, control [M 2] (m), keep_out [n_keep_out 2] (m), x_pred [4] (m, m/s),
-    j_pred [4, 4], clearance [L] (m), scale_j, scale_p [4 L] (the Jacobi scalings, numbers
-    taken at the start point so that no derivative runs through them), f_scale [1]."""
+    lift [16 (L - 1) T] (the lifted covariances, each 4 x 4 column-major, target-major); index
+    2 (h M + m) + axis for UAV m at the end of horizon slot h (eta: h M + m). Parameters: prev
+    [M 2] (m), v0 [M 2] (m/s), serving, control [M 2] (m), keep_out [n_keep_out 2] (m), x_pred
+    [4 T] (m, m/s; target i's at 4 i), j_pred [4, 4 T] (target i's the columns 4 i..4 i + 3),
+    clearance [L T] (m; target i's at L i), target_weight [T] (T > 1 only; one target has no
+    weight), scale_j, scale_p [4 L T] (the Jacobi scalings, numbers taken at the start point so
+    that no derivative runs through them; target i's at 4 L i), f_scale [1]."""
 
     z: ca.SX
     u: ca.SX
@@ -122,6 +127,7 @@ class HorizonSymbols:
     x_pred: ca.SX
     j_pred: ca.SX
     clearance: ca.SX
+    target_weight: ca.SX
     scale_j: ca.SX
     scale_p: ca.SX
     f_scale: ca.SX
@@ -130,38 +136,47 @@ class HorizonSymbols:
     v_max_mps: float
     dt_s: float
     vehicle_model: bool
+    n_targets: int
+    length: int
 
     @classmethod
-    def create(cls, s: Scenario, n_keep_out: int) -> HorizonSymbols:
+    def create(cls, s: Scenario, n_keep_out: int, n_targets: int = 1) -> HorizonSymbols:
         """The symbols of s's horizon (M UAVs, planner.horizon.length slots) with n_keep_out
-        keep-out points."""
-        M, L = s.M, s.planner.horizon.length
+        keep-out points and n_targets targets (1: the single-target problem's symbols)."""
+        M, L, T = s.M, s.planner.horizon.length, n_targets
+        if T < 1:
+            raise ValueError(f"a horizon problem needs at least one target, not {T}")
         vehicle_model = s.planner.vehicle_model
         return cls(
             z=ca.SX.sym("z", L * M * 2),
             u=ca.SX.sym("u", L * M * 2) if vehicle_model else ca.SX.sym("u", 0),
             eta=ca.SX.sym("eta", L * M),
-            lift=ca.SX.sym("lift", 16 * (L - 1)),
+            lift=ca.SX.sym("lift", 16 * (L - 1) * T),
             prev=ca.SX.sym("prev", M * 2),
             v0=ca.SX.sym("v0", M * 2),
             serving=ca.SX.sym("serving", M * 2),
             control=ca.SX.sym("control", M * 2),
             keep_out=ca.SX.sym("keep_out", n_keep_out * 2),
-            x_pred=ca.SX.sym("x_pred", 4),
-            j_pred=ca.SX.sym("j_pred", 4, 4),
-            clearance=ca.SX.sym("clearance", L),
-            scale_j=ca.SX.sym("scale_j", 4 * L),
-            scale_p=ca.SX.sym("scale_p", 4 * L),
+            x_pred=ca.SX.sym("x_pred", 4 * T),
+            j_pred=ca.SX.sym("j_pred", 4, 4 * T),
+            clearance=ca.SX.sym("clearance", L * T),
+            target_weight=ca.SX.sym("target_weight", T if T > 1 else 0),
+            scale_j=ca.SX.sym("scale_j", 4 * L * T),
+            scale_p=ca.SX.sym("scale_p", 4 * L * T),
             f_scale=ca.SX.sym("f_scale"),
             M=M,
             step_m=s.v_max * s.dt,
             v_max_mps=s.v_max,
             dt_s=s.dt,
             vehicle_model=vehicle_model,
+            n_targets=T,
+            length=L,
         )
 
     def parameters(self) -> list[ca.SX]:
-        """The parameters in p's order (j_pred column-major)."""
+        """The parameters in p's order (j_pred column-major; target_weight only for T > 1, so
+        that one target's parameters are the single-target problem's)."""
+        weight = [self.target_weight] if self.n_targets > 1 else []
         return [
             self.prev,
             self.v0,
@@ -169,12 +184,39 @@ class HorizonSymbols:
             self.control,
             self.keep_out,
             self.x_pred,
-            ca.reshape(self.j_pred, 16, 1),
+            ca.reshape(self.j_pred, 16 * self.n_targets, 1),
             self.clearance,
+            *weight,
             self.scale_j,
             self.scale_p,
             self.f_scale,
         ]
+
+    def state(self, i: int) -> ca.SX:
+        """Target i's predicted state [4] (m, m/s) at the end of slot n (one target: x_pred)."""
+        return self.x_pred if self.n_targets == 1 else self.x_pred[4 * i : 4 * i + 4]
+
+    def prior(self, i: int) -> ca.SX:
+        """Target i's prior information [4, 4] (one target: j_pred)."""
+        return self.j_pred if self.n_targets == 1 else self.j_pred[:, 4 * i : 4 * i + 4]
+
+    def target_clearance(self, i: int, h: int) -> ca.SX:
+        """Target i's 14j distance (m) at the leg samples of horizon slot h."""
+        return self.clearance[i * self.length + h]
+
+    def weight(self, i: int) -> ca.SX | None:
+        """Target i's weight in the objective; None for one target (no weight)."""
+        return None if self.n_targets == 1 else self.target_weight[i]
+
+    def scales(self, i: int, h: int) -> tuple[ca.SX, ca.SX]:
+        """(scale_j, scale_p) [4] each of target i's horizon slot h."""
+        k = 4 * (i * self.length + h)
+        return self.scale_j[k : k + 4], self.scale_p[k : k + 4]
+
+    def lifted(self, i: int, h: int) -> ca.SX:
+        """Target i's lifted covariance [4, 4] after horizon slot h (h < L - 1)."""
+        k = 16 * (i * (self.length - 1) + h)
+        return ca.reshape(self.lift[k : k + 16], 4, 4)
 
     def q(self, h: int, m: int) -> ca.SX:
         """UAV m's position [2] (m) at the end of horizon slot h (0-based; -1: now)."""
@@ -270,8 +312,8 @@ def add_uav_slot_rows(
     samples: LegSamples,
 ) -> None:
     """UAV m's rows of horizon slot h (at qm [2] with share em): 14a, 14b, the leg limits and
-    14h (nlp_model.add_uav_rows), then at each leg sample 14j from the predicted target and the
-    keep-out distance from each keep-out point."""
+    14h (nlp_model.add_uav_rows), then at each leg sample 14j from each target along its own
+    predicted path (in the targets' order) and the keep-out distance from each keep-out point."""
     # 14h also on the vehicle model: a vehicle faster than V_max now (the live planner's V_max
     # is 0.9 of the vehicles') would otherwise cover more than V_max dt in its first slot.
     limits = leg_limits(sym, s, h, m)
@@ -280,8 +322,10 @@ def add_uav_slot_rows(
     S = sym.step_m
     add_uav_rows(rows, s, qm, em, sym.serving[bs], sym.control[bs], step2, link_m, S, limits)
     for frac in samples.fracs:
-        p = s.motion.position_after(sym.x_pred, (h - 1 + frac) * s.dt)
-        add_clearance_row(rows, sym.along(h, m, frac) - p, (sym.clearance[h] / S) ** 2, S)
+        for i in range(sym.n_targets):
+            p = s.motion.position_after(sym.state(i), (h - 1 + frac) * s.dt)
+            c2 = (sym.target_clearance(i, h) / S) ** 2
+            add_clearance_row(rows, sym.along(h, m, frac) - p, c2, S)
         for k in range(int(sym.keep_out.numel()) // 2):
             gap = sym.along(h, m, frac) - sym.keep_out[2 * k : 2 * k + 2]
             add_clearance_row(rows, gap, samples.keep2, S)
@@ -302,10 +346,11 @@ def add_pair_rows(
 
 @dataclass(frozen=True)
 class SlotInformation:
-    """One horizon slot's J_M [4, 4] (the sum of its UAVs' terms) and its UAVs' members."""
+    """One horizon slot's J_M [4, 4] per target (the sum of its UAVs' terms at that target's
+    predicted state) and, per target, its UAVs' members."""
 
-    information: ca.SX
-    members: list[Member]
+    information: list[ca.SX]
+    members: list[list[Member]]
 
 
 def add_slot(
@@ -319,17 +364,20 @@ def add_slot(
     sensing: SensingParams,
 ) -> SlotInformation:
     """Horizon slot h's rows (per UAV `add_uav_slot_rows`, the pairs within band, 14c) and its
-    information, every J_M at the predicted state x_l = F^h x_pred."""
+    information per target, every target i's J_M at its predicted state x_il = F^h x_pred,i."""
     F = s.motion.transition(s.dt)
-    x_l = ca.mtimes(ca.DM(np.linalg.matrix_power(F, h)), sym.x_pred)
-    J_info = ca.SX.zeros(4, 4)
-    members = []
+    T = sym.n_targets
+    Fh = ca.DM(np.linalg.matrix_power(F, h))
+    x_l = [ca.mtimes(Fh, sym.state(i)) for i in range(T)]
+    J_info = [ca.SX.zeros(4, 4) for _ in range(T)]
+    members: list[list[Member]] = [[] for _ in range(T)]
     for m in range(sym.M):
         qm = sym.q(h, m)
         em = sym.eta[h * sym.M + m]
-        terms, member = uav_information(sym, h, m, qm, em, x_l, sensing)
-        J_info = J_info + terms
-        members.append(member)
+        for i in range(T):
+            terms, member = uav_information(sym, h, m, qm, em, x_l[i], sensing)
+            J_info[i] = J_info[i] + terms
+            members[i].append(member)
         add_uav_slot_rows(rows, sym, s, h, m, qm, em, margins.link_m, samples)
     add_pair_rows(rows, sym, h, band, samples)
     rows.add(ca.sum1(sym.eta[h * sym.M : (h + 1) * sym.M]), 1.0, 1.0)
@@ -337,29 +385,34 @@ def add_slot(
 
 
 def add_terminal_rows(rows: NlpRows, sym: HorizonSymbols, s: Scenario) -> int:
-    """The terminal rows (docs/model.md, "The terminal row"), one per UAV; returns their count.
+    """The terminal rows (docs/model.md, "The terminal row"), one per UAV and target (UAV-major);
+    returns their count.
 
-    At the end of the horizon, |r| - |w|^2 / (2 a_max) >= c_L for the offset r from the predicted
-    target and the velocity w relative to it (units of S). Braking w at a_max keeps it, so the
+    At the end of the horizon, |r| - |w|^2 / (2 a_max) >= c_L for the offset r from each
+    predicted target and the velocity w relative to it (units of S). Braking w at a_max keeps it, so the
     plan shifted by one slot can be continued; without it the horizon ended where no next slot
     could keep the clearance, and the shifted starts of the soak's tracking phase missed their
     rows."""
     L, S, dt = s.planner.horizon.length, sym.step_m, s.dt
-    target_end = s.motion.position_after(sym.x_pred, (L - 1) * dt)
+    T = sym.n_targets
+    target_end = [s.motion.position_after(sym.state(i), (L - 1) * dt) for i in range(T)]
     brake = s.a_max * dt**2 / S  # in units of S per slot squared
     for m in range(sym.M):
-        offset = (sym.q(L - 1, m) - target_end) / S
-        relative = (sym.v(L - 1, m) - sym.x_pred[2:4]) * dt / S
-        stopping = ca.sumsqr(relative) / (2 * brake)
-        rows.add(ca.norm_2(offset) - stopping - sym.clearance[L - 1] / S, 0.0, float("inf"))
-    return sym.M
+        for i in range(T):
+            offset = (sym.q(L - 1, m) - target_end[i]) / S
+            relative = (sym.v(L - 1, m) - sym.state(i)[2:4]) * dt / S
+            stopping = ca.sumsqr(relative) / (2 * brake)
+            clearance = sym.target_clearance(i, L - 1) / S
+            rows.add(ca.norm_2(offset) - stopping - clearance, 0.0, float("inf"))
+    return sym.M * T
 
 
 @dataclass(frozen=True)
 class BoundRecursion:
-    """The objective along the horizon: `objective` the eliminated sum_l w_l tr(C_l), and
-    `lifted_objective` with `lifted_rows` (L - 1 equalities [16] each, = 0) its lifted form;
-    `stages`: per slot its members and its LiftedSlot (the Hessian's, horizon_hess_lag)."""
+    """The objective along the horizon: `objective` the eliminated sum_i a_i sum_l w_l tr(C_il),
+    and `lifted_objective` with `lifted_rows` ((L - 1) T equalities [16] each, = 0, target-major)
+    its lifted form; `stages`: per target and slot (target-major) its members and its LiftedSlot
+    (the Hessian's, horizon_hess_lag)."""
 
     objective: ca.SX
     lifted_objective: ca.SX
@@ -370,7 +423,29 @@ class BoundRecursion:
 def bound_recursion(
     sym: HorizonSymbols, slots: list[SlotInformation], s: Scenario, weights: FloatArray
 ) -> BoundRecursion:
-    """The bound's recursion over the slots' information, eliminated and lifted.
+    """The bound's recursion of every target (`target_recursion`), their terms summed in the
+    targets' order; one target's is the single-target problem's recursion itself."""
+    if sym.n_targets == 1:
+        return target_recursion(sym, 0, slots, s, weights)
+    stages: list[tuple[list[Member], LiftedSlot]] = []
+    lifted_rows: list[ca.SX] = []
+    lifted_objective = ca.SX(0.0)
+    objective = ca.SX(0.0)
+    for i in range(sym.n_targets):
+        one = target_recursion(sym, i, slots, s, weights)
+        stages += one.stages
+        lifted_rows += one.lifted_rows
+        lifted_objective = lifted_objective + one.lifted_objective
+        objective = objective + one.objective
+    return BoundRecursion(objective, lifted_objective, lifted_rows, stages)
+
+
+def target_recursion(
+    sym: HorizonSymbols, i: int, slots: list[SlotInformation], s: Scenario, weights: FloatArray
+) -> BoundRecursion:
+    """Target i's bound recursion over the slots' information (its J_M at its own predicted
+    states), eliminated and lifted, each slot's term weighted by weights[h] [L] (times the
+    target's weight where there are several targets).
 
     Lifted (docs/model.md, "Receding horizon"): the scaled predicted covariance
     Pt_h = E_h (F C_h F^T + W) E_h of every slot but the last is a variable, tied by that
@@ -381,21 +456,24 @@ def bound_recursion(
     L = len(slots)
     F, W = s.motion.transition(s.dt), s.motion.process_noise(s.dt)
     ones4 = ca.SX.ones(4)
+    target_weight = sym.weight(i)
     stages: list[tuple[list[Member], LiftedSlot]] = []
     lifted_rows: list[ca.SX] = []
     lifted_objective = ca.SX(0.0)
     objective = ca.SX(0.0)
-    J_prior = sym.j_pred
-    J_prior_lifted = sym.j_pred
+    J_prior = sym.prior(i)
+    J_prior_lifted = sym.prior(i)
     for h, slot_info in enumerate(slots):
-        J = J_prior + slot_info.information
-        dj, dp = sym.scale_j[4 * h : 4 * h + 4], sym.scale_p[4 * h : 4 * h + 4]
+        information = slot_info.information[i]
+        J = J_prior + information
+        dj, dp = sym.scales(i, h)
         C = scaled_inverse_sx(0.5 * (J + J.T), dj)
-        objective = objective + weights[h] * ca.trace(C)
-        Pt = ca.reshape(sym.lift[16 * h : 16 * h + 16], 4, 4) if h + 1 < L else None
-        slot = partial(lifted_slot, J_prior_lifted, dj, dp, Pt, weights[h], F, W)
-        term, row = slot(slot_info.information)
-        stages.append((slot_info.members, slot))
+        weight = weights[h] if target_weight is None else weights[h] * target_weight
+        objective = objective + weight * ca.trace(C)
+        Pt = sym.lifted(i, h) if h + 1 < L else None
+        slot = partial(lifted_slot, J_prior_lifted, dj, dp, Pt, weight, F, W)
+        term, row = slot(information)
+        stages.append((slot_info.members[i], slot))
         lifted_objective = lifted_objective + term
         if h + 1 < L:
             assert row is not None and Pt is not None
@@ -410,11 +488,13 @@ def bound_recursion(
 
 @dataclass(frozen=True)
 class HorizonProblem:
-    """The horizon NLP of a scenario, n_keep_out keep-out points and a pair band, symbolic.
+    """The horizon NLP of a scenario, n_keep_out keep-out points, a pair band and n_targets
+    targets T, symbolic.
 
-    x [n_x] = (z, u, eta) (HorizonSymbols' variables), lift [n_lift = 16 (L - 1)], p [sum
+    x [n_x] = (z, u, eta) (HorizonSymbols' variables), lift [n_lift = 16 (L - 1) T], p [sum
     param_sizes] (HorizonSymbols' parameters in order); g [n_rows] the rows, lbg <= g <= ubg
-    (per horizon slot its UAVs' rows, its pairs', 14c; then n_terminal terminal rows), rate_rows
+    (per horizon slot its UAVs' rows, its pairs', 14c; then n_terminal terminal rows, M T or
+    none), rate_rows
     the indices of the 14a rows (their bound moves with R_th: nlp_model.lower_at_rate);
     g_lifted [n_lift] the lifted equalities (= 0). `objective` is the eliminated objective,
     `lifted_objective` the lifted one (both before the division by the parameter f_scale);
@@ -443,6 +523,7 @@ class HorizonProblem:
     step_m: float
     vehicle_model: bool
     margins: SafetyMargins
+    n_targets: int = 1
 
     @property
     def n_x(self) -> int:
@@ -454,11 +535,12 @@ class HorizonProblem:
 
 
 def build_horizon_problem(
-    scenario: Scenario, n_keep_out: int = 0, pair_band: int | None = None
+    scenario: Scenario, n_keep_out: int = 0, pair_band: int | None = None, n_targets: int = 1
 ) -> HorizonProblem:
     """The horizon NLP of the scenario's M UAVs with n_keep_out keep-out points; pair_band: the
     UAV-UAV rows only of the UAV slots a < b with b - a <= pair_band (planning/pairs.py), None:
-    every pair."""
+    every pair; n_targets: the targets T it plans for (the weighted sum of their horizon
+    objectives, 14j from each; 1: the single-target problem, its expressions unchanged)."""
     s = scenario
     cfg = s.planner.horizon
     M, L = s.M, cfg.length
@@ -466,7 +548,7 @@ def build_horizon_problem(
     margins = SafetyMargins.of(s)
     samples = LegSamples.of(s, margins)
     sensing = SensingParams.from_scenario(s)
-    sym = HorizonSymbols.create(s, n_keep_out)
+    sym = HorizonSymbols.create(s, n_keep_out, n_targets)
     params = sym.parameters()
     rows = NlpRows()
     slots = [add_slot(rows, sym, s, h, band, margins, samples, sensing) for h in range(L)]
@@ -480,7 +562,9 @@ def build_horizon_problem(
     lbg, ubg = rows.bounds()
     g = ca.vertcat(*rows.rows)
     g_lifted = ca.vertcat(*bound.lifted_rows)
-    hess_lag = horizon_hess_lag(ca.vertcat(x, sym.lift), p, g, sym.lift, bound.stages, sym.f_scale)
+    hess_lag = horizon_hess_lag(
+        ca.vertcat(x, sym.lift), p, g, sym.lift, bound.stages, sym.f_scale, n_targets
+    )
     nlp: dict[str, Any] = {
         "x": ca.vertcat(x, sym.lift),
         "p": p,
@@ -508,4 +592,5 @@ def build_horizon_problem(
         step_m=sym.step_m,
         vehicle_model=sym.vehicle_model,
         margins=margins,
+        n_targets=n_targets,
     )

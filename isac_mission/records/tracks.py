@@ -1,7 +1,8 @@
 """The tracks of a slot line (docs/trace.md): what every line carries whatever the number of
-targets (`tracks_fields`), the whole line of a tracker that may hold several tracks
-(`slot_fields`), what a live line adds so that a restart continues after it (`resume_fields`,
-read back by `resume_point`), and the tracks of any line read back (`TracksLine`).
+targets (`tracks_fields`, each track with its operator's priority when it is not 1), the whole
+line of a tracker that may hold several tracks (`slot_fields`), what a live line adds so that a
+restart continues after it (`resume_fields`, `priorities_field`, read back by `resume_point`,
+`read_priorities`), and the tracks of any line read back (`TracksLine`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from isac_mission.records.jsonlines import dumps_line, loads_line, to_jsonable
 from isac_mission.records.slot import MissionEnd, SlotRecord
 from isac_mission.tracking.multi_target import SavedTrack, TrackerState
 from isac_mission.tracking.pcrb import Bound
+from isac_mission.tracking.priorities import DEFAULT_PRIORITY, Priorities, priority_problem
 from isac_mission.tracking.tracker import LABELLED_TRACK_ID, TrackEstimate
 from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan
 
@@ -32,7 +34,9 @@ class TracksSlot:
     safety rule followed (0: none, the fleet held); tracker_state: what the tracker carries to
     the next slot (the live loop's, for `resume_fields`; None offline); start_xy [M, 2] m,
     start_velocity [M, 2] m/s: where and how fast the planner planned the slot from (None: not
-    known, or no plan of the loop)."""
+    known, or no plan of the loop); priorities: the operator's priorities the slot's plan was
+    made with (each track's `priority` in the line; None: every track 1); next_priorities: those
+    the mission carries on with (the live loop's, for `resume_fields`; None offline)."""
 
     slot: int
     method: str
@@ -46,6 +50,8 @@ class TracksSlot:
     tracker_state: TrackerState | None = field(default=None, compare=False)
     start_xy: FloatArray | None = field(default=None, compare=False)
     start_velocity: FloatArray | None = field(default=None, compare=False)
+    priorities: Priorities | None = field(default=None, compare=False)
+    next_priorities: Priorities | None = field(default=None, compare=False)
 
 
 def end_line(end: MissionEnd) -> str:
@@ -58,11 +64,15 @@ def tracks_fields(
     truth: FloatArray,
     tracks: Sequence[TrackEstimate],
     reports: Sequence[UavReport],
+    priorities: Priorities | None = None,
 ) -> dict[str, Any]:
     """The fields every slot line has, whatever the number of targets (docs/trace.md): the
     track the plan followed, the targets in the scene (truth [T, 4], NaN rows absent), every
-    track after the update, each UAV's report and its measurements' origins."""
+    track after the update (with `priority`, the operator's priority the slot's plan was made
+    with, when it is not 1: `priorities`, None for all 1), each UAV's report and its
+    measurements' origins."""
     present = np.flatnonzero(np.all(np.isfinite(truth), axis=1))
+    table = Priorities() if priorities is None else priorities
     return {
         "planned_for": planned_for,
         "targets": [{"index": int(t), "state": truth[t]} for t in present],
@@ -75,11 +85,39 @@ def tracks_fields(
                 "pcrb_position_trace": float(np.trace(t.bound.C[:2, :2])),
                 "weight": t.weight,
             }
+            | _priority_entry(table[t.track_id])
             for t in tracks
         ],
         "measurements": [r.measurements for r in reports],
         "origins": [r.origin for r in reports],
     }
+
+
+def _priority_entry(priority: float) -> dict[str, float]:
+    """A track entry's `priority`: absent at the default (so a mission with none set writes the
+    lines it always has)."""
+    return {} if priority == DEFAULT_PRIORITY else {"priority": priority}
+
+
+def priorities_field(priorities: Priorities | None) -> dict[str, Any]:
+    """What a live line adds so that a restart goes on with the operator's priorities
+    (docs/trace.md): `priorities`, every track whose priority is not 1 as {"id", "priority"},
+    those of tracks yet to appear included; {} when there is none."""
+    if priorities is None or not priorities.entries:
+        return {}
+    return {"priorities": priorities.to_json()}
+
+
+def read_priorities(line: Mapping[str, Any]) -> Priorities:
+    """The priorities a line's `priorities` field holds (`priorities_field`; absent: every track
+    1); MessageError naming what is wrong."""
+    value = line.get("priorities")
+    if value is None:
+        return Priorities()
+    try:
+        return Priorities.from_json(value)
+    except ValueError as err:
+        raise MessageError(f"slot {line.get('slot')}: {err}") from None
 
 
 def slot_fields(o: TracksSlot, extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -96,7 +134,7 @@ def slot_fields(o: TracksSlot, extra: Mapping[str, Any] | None = None) -> dict[s
         "eta": o.bandwidth_share,
         "assoc": o.plan.bs_of_uav,
     }
-    record |= tracks_fields(o.planned_for, o.truth, o.tracks, o.reports)
+    record |= tracks_fields(o.planned_for, o.truth, o.tracks, o.reports, o.priorities)
     plan_fields: dict[str, Any] = {
         "reason": rep.reason or None,
         "plan_xy": None if rep.status in SKIPPED else o.plan.uav_xy_m,
@@ -127,11 +165,12 @@ def resume_fields(o: TracksSlot) -> dict[str, Any]:
     "Lines of a tracker of several tracks"): `plan_eta`, the shares of the slot's plan (the next plan starts from
     them), and `tracker`, what the tracker carries to the next slot beside the `tracks` (each
     track's information J, hits and misses in a row, and pending refutation; the internal
-    candidates; the next track ID). {} without a tracker state (offline)."""
+    candidates; the next track ID), and the operator's priorities the mission goes on with
+    (`priorities_field`, when any is not 1). {} without a tracker state (offline)."""
     st = o.tracker_state
     if st is None:
         return {}
-    return {
+    return priorities_field(o.next_priorities) | {
         "plan_eta": o.plan.bandwidth_share,
         "tracker": {
             "next_id": st.next_id,
@@ -153,12 +192,14 @@ def resume_fields(o: TracksSlot) -> dict[str, Any]:
 @dataclass(frozen=True)
 class ResumePoint:
     """Where a multi-target mission goes on after a trace's slot line: slot, the tracker's
-    state after it, plan_eta [M] the shares of its plan and assoc [M] its BSs (-1: none)."""
+    state after it, plan_eta [M] the shares of its plan and assoc [M] its BSs (-1: none), and
+    the operator's priorities it went on with (`read_priorities`)."""
 
     slot: int
     tracker: TrackerState
     plan_eta: FloatArray
     assoc: IntArray
+    priorities: Priorities = field(default_factory=Priorities)
 
 
 def resume_point(line: Mapping[str, Any]) -> ResumePoint:
@@ -217,6 +258,7 @@ def resume_point(line: Mapping[str, Any]) -> ResumePoint:
         ),
         float_array(line["plan_eta"], f"slot {slot}: plan_eta", (None,)),
         int_array(line.get("assoc"), f"slot {slot}: assoc"),
+        read_priorities(line),
     )
 
 
@@ -250,7 +292,8 @@ def _differences(a: dict[str, Any], b: dict[str, Any], prefix: str) -> list[str]
 @dataclass(frozen=True)
 class TrackLine:
     """One track of a slot line as read: track_id, confirmed, x [4] (m, m/s), P [4, 4], the
-    position part of its bound's trace (m^2) and its association weight."""
+    position part of its bound's trace (m^2), its association weight and its operator's
+    priority the slot's plan was made with (1 when the line does not say)."""
 
     track_id: int
     confirmed: bool
@@ -258,6 +301,7 @@ class TrackLine:
     P: FloatArray
     pcrb_position_trace: float
     weight: float
+    priority: float = DEFAULT_PRIORITY
 
 
 @dataclass(frozen=True)
@@ -312,6 +356,7 @@ class TracksLine:
                     float_array(t.get("P"), f"{name}.P", (4, 4)),
                     as_float(t.get("pcrb_position_trace"), f"{name}.pcrb_position_trace"),
                     as_float(t.get("weight", float("nan")), f"{name}.weight"),
+                    _priority(t, name),
                 )
             )
         truth = {}
@@ -347,6 +392,10 @@ class TracksLine:
             line=dict(obj),
         )
 
+    def priorities(self) -> Priorities:
+        """The priorities the line's tracks record (tracks not in the line: 1)."""
+        return Priorities.of((t.track_id, t.priority) for t in self.tracks)
+
     @classmethod
     def of_labelled(cls, obj: Mapping[str, Any], rec: SlotRecord) -> TracksLine:
         """The tracks of a labelled line of version 1 (no `tracks`): its one track, ID 1,
@@ -378,3 +427,13 @@ class TracksLine:
             origins=tuple(np.zeros(0, dtype=np.int64) for _ in range(rec.n_uavs)),
             line=dict(obj),
         )
+
+
+def _priority(entry: Mapping[str, Any], name: str) -> float:
+    """A track entry's `priority` (absent: 1); MessageError when it is not a priority."""
+    value = entry.get("priority", DEFAULT_PRIORITY)
+    track_id = entry.get("id")
+    problem = priority_problem(track_id, value)
+    if problem is not None:
+        raise MessageError(f"{name}.priority: {problem}")
+    return float(value)

@@ -287,7 +287,8 @@ class MultiTargetTracker:
             if t.refuted is not None:
                 t.refuted = ekf_predict(t.refuted, s.F, s.W)
             if t.track_id > 0:
-                out.append(TrackPrediction(t.track_id, t.confirmed, t.belief, t.J_pred))
+                existence = 1.0 if t.confirmed else min(1.0, sum(t.hits) / s.confirm_hits)
+                out.append(TrackPrediction(t.track_id, t.confirmed, t.belief, t.J_pred, existence))
         return tuple(out)
 
     def update(

@@ -37,13 +37,16 @@ LABELLED_TRACK_ID = 1
 
 @dataclass(frozen=True)
 class TrackPrediction:
-    """One track before a slot's reports: track_id, confirmed, prediction (x [4], P [4, 4]) and
-    prior_information J_pred [4, 4] = (F C F^T + W)^-1 of its bound (what planning sees)."""
+    """One track before a slot's reports: track_id, confirmed, prediction (x [4], P [4, 4]),
+    prior_information J_pred [4, 4] = (F C F^T + W)^-1 of its bound (what planning sees), and
+    existence in (0, 1]: how far the track is on its way to confirmation (a confirmed track 1; a
+    tentative one its hits over the hits that confirm it)."""
 
     track_id: int
     confirmed: bool
     prediction: Gaussian
     prior_information: FloatArray
+    existence: float = 1.0
 
     def belief(self, motion: MotionModel) -> TargetBelief:
         """The track as the planner takes it (tracking/beliefs.py), predicted by `motion`."""

@@ -15,6 +15,7 @@ strict JSON, and the JSON Schema of every message (docs/bus.md). Imports neither
 - `strict_json`: strict JSON shared with `records/`.
 """
 
+from isac_mission.tracking.priorities import DEFAULT_PRIORITY, MAX_PRIORITY
 from isac_mission.wire.codec import (
     RequestRead,
     collect_detections,
@@ -31,6 +32,7 @@ from isac_mission.wire.control_models import (
     CONTROL_COMMANDS,
     FLEET_COMMANDS,
     MAX_ID_CHARS,
+    PRIORITY_PARAMS,
     ControlMsg,
     ControlReplyMsg,
     FleetMsg,
@@ -78,6 +80,7 @@ from isac_mission.wire.models import (
 __all__ = [
     "CONTROL_COMMANDS",
     "CONTROL_PARAMS",
+    "DEFAULT_PRIORITY",
     "FLEET_COMMANDS",
     "LINK_STATES",
     "MAX_ABS",
@@ -86,12 +89,14 @@ __all__ = [
     "MAX_ID_CHARS",
     "MAX_MEASUREMENTS",
     "MAX_PAYLOAD_BYTES",
+    "MAX_PRIORITY",
     "MAX_REASON_CHARS",
     "MAX_SLOT",
     "MAX_STATUS_CHARS",
     "MAX_TARGETS",
     "MAX_TRACKS",
     "MAX_UAVS",
+    "PRIORITY_PARAMS",
     "SCHEMA",
     "SHARE_SUM_TOL",
     "TELEMETRY_MODES",

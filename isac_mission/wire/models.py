@@ -28,11 +28,14 @@ from pydantic import (
     AfterValidator,
     BeforeValidator,
     Field,
+    SerializerFunctionWrapHandler,
     ValidationError,
     ValidationInfo,
     field_validator,
+    model_serializer,
 )
 
+from isac_mission.tracking.priorities import DEFAULT_PRIORITY, MAX_PRIORITY
 from isac_mission.types import FloatArray, IntArray, SlotPlan, SolveReport
 from isac_mission.wire.control_models import (
     CONTROL_PARAMS as CONTROL_PARAMS,
@@ -113,6 +116,28 @@ PublishedWall = Annotated[
     ),
 ]
 """Wall clock (Unix time, s) at which the message was put, None when not stamped (not sent)."""
+
+Priority = Annotated[
+    float,
+    Field(
+        ge=0.0,
+        le=MAX_PRIORITY,
+        description="The track's priority: its weight in the planner's objective, 0 (not "
+        "planned for, still kept clear of) to 10; absent: 1 (written only when it is not 1).",
+    ),
+    AS_FLOAT,
+]
+"""A track's priority (an operator's `priority` command): 0 to MAX_PRIORITY, DEFAULT_PRIORITY
+when not sent."""
+
+
+def _without_default_priority(fields: dict[str, Any]) -> dict[str, Any]:
+    """A track's fields as written: `priority` left out at DEFAULT_PRIORITY, so that a mission
+    whose operator sets none sends the bytes it always has."""
+    if fields.get("priority") == DEFAULT_PRIORITY:
+        del fields["priority"]
+    return fields
+
 
 CHOICES.update(
     mode=("{value!r} is not one of {allowed}", TELEMETRY_MODES),
@@ -493,7 +518,8 @@ class TrackMsg(Message):
     """The ground's estimate after slot `slot` (`isac/<mission>/track`).
 
     x [4]: EKF state [x, y, vx, vy] (m, m/s); P [4, 4]: its covariance; J [4, 4]: the PCRB
-    information; pcrb_trace = tr(J^-1).
+    information; pcrb_trace = tr(J^-1); priority: the track's (track 1) priority, 0 to 10
+    (DEFAULT_PRIORITY when not sent; written only when it differs).
     """
 
     type: Literal["track"] = carried()
@@ -504,6 +530,11 @@ class TrackMsg(Message):
     J: Annotated[FloatArray, matrix(Matrix4)] = Field(description="PCRB information.")
     pcrb_trace: NonNegative = Field(description="tr(J^-1) (m^2 + m^2/s^2).")
     published_wall_s: PublishedWall = None
+    priority: Priority = DEFAULT_PRIORITY
+
+    @model_serializer(mode="wrap")
+    def _written(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        return _without_default_priority(handler(self))
 
 
 class TrackEntry(WireModel):
@@ -511,7 +542,8 @@ class TrackEntry(WireModel):
 
     track_id (`id` on the wire): stable, >= 1, never reused; x [4]: state (m, m/s); P [4, 4]:
     its covariance; pcrb_position_trace: tr of the position block of its bound with origin
-    uncertainty (m^2).
+    uncertainty (m^2); priority: 0 to 10 (DEFAULT_PRIORITY when not sent; written only when it
+    differs).
     """
 
     track_id: Annotated[int, Field(alias="id"), AS_INT] = Field(
@@ -525,6 +557,11 @@ class TrackEntry(WireModel):
     pcrb_position_trace: NonNegative = Field(
         description="Trace of the position block of its bound with origin uncertainty (m^2)."
     )
+    priority: Priority = DEFAULT_PRIORITY
+
+    @model_serializer(mode="wrap")
+    def _written(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        return _without_default_priority(handler(self))
 
 
 class TrackSetMsg(Message):

@@ -132,7 +132,9 @@ def test_a_mission_follows_every_target_and_keeps_its_distance(
         assert slot.planned_for in confirmed or (slot.planned_for == 0 and not confirmed)
 
 
-def test_a_single_target_planner_is_refused_by_name(scenario: Scenario) -> None:
+def test_a_single_target_planner_is_refused_by_name(
+    scenario: Scenario, horizon_plans_one_target: None
+) -> None:
     with pytest.raises(ConfigError, match=r"horizon.*plans for one target"):
         run_monte_carlo(scenario, ["horizon"], 1, 1)
 

@@ -132,6 +132,8 @@ def test_an_excluded_vehicle_holds_and_the_others_plan_around_it(scenario: Scena
     np.testing.assert_allclose(plan.bandwidth_share[idx], alone.bandwidth_share, atol=1e-9)
 
 
-def test_a_one_target_planner_is_refused_by_name(scenario: Scenario) -> None:
+def test_a_one_target_planner_is_refused_by_name(
+    scenario: Scenario, horizon_plans_one_target: None
+) -> None:
     with pytest.raises(ConfigError, match="'horizon' plans for one target"):
         MissionState(scenario, multi_target_kit(scenario), "horizon")

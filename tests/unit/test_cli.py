@@ -77,7 +77,7 @@ def test_simulate_takes_a_shipped_scenario_by_name(tmp_path: Path) -> None:
 
 
 def test_run_and_serve_fly_the_horizon_by_default_and_resume_what_was_flown(
-    tmp_path: Path,
+    tmp_path: Path, horizon_plans_one_target: None
 ) -> None:
     from isac_mission.cli.live import resolved_method
     from isac_mission.config import load_scenario
@@ -87,8 +87,8 @@ def test_run_and_serve_fly_the_horizon_by_default_and_resume_what_was_flown(
     paper, multi = load_scenario("paper"), load_scenario("multi-target")
     assert not paper.multi_target and multi.multi_target
     assert resolved_method(None, paper, tmp_path, resume=False) == "horizon"
-    # The horizon plans one target's bound: a multi-target scenario defaults to a method that
-    # its path accepts, and the single-target default is one it refuses.
+    # Were the single-target default a one-target method (the fixture), a multi-target
+    # scenario would still default to a method that its path accepts.
     default_multi = resolved_method(None, multi, tmp_path, resume=False)
     check_multi_target_method(default_multi)
     with pytest.raises(ConfigError):

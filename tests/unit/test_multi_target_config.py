@@ -108,7 +108,7 @@ def test_replay_takes_a_multi_target_scenario_and_reads_its_trace(tmp_path: Path
 
 @pytest.mark.parametrize("command", ["run", "serve"])
 def test_the_live_service_refuses_a_one_target_planner_on_the_multi_target_path_by_name(
-    command: str,
+    command: str, horizon_plans_one_target: None
 ) -> None:
     result = CliRunner().invoke(
         app, [command, str(ROOT / "config" / "multi-target.yaml"), "--method", "horizon"]
@@ -117,7 +117,9 @@ def test_the_live_service_refuses_a_one_target_planner_on_the_multi_target_path_
     assert "'horizon' plans for one target" in " ".join(result.output.split())
 
 
-def test_simulate_refuses_a_one_target_planner_on_the_multi_target_path_by_name() -> None:
+def test_simulate_refuses_a_one_target_planner_on_the_multi_target_path_by_name(
+    horizon_plans_one_target: None,
+) -> None:
     result = CliRunner().invoke(
         app,
         ["simulate", str(ROOT / "config" / "multi-target.yaml"), "--methods", "sd,horizon"],

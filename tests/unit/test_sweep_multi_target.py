@@ -141,7 +141,9 @@ def test_a_serial_sweep_of_several_targets_writes_simulates_figures(tmp_path: Pa
         assert int(row["slots"]) == SLOTS and int(row["runs"]) == 1
 
 
-def test_a_method_that_plans_one_target_is_refused_before_any_work(tmp_path: Path) -> None:
+def test_a_method_that_plans_one_target_is_refused_before_any_work(
+    tmp_path: Path, horizon_plans_one_target: None
+) -> None:
     grid = tmp_path / "grid.yaml"
     grid.write_text("target_motion.process_noise_intensity: [0.5]\nmethods: [sd, horizon]\n")
     out = tmp_path / "out"

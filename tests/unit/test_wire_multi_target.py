@@ -412,5 +412,6 @@ def test_an_encoded_payload_has_exactly_the_fields_the_schema_names() -> None:
         ("track_set", encode(_track_set(published_wall_s=1.9e9))),
     ):
         assert set(_obj(data)) == set(schemas[kind]["properties"]), kind
-    entry = _obj(encode(_track_set()))["tracks"][0]
+    prioritised = _entry(1).model_copy(update={"priority": 2.0})  # the default is not written
+    entry = _obj(encode(_track_set(tracks=(prioritised,))))["tracks"][0]
     assert set(entry) == set(schemas["track_set"]["$defs"]["TrackEntryWire"]["properties"])

@@ -8,7 +8,7 @@ const S = {
   mode: null, config: null, latest: {}, trails: {}, series: new Map(), replies: [], sent: {},
   console: {}, token: null, dirty: false, chartsDirty: true, runs: [], frame: 1, playing: null,
   trackSeries: new Map(), airborne: {},
-  follow: false, insetTrack: "", rxMs: {},
+  follow: false, insetTrack: "", rxMs: {}, priorityNotes: {},
 };
 const M = {  // measurements, read by the tests and bench/console.py
   loadStart: performance.timeOrigin, firstMapWallMs: null, drawn: {}, telemetryReceived: 0,
@@ -331,6 +331,7 @@ function renderPanels(ph) {
   for (const [k, v] of Object.entries(cons.rejected || {})) extra.push(["console rejected " + k, String(v)]);
   rows($("health"), counters.map(([k, v]) => [k, String(v)]).concat(extra, health && health.last_error ? [["last error", health.last_error]] : []));
   renderInsetChoice();
+  renderTracksTable();
 }
 
 // The ground loop's lead track (its `track` message: tr(PCRB) and its parts) is named so when it
@@ -402,6 +403,7 @@ function renderReplayPanels() {
     rowsOut.push([run.label + " shares", f.eta.map((e) => e.toFixed(2)).join(" ")]);
   }
   rows($("mission-table"), rowsOut);
+  renderTracksTable();
 }
 
 function seriesPoints(key) {
@@ -446,6 +448,104 @@ function renderCharts() {
     { label: "solve", colour: "#6a1b9a", points: seriesPoints("solve_ms") },
     { label: "detection to plan", colour: "#ef6c00", points: seriesPoints("det_to_plan_ms") },
   ]);
+}
+
+// ------------------------------------------------------------------------- tracks and priorities
+
+// The tracks table: per track its id, state and priority (its weight in the planner's objective,
+// 0 to 10, as the ground loop's latest `track`/`track_set` says; 1 by default). Live, each row
+// has an input that sends the `priority` command and, under it, that request's fate (sent,
+// accepted with what was done, refused and why). A replay shows the first trace's tracks at the
+// slot shown, read-only. Rows are updated in place, so that a value being typed survives the
+// updates. `M.tracksTable` lists the rows shown.
+function tracksShown() {
+  if (S.mode === "replay") {
+    const run = S.runs[0], f = run ? run.frames[S.frame - 1] : null;
+    return f && f.tracks ? f.tracks : [];
+  }
+  return S.latest.tracks ? S.latest.tracks.tracks : [];
+}
+
+function fmtPriority(p) { return p == null || !isFinite(p) ? "1" : String(Number(p)); }
+
+function readOnlyPage() { return !!(S.console && S.console.secured && !S.token); }
+
+function trackRow(id, live) {
+  const tr = document.createElement("tr");
+  tr.dataset.track = String(id);
+  const name = document.createElement("td"); name.className = "track";
+  const prio = document.createElement("td"); prio.className = "num prio";
+  tr.append(name, prio);
+  if (live) {
+    const cell = document.createElement("td"); cell.className = "set";
+    const input = document.createElement("input");
+    input.type = "text"; input.inputMode = "decimal"; input.size = 4; input.className = "prio-input";
+    input.placeholder = "0\u201310"; input.setAttribute("aria-label", "priority of T" + id);
+    const button = document.createElement("button");
+    button.type = "button"; button.className = "prio-set"; button.textContent = "set";
+    const note = document.createElement("div"); note.className = "prio-note";
+    button.addEventListener("click", () => setPriority(id, input));
+    input.addEventListener("keydown", (ev) => { if (ev.key === "Enter") { ev.preventDefault(); setPriority(id, input); } });
+    cell.append(input, button, note);
+    tr.append(cell);
+  }
+  return tr;
+}
+
+// The fate of the latest priority request for track `id`: [text, kind] ("" when none).
+function priorityNote(id) {
+  const note = S.priorityNotes[id];
+  if (!note) return ["", ""];
+  if (!note.sentId) return [note.text, "error"];
+  const r = S.replies.find((x) => x.id === note.sentId);
+  if (!r) return ["sent " + note.weight + " (" + note.sentId + "), waiting for the ground loop's reply", "pending"];
+  return r.accepted ? ["accepted: " + (r.effect || r.reason), "accepted"] : ["refused: " + r.reason, "refused"];
+}
+
+function renderTracksTable() {
+  const table = $("tracks-table"), live = S.mode === "live";
+  const tracks = tracksShown().slice().sort((a, b) => a.id - b.id);
+  const ids = tracks.map((t) => String(t.id));
+  for (const tr of [...table.children]) if (!tr.dataset.track || !ids.includes(tr.dataset.track) || (tr.querySelector("input") !== null) !== live) tr.remove();
+  const rowsNow = new Map([...table.children].map((tr) => [tr.dataset.track, tr]));
+  tracks.forEach((t, i) => {
+    const id = String(t.id);
+    const tr = rowsNow.get(id) || trackRow(t.id, live);
+    if (table.children[i] !== tr) table.insertBefore(tr, table.children[i] || null);
+    const name = "T" + t.id + (t.confirmed ? "" : " (tentative)");
+    if (tr.cells[0].textContent !== name) tr.cells[0].textContent = name;
+    const prio = fmtPriority(t.priority);
+    if (tr.cells[1].textContent !== prio) { tr.cells[1].textContent = prio; tr.dataset.priority = prio; }
+    if (live) {
+      const ro = readOnlyPage();
+      for (const e of tr.cells[2].querySelectorAll("input, button")) e.disabled = ro;
+      const [text, kind] = priorityNote(id);
+      const note = tr.querySelector(".prio-note");
+      if (note.textContent !== text) note.textContent = text;
+      note.className = "prio-note" + (kind ? " " + kind : "");
+      tr.dataset.state = kind;
+    }
+  });
+  const run = S.runs[0];
+  $("tracks-note").textContent = !tracks.length ? "no track yet"
+    : S.mode === "replay" ? "priority (read-only) of " + (run ? run.label : "the trace") + "'s tracks at slot " + S.frame
+      : readOnlyPage() ? "priority, 0 to 10 (0: not planned for, still kept clear of); read-only until you log in"
+        : "priority, 0 to 10 (0: not planned for, still kept clear of; 1 by default)";
+  M.tracksTable = tracks.map((t) => ({ id: t.id, confirmed: t.confirmed, priority: fmtPriority(t.priority) }));
+}
+
+async function setPriority(id, input) {
+  const text = input.value.trim();
+  const w = Number(text);
+  if (text === "" || !isFinite(w)) {
+    S.priorityNotes[id] = { text: `priority of T${id}: ${JSON.stringify(text)} is not a number (nothing sent)` };
+    renderTracksTable();
+    return;
+  }
+  const r = await command({ command: "priority", track: id, params: { weight: w } });
+  S.priorityNotes[id] = r.id ? { sentId: r.id, weight: w } : { text: r.error };
+  if (r.id) input.value = "";
+  renderTracksTable();
 }
 
 // ------------------------------------------------------------------------- live updates
@@ -542,7 +642,7 @@ function renderReplies() {
   for (const s of Object.values(S.sent).slice(-20).reverse()) {
     const li = document.createElement("li");
     const r = byId.get(s.id);
-    const what = s.request.command + (s.request.uav != null ? " U" + s.request.uav : "") + (s.request.params ? " " + JSON.stringify(s.request.params) : "");
+    const what = s.request.command + (s.request.uav != null ? " U" + s.request.uav : "") + (s.request.track != null ? " T" + s.request.track : "") + (s.request.params ? " " + JSON.stringify(s.request.params) : "");
     if (r) {
       li.className = r.accepted ? "accepted" : "refused";
       li.textContent = `${what}: ${r.accepted ? "accepted" : "refused"} \u2014 ${r.reason || ""}${r.effect ? " \u2014 " + r.effect : ""}`;
@@ -551,6 +651,7 @@ function renderReplies() {
     items.push(li);
   }
   ol.replaceChildren(...items);
+  if (S.mode === "live") renderTracksTable();
 }
 
 async function post(path, body) {
@@ -562,15 +663,22 @@ async function post(path, body) {
   return { ok: res.ok, status: res.status, data };
 }
 
+// Send a fleet command; {id} once sent, else {error: why nothing was sent}.
 async function command(body) {
   if (S.console && S.console.secured && !S.token) {
-    say("read-only: log in with the operator password to send commands (nothing sent)", "error");
-    return;
+    const error = "read-only: log in with the operator password to send commands (nothing sent)";
+    say(error, "error");
+    return { error };
   }
   const r = await post("/api/control", body);
-  if (!r.ok) { say(`refused (HTTP ${r.status}): ${r.data.error}; nothing sent`, "error"); return; }
+  if (!r.ok) {
+    const error = `refused (HTTP ${r.status}): ${r.data.error}; nothing sent`;
+    say(error, "error");
+    return { error };
+  }
   S.sent[r.data.id] = r.data; renderReplies();
   say(`sent ${body.command} (${r.data.id})`, "info");
+  return { id: r.data.id };
 }
 
 function wireControls() {

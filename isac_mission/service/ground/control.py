@@ -6,6 +6,9 @@ field at fault and nothing is executed; so is a well-formed one that cannot be c
 vehicle already out of the mission, nothing to resume, ...). What each command does:
 
 - `set`: planning parameters (R_th) from the next planned slot on;
+- `priority` (one track): the track's weight in the planner's objective, 0 to 10 (0: not
+  planned for, still kept clear of), from the next planned slot on; refused with the mission
+  state's reason when it cannot be set (no such track);
 - `hold` (one vehicle or all): the vehicles are planned around (share 0, no BS; the others keep
   D_s from them) and their bridges switch them to PX4 HOLD, streaming setpoints at the vehicle's
   own position (`fleet` command);
@@ -44,7 +47,7 @@ log = logging.getLogger(__name__)
 class ControlledMission(Protocol):
     """What a request needs of the loop's mission state (service/ground/mission.py's
     MissionState): the last processed slot, the scenario
-    planned with, and a way to plan with another from the next slot on."""
+    planned with, a way to plan with another from the next slot on, and a track's priority."""
 
     @property
     def slot(self) -> int: ...
@@ -53,6 +56,16 @@ class ControlledMission(Protocol):
     def scenario(self) -> Scenario: ...
 
     def set_scenario(self, s: Scenario) -> None: ...
+
+    @property
+    def next_planned_slot(self) -> int:
+        """The first slot whose plan a change made now goes into."""
+        ...
+
+    def set_priority(self, track_id: int, weight: float) -> None:
+        """Plan with track `track_id` weighted `weight` (0 to 10) from the next planned slot
+        on; ValueError saying what is wrong (no such track, a weight out of range)."""
+        ...
 
 
 HOLD_REASON = "control: hold"
@@ -158,6 +171,9 @@ class ControlDesk:
         if msg.command == "set":
             assert msg.params is not None  # set carries them (wire.control_models)
             return Outcome(True, "parameters valid", self._set(msg.params))
+        if msg.command == "priority":
+            assert msg.track is not None and msg.params is not None  # (wire.control_models)
+            return self._priority(msg.track, msg.params["weight"])
         every = tuple(range(self.n_uavs)) if msg.uav is None else (msg.uav,)
         if msg.command in ("hold", "land"):
             return self._take(msg, every)
@@ -175,6 +191,19 @@ class ControlDesk:
             state.scenario.with_changes(r_th=r_th_mbps * 1e6 * self.plan_rate_factor)
         )
         return f"R_th = {r_th_mbps:g} Mbit/s from slot {state.slot + 2} on"
+
+    def _priority(self, track_id: int, weight: float) -> Outcome:
+        """`priority`: the track's weight in the planner's objective from the next planned slot
+        on; refused with the mission state's reason (ValueError: no such track, ...)."""
+        state = self.state()
+        try:
+            state.set_priority(track_id, weight)
+        except ValueError as err:
+            return _refused(str(err))
+        effect = f"track {track_id}: priority {weight:g} from slot {state.next_planned_slot} on"
+        if weight == 0.0:
+            effect += " (not planned for, still kept clear of)"
+        return Outcome(True, "priority accepted", effect)
 
     def _out_of_mission(self, m: int) -> str:
         """Why vehicle m is out of the mission for good ("" when it is not)."""

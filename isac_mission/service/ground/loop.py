@@ -106,6 +106,7 @@ class GroundLoop(BusLoop):
                 resume.eta,
                 resume.assoc,
                 self.initial_errors,
+                resume.priorities,
             )
         except ValueError as err:
             path = self.settings.trace_path

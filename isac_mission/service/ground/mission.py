@@ -7,13 +7,15 @@ the ground plans slot n+1. `MissionState` runs the slot recursion of the offline
 paper's labelled EKF and PCRB, or the tracker of several targets), split at the points where the
 live service waits for the network: `next_job` predicts (the plan is made on the planner's
 thread), `commit` adopts the plan, `process` updates, `skip` traces a slot the world ran without
-a plan of this loop.
+a plan of this loop. The operator's priority of each track (tracking/priorities.py) weighs it in
+the plans: the scenario's script (`priorities:`) and `set_priority` change it from the next
+planned slot on.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -26,7 +28,14 @@ from isac_mission.planning.slot import Method
 from isac_mission.planning.tracks import TracksPlan, check_method
 from isac_mission.timebase import SlotTimeline
 from isac_mission.tracking.factory import keep_out_tracks, tracker_for
-from isac_mission.tracking.tracker import SlotTracking, Tracker, TrackPrediction
+from isac_mission.tracking.multi_target import TrackerState
+from isac_mission.tracking.priorities import Priorities, apply_changes
+from isac_mission.tracking.tracker import (
+    LABELLED_TRACK_ID,
+    SlotTracking,
+    Tracker,
+    TrackPrediction,
+)
 from isac_mission.types import FloatArray, Gaussian, IntArray, SlotPlan, SolveReport
 
 NO_ORIGIN = -2
@@ -88,6 +97,8 @@ class PendingSlot:
     """The vehicles the plan left out (PlanningJob.excluded)."""
     skipped: bool = False
     """The world ran the slot without a plan of this loop (`MissionState.skip`)."""
+    priorities: Priorities = field(default_factory=Priorities)
+    """The operator's priorities the plan was made with (those in force for a skipped slot)."""
 
 
 @dataclass(frozen=True)
@@ -101,7 +112,8 @@ class GroundSlot:
     (with the world's origins, NO_ORIGIN where not known); predictions: the tracks' predictions
     the plan was made from; tracking: the tracks after the update; received: the reports that
     arrived; saved: the tracker's state after the update (`Tracker.saved`: what a resume
-    continues from).
+    continues from); priorities: the operator's priorities the mission goes on with after the
+    slot (what a resume continues with; the plan's are `pending.priorities`).
     """
 
     slot: int
@@ -117,6 +129,7 @@ class GroundSlot:
     tracking: SlotTracking
     received: int
     saved: object
+    priorities: Priorities = field(default_factory=Priorities)
 
     @property
     def plan(self) -> SlotPlan:
@@ -206,6 +219,15 @@ class MissionState:
         made again from the same prediction."""
         self._started_at: int | None = None
         """The slot after which the known targets' tracks were last started."""
+        self.priorities = Priorities()
+        """The operator's priority of each track (tracking/priorities.py), as the next plan
+        takes it."""
+        self._script_through = 0
+        """The last slot whose scripted priority changes (the scenario's) are applied."""
+        self._seen_ids: set[int] = set()
+        """Every track ID the tracker has given out that this state has seen."""
+        self._last_job_slot = 0
+        """The slot of the last planning job made (`next_job`)."""
 
     @classmethod
     def from_prior(
@@ -228,10 +250,13 @@ class MissionState:
         eta: FloatArray,
         assoc: IntArray,
         initial_errors: FloatArray | None = None,
+        priorities: Priorities | None = None,
     ) -> MissionState:
         """Continue after a trace's slot line: the tracker as it was after `slot`'s update, the
-        shares eta [M] and BSs assoc [M] of that slot's plan; no last plan (the vehicles were
-        not flying this loop's plan). ValueError when the line does not fit `s`."""
+        shares eta [M] and BSs assoc [M] of that slot's plan, the operator's priorities the
+        mission went on with (None: every track 1; the scenario's scripted changes of later slots
+        still to come); no last plan (the vehicles were not flying this loop's plan). ValueError
+        when the line does not fit `s`."""
         if slot >= s.N:
             raise ValueError(f"slot {slot} is the mission's last ({s.N}): nothing to resume")
         eta, assoc = np.array(eta, dtype=float), np.array(assoc, dtype=np.int64)
@@ -239,6 +264,8 @@ class MissionState:
             raise ValueError(f"slot {slot}'s line is not for {s.M} UAVs")
         state = cls(s, kit, method, initial_errors, tracker)
         state.slot, state.eta, state.assoc = slot, eta, assoc
+        state.priorities = Priorities() if priorities is None else priorities
+        state._script_through = slot
         return state
 
     @property
@@ -272,7 +299,46 @@ class MissionState:
         if self._predicted is None:
             self.start_known_tracks()
             self._predicted = self.tracker.predict()
+            self._seen_ids.update(p.track_id for p in self._predicted)
         return self._predicted
+
+    def set_priority(self, track_id: int, weight: float) -> None:
+        """The operator's priority of track `track_id` from the next planned slot on: `weight`
+        in [0, 10] (0: not planned for, still kept clear of; tracking/priorities.py).
+        ValueError naming what is wrong: a weight out of [0, 10] or not a finite number, a track
+        ID the tracker has never had ("no track 7")."""
+        table = self.priorities.with_priority(track_id, weight)  # checks both values
+        had = self.track_ids_had()
+        if track_id not in had:
+            so_far = ", ".join(map(str, sorted(had)[:20])) if had else "none yet"
+            raise ValueError(
+                f"no track {track_id}: the tracker has never had it (its tracks: {so_far})"
+            )
+        self.priorities = table
+
+    @property
+    def next_planned_slot(self) -> int:
+        """The first slot whose plan a change made now (`set_priority`, `set_scenario`) goes
+        into: the next slot, or the one after it when its planning job is already made."""
+        return max(self.slot + 1, self._last_job_slot + 1)
+
+    def track_ids_had(self) -> set[int]:
+        """Every track ID the tracker has had so far (a tracker of several tracks gives them out
+        in order, so those below its next ID; the labelled tracker's one, 1, once started)."""
+        ids = set(self._seen_ids)
+        saved = self.tracker.saved()
+        if isinstance(saved, TrackerState):
+            ids.update(range(1, saved.next_id))
+        elif saved is not None and self.tracker.labels_reports:
+            ids.add(LABELLED_TRACK_ID)
+        return ids
+
+    def _apply_script(self, slot: int) -> None:
+        """Apply the scenario's scripted priority changes up to slot `slot` (once each)."""
+        if slot > self._script_through:
+            changes = self.scenario.priority_changes
+            self.priorities = apply_changes(self.priorities, changes, self._script_through, slot)
+            self._script_through = slot
 
     def next_job(
         self,
@@ -291,6 +357,8 @@ class MissionState:
         prev_plan: last slot's plan when the active vehicles are the same (over them only),
         else None."""
         predictions = self.predict()
+        self._apply_script(self.slot + 1)
+        self._last_job_slot = self.slot + 1
         excluded = tuple(sorted(excluded))
         active = tuple(m for m in range(self.scenario.M) if m not in excluded)
         xy = np.asarray(uav_xy, dtype=float)
@@ -315,6 +383,7 @@ class MissionState:
             excluded=excluded,
             prev_plan=prev_plan,
             operator_held=tuple(sorted(operator_held)),
+            priorities=self.priorities,
         )
 
     def commit(self, job: PlanningJob, planned: TracksPlan | SlotPlan) -> PendingSlot:
@@ -332,6 +401,7 @@ class MissionState:
             job.uav_xy,
             job.uav_v,
             job.excluded,
+            priorities=job.priorities,
         )
         self.last_plan = (job.slot, job.active, planned.plan)
         return self.pending
@@ -375,6 +445,7 @@ class MissionState:
         if n != self.slot + 1:
             raise ValueError(f"slot {n} is not the next slot {self.slot + 1}")
         predictions = self.predict()
+        self._apply_script(n)
         known = np.full((s.M, 2), np.nan)
         eta = np.array(self.eta, dtype=float)
         for m, msg in msgs.items():
@@ -389,7 +460,7 @@ class MissionState:
         plan = SlotPlan(
             known, assoc, eta, float("nan"), SolveReport(status, reason, fallback=status)
         )
-        self.pending = PendingSlot(n, predictions, plan, skipped=True)
+        self.pending = PendingSlot(n, predictions, plan, skipped=True, priorities=self.priorities)
         out = self.process(n, msgs, truth, np.asarray(compute_xy, dtype=float))
         self.last_plan = None  # this slot had no plan of ours: the next one starts afresh
         return out
@@ -422,6 +493,8 @@ class MissionState:
             uav_xy[m] = known[m] = msg.uav_xy_m
             measurements.append(np.asarray(msg.report, dtype=float).reshape(-1, 2))
         tracking = self.tracker.update(measurements, uav_xy, sensing_eta, self.kit.sensing)
+        self._seen_ids.update(t.track_id for t in tracking.tracks)
+        self._seen_ids.update(tracking.started)
         origins = () if truth is None else truth.measurement_origins
         reports = tuple(
             UavReport(z, _origins(origins, m, len(z))) for m, z in enumerate(measurements)
@@ -451,6 +524,7 @@ class MissionState:
             tracking=tracking,
             received=len(msgs),
             saved=self.tracker.saved(),
+            priorities=self.priorities,
         )
 
 

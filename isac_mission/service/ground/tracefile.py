@@ -6,7 +6,10 @@ The loop writes every slot through one `SlotOutput`, made for the scenario's tra
 bound) or the trace of tracks (`records/tracks.py` lines, the `track_set` message; a
 resume restores the tracker from the last complete slot line). Both write and fsync slot by
 slot, continue a resumed trace after its last complete slot (a torn last line is cut off), start
-afresh when the file has no complete line, and end each run with an `end` line.
+afresh when the file has no complete line, and end each run with an `end` line. Each track in a
+line and in the track message carries the operator's priority (the line: its plan's; the
+message: the one the mission goes on with), and a live line the whole table a resume continues
+with (`records.tracks.priorities_field`).
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -28,6 +31,8 @@ from isac_mission.records.progress import trace_progress
 from isac_mission.records.tracks import (
     TracksSlot,
     config_differences,
+    priorities_field,
+    read_priorities,
     resume_fields,
     resume_point,
     tracks_fields,
@@ -38,7 +43,8 @@ from isac_mission.service.ground.settings import GroundSettings
 from isac_mission.tracking.cycle import TrackState
 from isac_mission.tracking.factory import tracker_for
 from isac_mission.tracking.pcrb import Bound
-from isac_mission.tracking.tracker import Tracker
+from isac_mission.tracking.priorities import Priorities
+from isac_mission.tracking.tracker import LABELLED_TRACK_ID, Tracker
 from isac_mission.types import FloatArray, Gaussian, IntArray
 from isac_mission.wire import (
     DetectionMsg,
@@ -58,12 +64,14 @@ log = logging.getLogger(__name__)
 class ResumeFrom:
     """Where a resumed trace goes on: after `slot`, with the tracker's saved state (for
     `tracking/factory.restored_tracker`), and that slot's plan's shares eta [M] and BSs
-    assoc [M]."""
+    assoc [M], and the operator's priorities the mission went on with (the line's
+    `priorities`: `MissionState.resumed`)."""
 
     slot: int
     saved: object
     eta: FloatArray
     assoc: IntArray
+    priorities: Priorities = field(default_factory=Priorities)
 
 
 class SlotOutput(Protocol):
@@ -169,6 +177,7 @@ class RecordOutput:
                 saved,
                 np.asarray(last.bandwidth_share, dtype=float),
                 np.asarray(last.assoc, dtype=np.int64),
+                read_priorities({"slot": last.slot, **last.extra}),
             )
         config = live_trace_config(self.s, self.settings.method, self.settings.trace_config)
         self.writer = TraceWriter(path, config, fsync=True)
@@ -190,6 +199,7 @@ class RecordOutput:
             J=track.bound.J,
             pcrb_trace=track.bound.trace,
             published_wall_s=time.time(),
+            priority=g.priorities[LABELLED_TRACK_ID],
         )
 
     def complete(
@@ -248,7 +258,8 @@ def slot_record(g: GroundSlot, extra: Mapping[str, Any]) -> SlotRecord:
         }
         | ({"planned_around": list(pending.planned_around)} if pending.planned_around else {})
         | dict(extra)
-        | tracks_fields(g.planned_for, g.truth, g.tracking.tracks, g.reports),
+        | priorities_field(g.priorities)
+        | tracks_fields(g.planned_for, g.truth, g.tracking.tracks, g.reports, g.pending.priorities),
     )
     return record
 
@@ -262,7 +273,8 @@ def _labelled(variances: FloatArray | None) -> FloatArray:
 def track_set_slot(g: GroundSlot) -> TracksSlot:
     """The trace-of-tracks line of a slot (records/tracks.py): `eta` 0 for a UAV whose
     report did not arrive (the tracker took nothing from it); a skipped slot's positions where
-    its reports said (NaN: none)."""
+    its reports said (NaN: none); the priorities its plan was made with, and those the mission
+    goes on with (for a resume)."""
     arrived = np.isfinite(g.known_xy[:, 0])
     return TracksSlot(
         g.slot,
@@ -277,6 +289,8 @@ def track_set_slot(g: GroundSlot) -> TracksSlot:
         g.saved,  # type: ignore[arg-type]  # the tracker of tracks' TrackerState
         g.pending.start_xy,
         g.pending.start_velocity,
+        g.pending.priorities,
+        g.priorities,
     )
 
 
@@ -317,7 +331,9 @@ class TrackSetOutput:
                 return None
             point = resume_point(last_line)
             self.last_traced = point.slot
-            return ResumeFrom(point.slot, point.tracker, point.plan_eta, point.assoc)
+            return ResumeFrom(
+                point.slot, point.tracker, point.plan_eta, point.assoc, point.priorities
+            )
         if self.settings.resume and path.exists():
             log.warning("%s has no complete line; starting a new trace", path)
         self.writer = TraceWriter(path, self.config(), fsync=True)
@@ -336,6 +352,7 @@ class TrackSetOutput:
                 x=t.belief.x,
                 P=t.belief.P,
                 pcrb_position_trace=float(np.trace(t.bound.C[:2, :2])),
+                priority=g.priorities[t.track_id],
             )
             for t in g.tracking.tracks
         )
