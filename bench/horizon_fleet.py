@@ -48,28 +48,29 @@ AT_CAP_NOTE = "its last iterate kept"
 older package, which has none)."""
 
 
-def fleet_scenario(m: int, slots: int):  # type: ignore[no-untyped-def]
-    """The live planning scenario of a fleet of m UAVs (module docstring)."""
-    from isac_mission.config import parse_scenario
-    from isac_mission.config.live_settings import LiveSettings
-
+def fleet_config(m: int, slots: int) -> dict[str, object]:
+    """The scenario mapping of a fleet of m UAVs (module docstring), before the live settings."""
     k = max(5, m // 2)
     rng = np.random.default_rng(1000 + m)
     n = math.ceil(math.sqrt(m))
     grid = (np.arange(n) + 0.5) / n
     cells = np.array([(x, y) for y in grid for x in grid])[:m]
     start = 300 + 2400 * cells + rng.uniform(-60, 60, size=(m, 2))
-    s = parse_scenario(
-        {
-            "timing": {"duration_s": slots, "slot_s": 1.0},
-            "radio": {"bs_capacity": math.ceil(m / k) + 1, "bandwidth_hz": 20e6 * m / 3},
-            "base_stations": {"count": k},
-            "uavs": {"start_xy_m": start.round(1).tolist()},
-            "planner": {"polish": True},
-        },
-        f"fleet M={m}",
-    )
-    return LiveSettings().apply(s)
+    return {
+        "timing": {"duration_s": slots, "slot_s": 1.0},
+        "radio": {"bs_capacity": math.ceil(m / k) + 1, "bandwidth_hz": 20e6 * m / 3},
+        "base_stations": {"count": k},
+        "uavs": {"start_xy_m": start.round(1).tolist()},
+        "planner": {"polish": True},
+    }
+
+
+def fleet_scenario(m: int, slots: int):  # type: ignore[no-untyped-def]
+    """The live planning scenario of a fleet of m UAVs (module docstring)."""
+    from isac_mission.config import parse_scenario
+    from isac_mission.config.live_settings import LiveSettings
+
+    return LiveSettings().apply(parse_scenario(fleet_config(m, slots), f"fleet M={m}"))
 
 
 def flown_gaps_m(s, outcomes) -> tuple[list[float], list[float]]:  # type: ignore[no-untyped-def]

@@ -34,15 +34,11 @@ RADIUS_M = 1000.0
 def scenario_of(m: int, n_targets: int, slots: int):  # type: ignore[no-untyped-def]
     """The fleet of m UAVs (bench/horizon_fleet.py) with n_targets known intruders (module
     docstring), tracked by the multi-target tracker."""
+    from horizon_fleet import fleet_config
+
     from isac_mission.config import parse_scenario
     from isac_mission.config.live_settings import LiveSettings
 
-    k = max(5, m // 2)
-    rng = np.random.default_rng(1000 + m)
-    n = math.ceil(math.sqrt(m))
-    grid = (np.arange(n) + 0.5) / n
-    cells = np.array([(x, y) for y in grid for x in grid])[:m]
-    start = 300 + 2400 * cells + rng.uniform(-60, 60, size=(m, 2))
     targets = []
     for i in range(n_targets):
         a = 2 * math.pi * (i + 0.37) / n_targets
@@ -57,12 +53,8 @@ def scenario_of(m: int, n_targets: int, slots: int):  # type: ignore[no-untyped-
             }
         )
     s = parse_scenario(
-        {
-            "timing": {"duration_s": slots, "slot_s": 1.0},
-            "radio": {"bs_capacity": math.ceil(m / k) + 1, "bandwidth_hz": 20e6 * m / 3},
-            "base_stations": {"count": k},
-            "uavs": {"start_xy_m": start.round(1).tolist()},
-            "planner": {"polish": True},
+        fleet_config(m, slots)
+        | {
             "targets": targets,
             "detection": {"model": "fixed", "false_alarms_per_slot": 0},
             "tracker": {"kind": "multi"},

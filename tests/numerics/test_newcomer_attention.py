@@ -33,7 +33,7 @@ from isac_mission.tracking.multi_target import (
 from isac_mission.tracking.priorities import Priorities
 from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, Gaussian, SlotPlan, SolveReport
-from tests.support.independent.pcrb import jacobian
+from tests.support.independent.pcrb import posterior_trace
 
 P_PRED = np.diag([25.0, 25.0, 1.0, 1.0])
 """The confirmed track's predicted covariance (m^2, m^2/s^2)."""
@@ -152,15 +152,10 @@ def test_a_tentative_track_enters_the_objective_weighed_w_times_existence_times_
 
 
 def _bound(b: TargetBelief, xy: FloatArray, eta: FloatArray, sensing: SensingParams) -> float:
-    """tr((J_pred + H^T R^-1 H)^-1) of one target at the plan: H the independent checker's, R
-    eq. 8's variances at the plan's ranges and shares."""
-    x = b.state_pred
-    r = sensing.variances(np.linalg.norm(x[None, :2] - xy, axis=1), eta)
-    H = jacobian(x, xy)
-    with np.errstate(divide="ignore"):
-        info = np.where(np.isfinite(r), 1.0 / r, 0.0)
-    J = b.prior_information + H.T @ (info[:, None] * H)
-    return float(np.trace(np.linalg.inv(J)))
+    """One target's bound at the plan: eq. 8's variances at the plan's ranges and shares, the
+    rest the independent checker's (`posterior_trace`)."""
+    r = sensing.variances(np.linalg.norm(b.state_pred[None, :2] - xy, axis=1), eta)
+    return posterior_trace(b.prior_information, b.state_pred, xy, r)
 
 
 def test_the_plans_objective_is_the_weighted_sum_with_the_newcomer(

@@ -43,7 +43,7 @@ from isac_mission.tracking.priorities import Priorities, PriorityChange
 from isac_mission.tracking.tracker import TrackPrediction
 from isac_mission.types import FloatArray, SlotPlan, SolveReport
 from tests.support.ground_steps import predictions_of
-from tests.support.independent.pcrb import jacobian
+from tests.support.independent.pcrb import posterior_trace
 from tests.support.live_cli import ROOT
 
 P_PRED = np.diag([25.0, 25.0, 1.0, 1.0])
@@ -98,16 +98,10 @@ def _plan(
 
 
 def _bound(b: TargetBelief, xy: FloatArray, eta: FloatArray, sensing: SensingParams) -> float:
-    """tr((J_pred + H^T R^-1 H)^-1) of one target at the plan: H this file's own (the
-    independent checker's), R eq. 8's variances at the plan's ranges and shares."""
-    x = b.state_pred
-    ranges = np.linalg.norm(x[None, :2] - xy, axis=1)
-    r = sensing.variances(ranges, eta)
-    H = jacobian(x, xy)
-    with np.errstate(divide="ignore"):
-        info = np.where(np.isfinite(r), 1.0 / r, 0.0)
-    J = b.prior_information + H.T @ (info[:, None] * H)
-    return float(np.trace(np.linalg.inv(J)))
+    """One target's bound at the plan: eq. 8's variances at the plan's ranges and shares, the
+    rest the independent checker's (`posterior_trace`)."""
+    r = sensing.variances(np.linalg.norm(b.state_pred[None, :2] - xy, axis=1), eta)
+    return posterior_trace(b.prior_information, b.state_pred, xy, r)
 
 
 class Capture:

@@ -49,6 +49,18 @@ def jacobian(x: Array, uav_xy: Array) -> Array:
     return jac
 
 
+def posterior_trace(prior_information: Array, x: Array, uav_xy: Array, r_diag: Array) -> float:
+    """tr((J_pred + H^T R^-1 H)^-1) of one target at state x [4] measured from uav_xy [M, 2]
+    with variances r_diag [2M] (m^2 then m^2/s^2; inf or NaN: no measurement): its bound after
+    one slot's measurements, H this module's own Jacobian."""
+    H = jacobian(x, uav_xy)
+    r = np.asarray(r_diag, dtype=float)
+    with np.errstate(divide="ignore"):
+        info = np.where(np.isfinite(r), 1.0 / r, 0.0)
+    J = np.asarray(prior_information, dtype=float) + H.T @ (info[:, None] * H)
+    return float(np.trace(np.linalg.inv(J)))
+
+
 def cv_model(dt: float, kappa: float) -> tuple[Array, Array]:
     """(F, W) [4, 4] of eq. 3-4 for state order [x, y, vx, vy]."""
     f = np.eye(4)
