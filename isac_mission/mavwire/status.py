@@ -75,6 +75,12 @@ class VehicleStatus:
         return self.armed and not self.landed
 
     @property
+    def in_air(self) -> bool:
+        """Armed and reported in the air (landed state IN_AIR: not taking off, landing or on
+        the ground; False while the landed state is unknown)."""
+        return self.armed and self.landed_state == mavlink2.MAV_LANDED_STATE_IN_AIR
+
+    @property
     def altitude_m(self) -> float | None:
         """Height above the local origin (-down), m, or None before the first position."""
         return None if self.position_ned_m is None else -float(self.position_ned_m[2])

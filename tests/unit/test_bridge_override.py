@@ -11,7 +11,7 @@ import numpy as np
 from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.operator import OverrideKeeper
-from isac_mission.service.bridge.override import OverrideWatch, is_offboard_loss
+from isac_mission.service.bridge.override import KILLED, OverrideWatch, is_offboard_loss
 from isac_mission.service.bridge.settings import BridgeSettings
 from isac_mission.service.bridge.supervision import LinkWatch
 from isac_mission.timebase import FuncTime
@@ -183,3 +183,26 @@ def test_the_vehicles_word_on_the_offboard_loss_brings_a_reentry() -> None:
     assert rig.keeper.after_gap(held, 20.1)  # the loss hold: re-enter
     assert rig.keeper.reason == "" and rig.counters.overrides == 0
     assert rig.counters.link_interruptions == 1
+
+
+def test_a_kill_read_after_the_fall_or_during_a_gap_is_a_kill() -> None:
+    """Disarmed straight from IN_AIR is a kill even when the first disarmed status already says
+    ON_GROUND (the fall was faster than the status), or comes right after a link gap, whose
+    grace would otherwise hold the verdict until the vehicle lies on the ground ("landed")."""
+    rig = Rig()
+    flying(rig, 20.0)
+    assert rig.see(status("offboard", 20.5, armed=False, landed_state=ON_GROUND)) == KILLED
+    after_gap = Rig()
+    flying(after_gap, 20.0)
+    fallen = status("offboard", 22.0, armed=False, landed_state=ON_GROUND)  # 2 s unheard
+    assert after_gap.see(fallen) == KILLED
+    # Landing first (ON_GROUND while armed), then disarming, is a landing; so is a vehicle whose
+    # landed state is unknown (no EXTENDED_SYS_STATE): its disarm says nothing of the air.
+    landing = Rig()
+    flying(landing, 20.0)
+    assert landing.see(status("land", 20.5, landed_state=ON_GROUND)) == "landed"
+    assert landing.see(status("land", 21.0, armed=False, landed_state=ON_GROUND)) == "landed"
+    unknown = Rig()
+    flying(unknown, 20.0)
+    assert unknown.see(status("offboard", 20.5, landed_state=0)) == ""
+    assert unknown.see(status("offboard", 21.0, armed=False, landed_state=0)) != KILLED

@@ -10,7 +10,7 @@ from typing import Any
 from isac_mission.mavwire.status import VehicleStatus
 from isac_mission.service.bridge.counters import BridgeCounters
 from isac_mission.service.bridge.offboard import OffboardEntry
-from isac_mission.service.bridge.override import OverrideWatch, is_offboard_loss
+from isac_mission.service.bridge.override import KILLED, OverrideWatch, is_offboard_loss
 from isac_mission.service.bridge.setpoints import SetpointStream
 from isac_mission.service.bridge.supervision import LinkWatch
 from isac_mission.timebase import SimTime
@@ -50,6 +50,8 @@ class OverrideKeeper:
         self.reenter = reenter
         self.reason = ""
         """Why the service does not fly the vehicle; "" while it does."""
+        self.was_in_air = False
+        """The last status checked showed it armed and in the air (VehicleStatus.in_air)."""
         self.texts = OverrideWatch()
 
     def on_statustext(self, msg: Any) -> None:
@@ -76,6 +78,12 @@ class OverrideKeeper:
         override, follow one (re-worded as the mode changes), or end it when the vehicle is back
         in OFFBOARD and airborne (an operator's switch)."""
         if not flying or st.lost:
+            return
+        was_in_air, self.was_in_air = self.was_in_air, st.in_air
+        if was_in_air and not st.armed and not self.reason:
+            # Disarmed straight from the air: no failsafe of a link gap disarms, and the fall
+            # may reach the ground before a gap's grace ends (it would then read "landed").
+            self.take(KILLED)
             return
         if self.reason == "control: hold" and (
             st.mode not in ("hold", "offboard", "unknown") or not st.airborne

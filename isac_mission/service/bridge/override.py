@@ -26,6 +26,9 @@ from typing import Final
 
 from isac_mission.mavwire.status import VehicleStatus
 
+KILLED: Final = "killed: disarmed in the air"
+"""The override of a vehicle disarmed in the air (it falls: out of the mission)."""
+
 STATUSTEXT_KEPT_S: Final = 10.0
 """How long a vehicle's STATUSTEXT is taken as the cause of its next mode change (link clock s)."""
 _CAUSES: Final = (
@@ -75,7 +78,7 @@ class OverrideWatch:
         so far, whose failsafe cause is kept once its STATUSTEXT is old ("RTL: low battery"
         then "LAND: low battery", not "operator: LAND")."""
         if not st.airborne:
-            return "landed" if st.landed else "killed: disarmed in the air"
+            return "landed" if st.landed else KILLED
         mode = {"hold": "HOLD", "rtl": "RTL", "land": "LAND", "mission": "MISSION"}.get(
             st.mode, st.mode.upper()
         )
