@@ -10,8 +10,9 @@ import numpy as np
 
 from isac_mission.config.priorities import priority_problems
 from isac_mission.config.scenario import Scenario, ScenarioFile, multi_target_reasons
+from isac_mission.config.sections import ImmSpec
 from isac_mission.config.signing import mavlink_signing_key
-from isac_mission.config.targets import DetectionSpec, TargetSpec
+from isac_mission.config.targets import DetectionSpec, Leg, TargetSpec
 from isac_mission.config.units import SPEED_OF_LIGHT_MPS, db_to_linear, dbm_to_w
 from isac_mission.errors import ConfigError
 from isac_mission.types import FloatArray
@@ -126,6 +127,8 @@ def resolve(spec: ScenarioFile) -> Scenario:
         detection=resolve_detection(spec),
         multi_tracker=spec.tracker.multi,
         tracker_kind=spec.tracker.kind,
+        tracker_motion=spec.tracker.motion,
+        imm=None if spec.tracker.imm is None else ImmSpec.from_config(spec.tracker.imm),
         priority_changes=tuple(e.change() for e in spec.priorities),
     )
     problems = _cross_field_problems(scenario, n_slots, single_section)
@@ -138,7 +141,7 @@ def resolve(spec: ScenarioFile) -> Scenario:
 def resolve_targets(spec: ScenarioFile, n_slots: int) -> tuple[TargetSpec, ...]:
     """The scenario's targets, `targets:` in order (the deprecated `target:` read as its one
     entry). A target's slots are those from ceil(appears_s / dt) to floor(leaves_s / dt) (N at
-    most)."""
+    most); motion legs' legs are timed from its first slot."""
     dt = spec.timing.slot_s
     out = []
     for i, e in enumerate(spec.in_one_schema().targets):
@@ -155,6 +158,10 @@ def resolve_targets(spec: ScenarioFile, n_slots: int) -> tuple[TargetSpec, ...]:
                 first_slot=first,
                 last_slot=last,
                 prior_known=e.prior == "known",
+                legs=tuple(
+                    Leg(leg.kind, leg.duration_s, leg.turn_rate_radps or 0.0, leg.accel_mps2 or 0.0)
+                    for leg in e.legs or ()
+                ),
             )
         )
     return tuple(out)

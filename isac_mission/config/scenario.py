@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
 from pydantic import Field, model_validator
 
 from isac_mission.config.impairment import ImpairmentConfig
@@ -24,6 +25,7 @@ from isac_mission.config.sections import (
     AreaConfig,
     BaseStationConfig,
     BatteryConfig,
+    ImmSpec,
     PlannerConfig,
     RadioConfig,
     Section,
@@ -33,6 +35,7 @@ from isac_mission.config.sections import (
     TimingConfig,
     TrackerConfig,
     TrackerKind,
+    TrackerMotion,
     UavConfig,
 )
 from isac_mission.config.security import SecurityConfig
@@ -45,7 +48,7 @@ from isac_mission.config.targets import (
     TargetSpec,
 )
 from isac_mission.deprecation import REMOVAL_VERSION
-from isac_mission.model.motion import ConstantVelocity, MotionModel
+from isac_mission.model.motion import ConstantVelocity, MotionModel, stationary_probabilities
 from isac_mission.tracking.priorities import PriorityChange
 from isac_mission.types import FloatArray
 
@@ -247,14 +250,20 @@ class Scenario:
     priority_changes: tuple[PriorityChange, ...] = ()
     """The scripted priority changes (priorities:; tracking/priorities.py), in the file's
     order; () by default."""
+    tracker_motion: TrackerMotion = "cv"
+    """tracker.motion: cv (constant velocity, eq. 3; every scenario before the key) or imm (the
+    interacting multiple model of `imm`)."""
+    imm: ImmSpec | None = None
+    """tracker.imm resolved (config/sections.py): set exactly when tracker_motion is imm."""
 
     @property
     def multi_target(self) -> bool:
-        """The multi-target path: tracker.kind multi, or (auto, labelled) more than one target,
-        a target that turns, flies waypoints, comes, goes or must be found, or detections with
-        false alarms or an SNR model (`multi_target_reasons`); False on every single-target
-        scenario as before."""
-        if self.tracker_kind == "multi":
+        """The multi-target path: tracker.kind multi, or tracker.motion imm (the IMM runs on
+        that tracker's tracks, for one target as for several), or (auto, labelled) more than one
+        target, a target that turns, flies waypoints or legs, comes, goes or must be found, or
+        detections with false alarms or an SNR model (`multi_target_reasons`); False on every
+        single-target scenario as before."""
+        if self.tracker_kind == "multi" or self.tracker_motion == "imm":
             return True
         if len(self.targets) > 1 or (self.detection is not None and not self.detection.is_default):
             return True
@@ -262,7 +271,19 @@ class Scenario:
 
     @property
     def motion(self) -> MotionModel:
-        """The target's motion model (model/motion.py): constant velocity with kappa."""
+        """How the bounds and the planner believe a target moves (model/motion.py): constant
+        velocity with kappa (eq. 3-4); with the IMM (tracker.motion imm), constant velocity with
+        its modes' intensities mixed by the long-run share of each mode (the stationary
+        distribution of its switching; docs/model.md, "The interacting multiple model")."""
+        if self.imm is None:
+            return self.truth_motion
+        share = stationary_probabilities(np.array(self.imm.switching))
+        return ConstantVelocity(float(share @ [m.kappa_m2ps3 for m in self.imm.modes]))
+
+    @property
+    def truth_motion(self) -> ConstantVelocity:
+        """How a noisy true target moves (model/targets.py, the labelled target's truth):
+        constant velocity with kappa (eq. 3-4)."""
         return ConstantVelocity(self.kappa)
 
     @property
@@ -331,6 +352,15 @@ class Scenario:
             "planner": self.planner.model_dump(),
             **(self._multi_target_config() if self.multi_target else {}),
             **(self._priorities_config() if self.priority_changes else {}),
+            **(self._tracker_motion_config() if self.tracker_motion != "cv" else {}),
+        }
+
+    def _tracker_motion_config(self) -> dict[str, Any]:
+        """The tracker's motion model as the trace config states it (absent: cv, as every trace
+        written before tracker.motion existed)."""
+        return {
+            "tracker_motion": self.tracker_motion,
+            "imm": None if self.imm is None else dataclasses.asdict(self.imm),
         }
 
     def _priorities_config(self) -> dict[str, Any]:
@@ -345,10 +375,19 @@ class Scenario:
     def _multi_target_config(self) -> dict[str, Any]:
         """The trace config of the multi-target path (absent from single-target traces)."""
         return {
-            "targets": [dataclasses.asdict(t) for t in self.targets],
+            "targets": [_target_config(t) for t in self.targets],
             "detection": None if self.detection is None else dataclasses.asdict(self.detection),
             "multi_target": self.multi_tracker.model_dump(),
         }
+
+
+def _target_config(t: TargetSpec) -> dict[str, Any]:
+    """A target as the trace config states it: its fields, legs left out when it has none (as
+    every trace written before motion legs existed)."""
+    out = dataclasses.asdict(t)
+    if not t.legs:
+        del out["legs"]
+    return out
 
 
 def multi_target_reasons(s: Scenario) -> list[str]:
@@ -369,6 +408,8 @@ def multi_target_reasons(s: Scenario) -> list[str]:
             out.append(f"target {t.name} appears at slot {t.first_slot}")
         if t.last_slot < s.N:
             out.append(f"target {t.name} leaves at slot {t.last_slot}")
+    if s.tracker_motion == "imm":
+        out.append("tracker.motion imm (the IMM runs on the multi-target tracker's tracks)")
     d = s.detection
     if d is not None and d.model != "fixed":
         out.append(f"detection model {d.model}")

@@ -5,10 +5,16 @@ expect them. The targets themselves and the detection model: config/targets.py.
 Each section is a frozen pydantic model that forbids unknown keys; every choice the paper leaves
 open is a field whose description points at docs/model.md. `TargetConfig` (`target:`) is the
 deprecated single-target section (docs/decisions/0001-one-scenario-schema.md).
+
+The tracker's motion model (`tracker.motion`): cv, the paper's constant velocity, or imm, the
+interacting multiple model of `tracker.imm:` (`ImmConfig`), resolved as `ImmSpec` on
+`Scenario.imm` (config/resolve.py).
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from typing import Any, Literal
 
 from pydantic import (
@@ -16,6 +22,8 @@ from pydantic import (
     ConfigDict,
     Field,
     SerializerFunctionWrapHandler,
+    ValidationInfo,
+    field_validator,
     model_serializer,
     model_validator,
 )
@@ -255,6 +263,130 @@ class MultiTrackerConfig(Section):
 TrackerKind = Literal["auto", "labelled", "multi"]
 """Which tracker a scenario uses (`tracker.kind`; docs/model.md, "Several targets")."""
 
+TrackerMotion = Literal["cv", "imm"]
+"""The tracker's motion model (`tracker.motion`): constant velocity, or the IMM of `tracker.imm:`."""
+
+PROBABILITY_SUM_TOL = 1e-9
+"""How far a row of the switching matrix, or the initial probabilities, may sum from 1."""
+
+
+class ImmModeConfig(Section):
+    """One mode of `tracker.imm.modes:`: its motion model and its process noise."""
+
+    model: Literal["cv", "ct"] = Field(
+        description="cv: constant velocity (eq. 3) with kappa; ct: a coordinated turn with the "
+        "turn rate in the state, kappa on the velocity and q_omega on the turn rate."
+    )
+    process_noise_intensity: float = Field(
+        ge=0, allow_inf_nan=False, description="kappa of this mode, m^2/s^3."
+    )
+    turn_rate_noise: float = Field(
+        0.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="ct only: q_omega, the turn rate's process noise, rad^2/s^3 (0 on cv).",
+    )
+
+    @model_validator(mode="after")
+    def _turn_noise_on_ct(self) -> ImmModeConfig:
+        if self.model == "cv" and self.turn_rate_noise > 0:
+            raise ValueError(
+                f"turn_rate_noise is for model ct: a cv mode has no turn rate "
+                f"(got {self.turn_rate_noise:g})"
+            )
+        return self
+
+
+class ImmConfig(Section):
+    """`tracker.imm:`: the interacting multiple model of `tracker.motion: imm` (its modes, the
+    Markov switching between them, where it starts)."""
+
+    modes: list[ImmModeConfig] = Field(
+        min_length=2, max_length=4, description="The r models it mixes (2 to 4), in order."
+    )
+    switching: list[list[float]] = Field(
+        description="The Markov matrix [r, r] per slot: row i the probabilities of going from "
+        "mode i to each mode (entries in [0, 1], rows summing to 1)."
+    )
+    initial_probabilities: list[float] = Field(
+        description="[r] each mode's probability at a track's start (summing to 1)."
+    )
+    initial_turn_rate_std_radps: float = Field(
+        0.1,
+        gt=0,
+        allow_inf_nan=False,
+        description="Std of the turn rate (mean 0) where a mode knows none: a new track's ct "
+        "modes, and every cv mode (so that a ct mode mixed from it can take up a turn), rad/s.",
+    )
+
+    @field_validator("switching")
+    @classmethod
+    def _markov_matrix(cls, value: list[list[float]], info: ValidationInfo) -> list[list[float]]:
+        modes = info.data.get("modes")
+        r = len(value)
+        if modes is not None and r != len(modes):
+            raise ValueError(
+                f"{r} rows for {len(modes)} modes: it must be {len(modes)} x {len(modes)}"
+            )
+        for i, row in enumerate(value):
+            if len(row) != r:
+                raise ValueError(f"row {i} has {len(row)} entries, not {r}: it must be square")
+            bad = [p for p in row if not 0.0 <= p <= 1.0]
+            if bad:
+                raise ValueError(f"row {i}: {bad[0]:g} is not a probability in [0, 1]")
+            total = math.fsum(row)
+            if abs(total - 1.0) > PROBABILITY_SUM_TOL:
+                raise ValueError(f"row {i} sums to {total:.12g}, not 1")
+        return value
+
+    @field_validator("initial_probabilities")
+    @classmethod
+    def _distribution(cls, value: list[float], info: ValidationInfo) -> list[float]:
+        modes = info.data.get("modes")
+        if modes is not None and len(value) != len(modes):
+            raise ValueError(f"{len(value)} probabilities for {len(modes)} modes")
+        bad = [p for p in value if not 0.0 <= p <= 1.0]
+        if bad:
+            raise ValueError(f"{bad[0]:g} is not a probability in [0, 1]")
+        total = math.fsum(value)
+        if abs(total - 1.0) > PROBABILITY_SUM_TOL:
+            raise ValueError(f"they sum to {total:.12g}, not 1")
+        return value
+
+
+@dataclass(frozen=True)
+class ImmModeSpec:
+    """One resolved IMM mode: model ("cv" or "ct"), kappa_m2ps3 (kappa, m^2/s^3),
+    turn_noise_rad2ps3 (q_omega, rad^2/s^3; 0 on cv)."""
+
+    model: str
+    kappa_m2ps3: float
+    turn_noise_rad2ps3: float = 0.0
+
+
+@dataclass(frozen=True)
+class ImmSpec:
+    """The resolved `tracker.imm:`: modes [r], switching [r][r] (row i: from mode i),
+    initial_probabilities [r], initial_turn_rate_std_radps (rad/s)."""
+
+    modes: tuple[ImmModeSpec, ...]
+    switching: tuple[tuple[float, ...], ...]
+    initial_probabilities: tuple[float, ...]
+    initial_turn_rate_std_radps: float = 0.1
+
+    @classmethod
+    def from_config(cls, cfg: ImmConfig) -> ImmSpec:
+        """The section in SI units (it is already: the names change, lists become tuples)."""
+        return cls(
+            modes=tuple(
+                ImmModeSpec(m.model, m.process_noise_intensity, m.turn_rate_noise)
+                for m in cfg.modes
+            ),
+            switching=tuple(tuple(row) for row in cfg.switching),
+            initial_probabilities=tuple(cfg.initial_probabilities),
+            initial_turn_rate_std_radps=cfg.initial_turn_rate_std_radps,
+        )
+
 
 class TrackerConfig(Section):
     """`tracker:`: which tracker the scenario uses (`kind`), the start of every track (P0) and
@@ -291,6 +423,34 @@ class TrackerConfig(Section):
         description="The multi-target tracker (association, initiation, confirmation, "
         "deletion, GOSPA); read on the multi-target path only.",
     )
+    motion: TrackerMotion = Field(
+        "cv",
+        description="cv: constant velocity (eq. 3), every existing scenario; imm: the "
+        "interacting multiple model of `imm:`.",
+    )
+    imm: ImmConfig | None = Field(
+        None, description="motion imm only: its modes, switching and start (ImmConfig)."
+    )
+
+    @model_validator(mode="after")
+    def _imm_with_motion_imm(self) -> TrackerConfig:
+        if self.motion == "imm" and self.imm is None:
+            raise ValueError(
+                "motion imm needs imm (its modes, switching and initial_probabilities)"
+            )
+        if self.motion != "imm" and self.imm is not None:
+            raise ValueError(f"imm is for motion imm, not {self.motion}")
+        return self
+
+    @model_serializer(mode="wrap")
+    def _motion_when_set(self, handler: SerializerFunctionWrapHandler) -> Any:
+        """The section as dumped: motion cv and imm null left out, so that every scenario of
+        before the keys existed dumps as it did."""
+        out = handler(self)
+        if isinstance(out, dict) and out.get("motion") == "cv" and out.get("imm") is None:
+            out.pop("motion", None)
+            out.pop("imm", None)
+        return out
 
 
 class HorizonConfig(Section):

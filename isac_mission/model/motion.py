@@ -6,7 +6,9 @@ a path of times (the leg samples of a slot, the slots of a horizon). The tracker
 recursion, the planner's predicted target points and clearances, the offline truth and the
 simulated world all take one; none of them writes a motion model's equations itself.
 
-`ConstantVelocity` (eq. 3-4) is the one implementation. Pure numpy.
+`ConstantVelocity` (eq. 3-4) is the one implementation; `stationary_probabilities` gives the
+long-run share of each mode of a target switching between modes (the interacting multiple
+model's, whose bound is a constant velocity with the modes' noise mixed by them). Pure numpy.
 """
 
 from __future__ import annotations
@@ -97,3 +99,18 @@ class ConstantVelocity:
         covariances[:, 2:, :2] = np.transpose(cross, (0, 2, 1))
         covariances[:, 2:, 2:] = vv[None] + (kappa * t)[:, None, None] * eye
         return PredictedPath(t, means, covariances)
+
+
+def stationary_probabilities(switching: FloatArray) -> FloatArray:
+    """pi [r]: the stationary distribution of a mode-switching Markov chain, switching [r, r]
+    (row i: the probabilities of each mode after mode i); the left eigenvector of eigenvalue 1,
+    normalised to sum 1."""
+    P = np.asarray(switching, dtype=float)
+    r = P.shape[0]
+    # pi (P - I) = 0 with sum(pi) = 1, solved in the least-squares sense (exact for an ergodic
+    # chain; a reducible one gets the minimum-norm solution).
+    A = np.vstack([(P - np.eye(r)).T, np.ones((1, r))])
+    b = np.concatenate([np.zeros(r), [1.0]])
+    pi = np.linalg.lstsq(A, b, rcond=None)[0]
+    pi = np.clip(pi, 0.0, None)
+    return np.asarray(pi / pi.sum(), dtype=float)

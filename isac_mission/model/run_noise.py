@@ -34,7 +34,7 @@ class RunNoise:
 def draw_run_noise(s: Scenario, seed: int) -> RunNoise:
     """Draw one run's random numbers from a seeded generator."""
     rng = np.random.default_rng(seed)
-    W = s.motion.process_noise(s.dt)
+    W = s.truth_motion.process_noise(s.dt)
     return RunNoise(
         seed=seed,
         process=rng.multivariate_normal(np.zeros(4), W, size=s.N),

@@ -52,7 +52,7 @@ class Scene(Protocol):
 def true_trajectory(s: Scenario, noise: RunNoise) -> FloatArray:
     """[N + 1, 4] target states x_0..x_N of the scenario's motion model (eq. 3) driven by the
     run's process noise."""
-    F = s.motion.transition(s.dt)
+    F = s.truth_motion.transition(s.dt)
     xs = np.empty((s.N + 1, 4))
     xs[0] = s.x0
     for n in range(1, s.N + 1):

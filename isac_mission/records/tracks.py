@@ -18,6 +18,7 @@ from isac_mission.model.detections import UavReport
 from isac_mission.records.fields import as_float, as_int, as_str, float_array, int_array
 from isac_mission.records.jsonlines import dumps_line, loads_line, to_jsonable
 from isac_mission.records.slot import MissionEnd, SlotRecord
+from isac_mission.tracking.imm import N_STATE, ImmBelief
 from isac_mission.tracking.multi_target import SavedTrack, TrackerState
 from isac_mission.tracking.pcrb import Bound
 from isac_mission.tracking.priorities import DEFAULT_PRIORITY, Priorities, priority_problem
@@ -181,6 +182,7 @@ def resume_fields(o: TracksSlot) -> dict[str, Any]:
                     "hits": list(t.hits),
                     "misses": t.misses_in_row,
                     "refuted": None if t.refuted is None else {"x": t.refuted.x, "P": t.refuted.P},
+                    **_modes_field(t.modes),
                 }
                 for t in st.tracks
             ],
@@ -244,6 +246,7 @@ def resume_point(line: Mapping[str, Any]) -> ResumePoint:
                 tuple(hits),
                 as_int(k.get("misses"), f"{name}: tracker.tracks[{i}].misses"),
                 None if refuted is None else _belief(refuted, f"{name}: refuted"),
+                _read_modes(k.get("modes"), f"{name}: tracker.tracks[{i}].modes"),
             )
         )
     candidates = saved.get("candidates")
@@ -259,6 +262,34 @@ def resume_point(line: Mapping[str, Any]) -> ResumePoint:
         float_array(line["plan_eta"], f"slot {slot}: plan_eta", (None,)),
         int_array(line.get("assoc"), f"slot {slot}: assoc"),
         read_priorities(line),
+    )
+
+
+def _modes_field(modes: ImmBelief | None) -> dict[str, Any]:
+    """A track's IMM modes as its `tracker.tracks[i]` entry carries them (absent: an EKF's)."""
+    if modes is None:
+        return {}
+    return {
+        "modes": {
+            "means": modes.means,
+            "covariances": modes.covariances,
+            "probabilities": modes.probabilities,
+        }
+    }
+
+
+def _read_modes(obj: Any, name: str) -> ImmBelief | None:
+    """The IMM modes of `_modes_field` (None when absent); MessageError naming what is wrong."""
+    if obj is None:
+        return None
+    if not isinstance(obj, dict):
+        raise MessageError(f"{name}: expected an object with means, covariances, probabilities")
+    p = float_array(obj.get("probabilities"), f"{name}.probabilities", (None,))
+    r = len(p)
+    return ImmBelief(
+        float_array(obj.get("means"), f"{name}.means", (r, N_STATE)),
+        float_array(obj.get("covariances"), f"{name}.covariances", (r, N_STATE, N_STATE)),
+        p,
     )
 
 

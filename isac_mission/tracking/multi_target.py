@@ -49,6 +49,7 @@ import numpy as np
 
 from isac_mission.config.targets import DetectionSpec
 from isac_mission.model.detections import detection_probability
+from isac_mission.model.kinematics import process_noise
 from isac_mission.model.motion import ConstantVelocity
 from isac_mission.model.radar import SensingParams, measure, measurement_jacobian
 from isac_mission.tracking.association import (
@@ -60,6 +61,17 @@ from isac_mission.tracking.association import (
     pda_update,
 )
 from isac_mission.tracking.ekf import ekf_predict
+from isac_mission.tracking.imm import (
+    ImmBelief,
+    ImmModel,
+    imm_model,
+    imm_predict,
+    imm_start,
+    mixed_kappa,
+    mode_pda_updates,
+    mode_rows,
+    with_likelihoods,
+)
 from isac_mission.tracking.initiation import InitiationSettings, initiate, outside_gate, refit
 from isac_mission.tracking.origin_uncertainty import (
     bound_step_with_origin,
@@ -94,7 +106,8 @@ class TrackerSettings:
     (its P_d, or the SNR model's threshold) and clutter_density lambda (per m * m/s);
     association: "jpda" or "gnn"; gate_prob: P_g of the association gate; hit_weight,
     confirm_hits, confirm_window, delete_after_misses: track management (module docstring);
-    initiation: tracking/initiation.py's settings.
+    initiation: tracking/initiation.py's settings; imm: the interacting multiple model every
+    track's filter runs (tracking/imm.py; None: the EKF with F and W).
     """
 
     F: FloatArray
@@ -109,6 +122,7 @@ class TrackerSettings:
     delete_after_misses: int = 3
     initiation: InitiationSettings = field(default_factory=InitiationSettings)
     bound_W: FloatArray | None = None
+    imm: ImmModel | None = None
 
     @property
     def bound_noise(self) -> FloatArray:
@@ -142,6 +156,7 @@ class TrackerSettings:
                 detection=detection,
                 area_m=(float(s.area[0]), float(s.area[1])),
             ),
+            imm=None if s.imm is None else imm_model(s.imm, s.dt),
         )
 
 
@@ -151,7 +166,8 @@ class SavedTrack:
     track_id, confirmed, belief (x [4], P [4, 4]), information J [4, 4] of its bound, hits: its
     hits within its first `confirm_window` slots (what confirmation counts), misses_in_row: the
     slots in a row without a hit (what deletion counts), refuted: a refutation a UAV made this
-    slot, waiting for the next slot's to agree (module docstring, "A ghost"; None: none)."""
+    slot, waiting for the next slot's to agree (module docstring, "A ghost"; None: none),
+    modes: the IMM's modes of the track (None: the EKF's track)."""
 
     track_id: int
     confirmed: bool
@@ -160,6 +176,7 @@ class SavedTrack:
     hits: tuple[bool, ...]
     misses_in_row: int
     refuted: Gaussian | None = None
+    modes: ImmBelief | None = None
 
 
 @dataclass(frozen=True)
@@ -189,6 +206,12 @@ class _Track:
     suspects: list[tuple[int, FloatArray]] = field(default_factory=list)
     refuted: Gaussian | None = None
     refuted_now: bool = False
+    modes: ImmBelief | None = None
+    """The IMM's modes (settings.imm; belief is then their 4-D moment-matched marginal)."""
+    log_likelihoods: FloatArray | None = None
+    """The IMM's modes' log-likelihoods of the slot's reports so far."""
+    bound_W: FloatArray | None = None
+    """The process noise [4, 4] of the bound's step this slot (`_bound_noise` at predict)."""
 
 
 class MultiTargetTracker:
@@ -227,6 +250,7 @@ class MultiTargetTracker:
                     hits=list(t.hits),
                     misses_in_row=t.misses_in_row,
                     refuted=refuted,
+                    modes=t.modes,
                 )
             )
         for belief in state.candidates:
@@ -247,6 +271,7 @@ class MultiTargetTracker:
                 tuple(t.hits[:window]),
                 t.misses_in_row,
                 None if t.refuted is None else _copied(t.refuted),
+                t.modes,
             )
             for t in self._tracks
             if t.track_id > 0
@@ -267,7 +292,12 @@ class MultiTargetTracker:
         else:
             track_id = self._new_id()
         bound = Bound.from_covariance(belief.P.copy())
-        self._tracks.append(_Track(track_id, belief, bound, confirmed, hits=[True]))
+        track = _Track(track_id, belief, bound, confirmed, hits=[True])
+        imm = self.settings.imm
+        if imm is not None:
+            track.modes = imm_start(imm, belief)
+            track.belief = track.modes.marginal()
+        self._tracks.append(track)
         return track_id
 
     def _new_id(self) -> int:
@@ -280,9 +310,15 @@ class MultiTargetTracker:
         s = self.settings
         out = []
         for t in self._tracks:
-            t.belief = ekf_predict(t.belief, s.F, s.W)
+            if s.imm is not None and t.modes is not None:
+                t.modes = imm_predict(s.imm, t.modes)
+                t.belief = t.modes.marginal()
+                t.log_likelihoods = np.zeros(len(s.imm.modes))
+            else:
+                t.belief = ekf_predict(t.belief, s.F, s.W)
             t.x_pred = t.belief.x.copy()
-            t.J_pred = predict_information(t.bound, s.F, s.bound_noise)
+            t.bound_W = self._bound_noise(t)
+            t.J_pred = predict_information(t.bound, s.F, t.bound_W)
             t.own, t.suspects, t.refuted_now = {}, [], False
             if t.refuted is not None:
                 t.refuted = ekf_predict(t.refuted, s.F, s.W)
@@ -311,6 +347,10 @@ class MultiTargetTracker:
                 continue
             explained = self._associate(m, z, uav_xy_m[m], float(eta[m]), sensing, weights)
             unexplained.append(z[~explained])
+        for t in self._tracks:
+            if t.modes is not None and t.log_likelihoods is not None:
+                t.modes = with_likelihoods(t.modes, t.log_likelihoods)
+                t.belief, t.log_likelihoods = t.modes.marginal(), None
         self._repair(unexplained, uav_xy_m, eta, sensing)
         for t in self._tracks:
             self._step_bound(t, uav_xy_m, eta, sensing)
@@ -360,6 +400,10 @@ class MultiTargetTracker:
             return np.zeros(0, dtype=bool)
         density = max(s.clutter_density, _MIN_CLUTTER_DENSITY)
         h = Hypotheses.of(z_hat, S, z, pd, density, self._gate, s.gate_prob)
+        for i, t in enumerate(self._tracks):
+            if t.modes is not None:
+                r_pair = sensing.variances(z_hat[i, :1], np.array([eta]))
+                mode_rows(t.modes, z, uav_xy, r_pair, float(pd[i]), density, self._gate).put(h, i)
         if s.association == "jpda":
             beta = jpda(h)
         else:
@@ -380,8 +424,18 @@ class MultiTargetTracker:
                 ]
             if beta[i, -1] >= 1.0:
                 continue  # nothing of this report is the track's: its prediction stands
-            x, P = pda_update(t.belief.x, t.belief.P, z_hat[i], H[i], S[i], z, beta[i])
-            t.belief = Gaussian(x=x, P=P)
+            if t.modes is not None:
+                # Each mode takes the report with the marginals of the mixed prediction.
+                r_pair = sensing.variances(z_hat[i, :1], np.array([eta]))
+                t.modes, log_lik = mode_pda_updates(
+                    t.modes, z, uav_xy, r_pair, beta[i], float(pd[i]), density, s.gate_prob
+                )
+                before = 0.0 if t.log_likelihoods is None else t.log_likelihoods
+                t.log_likelihoods = before + log_lik
+                t.belief = t.modes.marginal()
+            else:
+                x, P = pda_update(t.belief.x, t.belief.P, z_hat[i], H[i], S[i], z, beta[i])
+                t.belief = Gaussian(x=x, P=P)
             weights[i] += 1.0 - beta[i, -1]
         return np.asarray(beta[:, :-1].sum(axis=0) >= EXPLAINED, dtype=bool)
 
@@ -418,6 +472,8 @@ class MultiTargetTracker:
             t.refuted_now = True
             if t.refuted is not None and not outside_gate(t.refuted, belief, self._gate):
                 t.belief, t.refuted = belief, None
+                if self.settings.imm is not None:  # the modes start again where the fit is
+                    t.modes = imm_start(self.settings.imm, belief)
                 unexplained[m] = np.delete(unexplained[m], row_index, axis=0)
                 repaired.append(t.track_id)
             else:
@@ -442,7 +498,18 @@ class MultiTargetTracker:
             range_m, np.full(len(range_m), sensing.radar_gain), s.detection, sensing.B, sensing.Ts
         )
         q = uav_reduction_factors(pd, s.clutter_density, r_diag, self._gate)
-        t.bound = bound_step_with_origin(t.bound, s.F, s.bound_noise, t.x_pred, uav_xy_m, r_diag, q)
+        W = s.bound_noise if t.bound_W is None else t.bound_W
+        t.bound = bound_step_with_origin(t.bound, s.F, W, t.x_pred, uav_xy_m, r_diag, q)
+
+    def _bound_noise(self, t: _Track) -> FloatArray:
+        """The process noise of the track's bound for the slot it is predicted to [4, 4]: the
+        settings' (the targets' own), or with the IMM its modes' white noise mixed by their
+        predicted probabilities (call after the modes' prediction),
+        W(sum_j c_j kappa_j) (docs/model.md, "The interacting multiple model")."""
+        imm = self.settings.imm
+        if imm is None or t.modes is None:
+            return self.settings.bound_noise
+        return process_noise(imm.dt_s, mixed_kappa(imm, t.modes.probabilities))
 
     def _manage(self, weights: FloatArray) -> tuple[list[int], list[int]]:
         """Hits, promotion, confirmation and deletion after the slot's reports; returns the IDs

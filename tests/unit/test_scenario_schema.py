@@ -36,6 +36,9 @@ ROOT = Path(__file__).resolve().parents[2]
 OLD = Path(__file__).resolve().parent / "data" / "scenarios-0.1"
 OLD_FILES = sorted(OLD.glob("*.yaml"))
 SHIPPED = sorted((ROOT / "config").glob("*.yaml"))
+SINCE_THE_NEW_FORM = {"manoeuvring.yaml"}
+"""Scenarios first shipped after the old form was deprecated, with what it never had (a target's
+legs, the tracker's IMM): they have no old form."""
 FILTER = re.compile(r".* is deprecated. use ")
 """pyproject.toml's filterwarnings pattern: a warning it matches is an error outside
 pytest.warns, so a test or shipped config that used an old section unnoticed fails."""
@@ -74,7 +77,8 @@ def load_quietly(path: Path | str) -> Scenario:
 
 
 def test_every_shipped_scenario_has_its_old_form_here() -> None:
-    assert [p.name for p in OLD_FILES] == [p.name for p in SHIPPED]
+    older = [p.name for p in SHIPPED if p.name not in SINCE_THE_NEW_FORM]
+    assert [p.name for p in OLD_FILES] == older
 
 
 @pytest.mark.parametrize("old", OLD_FILES, ids=[p.stem for p in OLD_FILES])
