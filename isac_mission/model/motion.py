@@ -6,13 +6,15 @@ a path of times (the leg samples of a slot, the slots of a horizon). The tracker
 recursion, the planner's predicted target points and clearances, the offline truth and the
 simulated world all take one; none of them writes a motion model's equations itself.
 
-`ConstantVelocity` (eq. 3-4) is the one implementation; `stationary_probabilities` gives the
-long-run share of each mode of a target switching between modes (the interacting multiple
-model's, whose bound is a constant velocity with the modes' noise mixed by them). Pure numpy.
+`ConstantVelocity` (eq. 3-4) is the one implementation. For a target that switches between modes
+(the interacting multiple model, tracking/imm.py): the coordinated turn with the turn rate in the
+state, x5 = [x, y, vx, vy, omega] (`ct_transition`, its Jacobian `ct_jacobian`), and the long-run
+share of each mode (`stationary_probabilities`). Pure numpy.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -114,3 +116,55 @@ def stationary_probabilities(switching: FloatArray) -> FloatArray:
     pi = np.linalg.lstsq(A, b, rcond=None)[0]
     pi = np.clip(pi, 0.0, None)
     return np.asarray(pi / pi.sum(), dtype=float)
+
+
+_SERIES_BELOW = 0.1
+"""|omega dt| below which the turn's coefficients use their Taylor series (error < 1e-17)."""
+
+
+def _turn_coefficients(u: float) -> tuple[float, float, float, float]:
+    """(sin u / u, (1 - cos u) / u and their derivatives in u) at u = omega dt; Taylor series
+    for |u| < _SERIES_BELOW, so that omega -> 0 is smooth and exact to float precision."""
+    if abs(u) < _SERIES_BELOW:
+        u2 = u * u
+        a = 1 - u2 / 6 * (1 - u2 / 20 * (1 - u2 / 42 * (1 - u2 / 72)))
+        b = u / 2 * (1 - u2 / 12 * (1 - u2 / 30 * (1 - u2 / 56 * (1 - u2 / 90))))
+        da = -u / 3 * (1 - u2 / 10 * (1 - u2 / 28 * (1 - u2 / 54)))
+        db = 0.5 * (1 - u2 / 4 * (1 - u2 / 18 * (1 - u2 / 40 * (1 - u2 / 70))))
+        return a, b, da, db
+    s, c = math.sin(u), math.cos(u)
+    return s / u, (1 - c) / u, (u * c - s) / u**2, (u * s - (1 - c)) / u**2
+
+
+def ct_transition(x: FloatArray, dt_s: float) -> FloatArray:
+    """f(x) [5]: the coordinated turn of x [5] over dt_s (s) at its own omega; omega constant.
+    Equals model/targets.coordinated_turn_matrix on [x, y, vx, vy], and CV at omega = 0."""
+    w = float(x[4])
+    a, b, _, _ = _turn_coefficients(w * dt_s)
+    s, c = math.sin(w * dt_s), math.cos(w * dt_s)
+    vx, vy = float(x[2]), float(x[3])
+    return np.array(
+        [
+            x[0] + dt_s * (a * vx - b * vy),
+            x[1] + dt_s * (b * vx + a * vy),
+            c * vx - s * vy,
+            s * vx + c * vy,
+            w,
+        ]
+    )
+
+
+def ct_jacobian(x: FloatArray, dt_s: float) -> FloatArray:
+    """F [5, 5] = d ct_transition / dx at x [5] (analytic; smooth through omega = 0)."""
+    w, vx, vy, T = float(x[4]), float(x[2]), float(x[3]), dt_s
+    a, b, da, db = _turn_coefficients(w * T)
+    s, c = math.sin(w * T), math.cos(w * T)
+    return np.array(
+        [
+            [1.0, 0.0, T * a, -T * b, T * T * (da * vx - db * vy)],
+            [0.0, 1.0, T * b, T * a, T * T * (db * vx + da * vy)],
+            [0.0, 0.0, c, -s, -T * (s * vx + c * vy)],
+            [0.0, 0.0, s, c, T * (c * vx - s * vy)],
+            [0.0, 0.0, 0.0, 0.0, 1.0],
+        ]
+    )

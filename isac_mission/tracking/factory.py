@@ -2,8 +2,9 @@
 
 A scenario's detections are labelled (the paper's one target, seen with a fixed detection
 probability and no false alarms: `tracking/tracker.LabelledTracker`, `model/scene.LabelledScene`)
-or unlabelled (several targets, a target that turns, flies waypoints, comes late, leaves or must
-be found, false alarms or an SNR detection model: `MultiTargetTracker`, `UnlabelledScene`).
+or unlabelled (several targets, a target that turns, flies waypoints or legs, comes late, leaves
+or must be found, false alarms or an SNR detection model, or the IMM: `MultiTargetTracker`,
+`UnlabelledScene`).
 Everything else takes a `Tracker`, a `Scene` and their draws through here, whatever the number
 of targets.
 """
@@ -100,7 +101,8 @@ def tracker_description(s: Scenario) -> str:
         return f"labelled EKF (kind {s.tracker_kind})"
     reasons = multi_target_reasons(s)
     why = f": {', '.join(reasons)}" if s.tracker_kind == "auto" and reasons else ""
-    return f"multi-target {s.multi_tracker.association.upper()} (kind {s.tracker_kind}{why})"
+    imm = "" if s.imm is None else f", the IMM of {len(s.imm.modes)} modes on every track"
+    return f"multi-target {s.multi_tracker.association.upper()}{imm} (kind {s.tracker_kind}{why})"
 
 
 def detection_description(s: Scenario) -> str | None:

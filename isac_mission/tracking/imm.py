@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Literal, cast
 import numpy as np
 from scipy.special import logsumexp
 
-from isac_mission.model.kinematics import process_noise, transition_matrix
+from isac_mission.model.motion import ConstantVelocity, ct_jacobian, ct_transition
 from isac_mission.model.radar import measure, measurement_jacobian
 from isac_mission.tracking.association import Hypotheses, pda_update
 from isac_mission.types import BoolArray, FloatArray, Gaussian
@@ -41,14 +41,11 @@ ModeKind = Literal["cv", "ct"]
 N_STATE = 5
 """The common state's dimension: [x_m, y_m, vx_mps, vy_mps, omega_radps]."""
 
-_SERIES_BELOW = 0.1
-"""|omega dt| below which the turn's coefficients use their Taylor series (error < 1e-17)."""
-
 
 @dataclass(frozen=True)
 class ImmMode:
     """One motion mode. kappa_m2ps3: white-acceleration intensity on x and y (m^2/s^3, as
-    model/kinematics.process_noise); turn_noise_rad2ps3 (ct only): omega's random-walk
+    model/motion.ConstantVelocity); turn_noise_rad2ps3 (ct only): omega's random-walk
     intensity (rad^2/s^3), its variance grows turn_noise dt per step."""
 
     model: ModeKind
@@ -73,63 +70,15 @@ class ImmMode:
         if self.model == "ct":
             return ct_transition(x, dt_s), ct_jacobian(x, dt_s)
         F = np.zeros((N_STATE, N_STATE))
-        F[:4, :4] = transition_matrix(dt_s)
+        F[:4, :4] = ConstantVelocity(0.0).transition(dt_s)
         return F @ x, F
 
     def noise(self, dt_s: float) -> FloatArray:
         """Q [5, 5]: the CV block of kappa on [x, y, vx, vy], turn_noise dt on omega."""
         Q = np.zeros((N_STATE, N_STATE))
-        Q[:4, :4] = process_noise(dt_s, self.kappa_m2ps3)
+        Q[:4, :4] = ConstantVelocity(self.kappa_m2ps3).process_noise(dt_s)
         Q[4, 4] = self.turn_noise_rad2ps3 * dt_s
         return Q
-
-
-def _turn_coefficients(u: float) -> tuple[float, float, float, float]:
-    """(sin u / u, (1 - cos u) / u and their derivatives in u) at u = omega dt; Taylor series
-    for |u| < _SERIES_BELOW, so that omega -> 0 is smooth and exact to float precision."""
-    if abs(u) < _SERIES_BELOW:
-        u2 = u * u
-        a = 1 - u2 / 6 * (1 - u2 / 20 * (1 - u2 / 42 * (1 - u2 / 72)))
-        b = u / 2 * (1 - u2 / 12 * (1 - u2 / 30 * (1 - u2 / 56 * (1 - u2 / 90))))
-        da = -u / 3 * (1 - u2 / 10 * (1 - u2 / 28 * (1 - u2 / 54)))
-        db = 0.5 * (1 - u2 / 4 * (1 - u2 / 18 * (1 - u2 / 40 * (1 - u2 / 70))))
-        return a, b, da, db
-    s, c = math.sin(u), math.cos(u)
-    return s / u, (1 - c) / u, (u * c - s) / u**2, (u * s - (1 - c)) / u**2
-
-
-def ct_transition(x: FloatArray, dt_s: float) -> FloatArray:
-    """f(x) [5]: the coordinated turn of x [5] over dt_s (s) at its own omega; omega constant.
-    Equals model/targets.coordinated_turn_matrix on [x, y, vx, vy], and CV at omega = 0."""
-    w = float(x[4])
-    a, b, _, _ = _turn_coefficients(w * dt_s)
-    s, c = math.sin(w * dt_s), math.cos(w * dt_s)
-    vx, vy = float(x[2]), float(x[3])
-    return np.array(
-        [
-            x[0] + dt_s * (a * vx - b * vy),
-            x[1] + dt_s * (b * vx + a * vy),
-            c * vx - s * vy,
-            s * vx + c * vy,
-            w,
-        ]
-    )
-
-
-def ct_jacobian(x: FloatArray, dt_s: float) -> FloatArray:
-    """F [5, 5] = d ct_transition / dx at x [5] (analytic; smooth through omega = 0)."""
-    w, vx, vy, T = float(x[4]), float(x[2]), float(x[3]), dt_s
-    a, b, da, db = _turn_coefficients(w * T)
-    s, c = math.sin(w * T), math.cos(w * T)
-    return np.array(
-        [
-            [1.0, 0.0, T * a, -T * b, T * T * (da * vx - db * vy)],
-            [0.0, 1.0, T * b, T * a, T * T * (db * vx + da * vy)],
-            [0.0, 0.0, c, -s, -T * (s * vx + c * vy)],
-            [0.0, 0.0, s, c, T * (c * vx - s * vy)],
-            [0.0, 0.0, 0.0, 0.0, 1.0],
-        ]
-    )
 
 
 @dataclass(frozen=True)

@@ -49,7 +49,6 @@ import numpy as np
 
 from isac_mission.config.targets import DetectionSpec
 from isac_mission.model.detections import detection_probability
-from isac_mission.model.kinematics import process_noise
 from isac_mission.model.motion import ConstantVelocity
 from isac_mission.model.radar import SensingParams, measure, measurement_jacobian
 from isac_mission.tracking.association import (
@@ -509,7 +508,7 @@ class MultiTargetTracker:
         imm = self.settings.imm
         if imm is None or t.modes is None:
             return self.settings.bound_noise
-        return process_noise(imm.dt_s, mixed_kappa(imm, t.modes.probabilities))
+        return ConstantVelocity(mixed_kappa(imm, t.modes.probabilities)).process_noise(imm.dt_s)
 
     def _manage(self, weights: FloatArray) -> tuple[list[int], list[int]]:
         """Hits, promotion, confirmation and deletion after the slot's reports; returns the IDs

@@ -15,7 +15,7 @@ from scipy import stats
 
 from isac_mission.config.sections import ImmModeSpec, ImmSpec
 from isac_mission.model.kinematics import process_noise, transition_matrix
-from isac_mission.model.motion import stationary_probabilities
+from isac_mission.model.motion import ct_jacobian, ct_transition, stationary_probabilities
 from isac_mission.model.radar import measure, measurement_jacobian
 from isac_mission.model.targets import coordinated_turn_matrix
 from isac_mission.tracking.ekf import ekf_predict, ekf_update
@@ -23,8 +23,6 @@ from isac_mission.tracking.imm import (
     ImmBelief,
     ImmMode,
     ImmModel,
-    ct_jacobian,
-    ct_transition,
     imm_model,
     imm_predict,
     imm_start,
