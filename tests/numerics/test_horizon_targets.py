@@ -1,6 +1,6 @@
 """The receding horizon for several targets (docs/model.md, "Receding horizon", "Several
 targets"): its NLP's objective is the weighted sum of each target's single-target horizon
-objective, a target of weight 0 is a clearance only, its plans keep every target's clearance
+objective, its gradient is the objective's finite differences, a target of weight 0 is a clearance only, its plans keep every target's clearance
 along every leg, and a target count that changes between slots starts cold without failure.
 Each checked against something computed independently (the hand-written bound recursion of
 tests/support, the one-target NLP, fine sampling of the legs)."""
@@ -140,6 +140,34 @@ def test_the_objective_is_the_weighted_sum_of_each_targets_horizon_objective(
         assert float(lifted["f"]) == pytest.approx(got, rel=1e-10)
         assert np.max(np.abs(np.asarray(lifted["g"]))) < 1e-9
         assert nlp.violation(xy, velocity, eta, data) == pytest.approx(max(misses), rel=1e-12)
+
+
+@pytest.mark.parametrize("vehicle_model", [False, True])
+def test_the_gradient_of_several_targets_is_the_objectives_finite_differences(
+    vehicle_model: bool,
+) -> None:
+    """Three targets of different weights: the NLP's gradient (what IPOPT steps along) against
+    central differences of its objective, at random plans around the fleet's start, in every
+    coordinate (positions, velocities and shares)."""
+    s, nlp = _nlp(vehicle_model, 3)
+    L = nlp.length
+    data = _data(s, TARGETS, _priors(s), np.array([1.4, 0.3, 2.2]))
+    rng = np.random.default_rng(11)
+    xy = s.uav_start_xy[None] + np.cumsum(rng.uniform(-20, 20, size=(L, s.M, 2)), axis=0)
+    velocity = rng.uniform(-20, 20, size=(L, s.M, 2)) if vehicle_model else None
+    eta = rng.dirichlet(np.ones(s.M), size=L)
+    x, p = nlp.pack(xy, velocity, eta, data)
+    grad = np.asarray(ca.DM(nlp.gradient(x, p)).full()).ravel()
+    numeric = np.empty_like(grad)
+    for k in range(len(x)):
+        h = 1e-4 * max(1.0, abs(float(x[k])))
+        up, down = x.copy(), x.copy()
+        up[k] += h
+        down[k] -= h
+        numeric[k] = (float(nlp.objective(up, p)) - float(nlp.objective(down, p))) / (2 * h)
+    scale = np.abs(grad).max()
+    assert scale > 0
+    np.testing.assert_allclose(grad, numeric, rtol=1e-5, atol=1e-6 * scale)
 
 
 def test_the_hessian_of_several_targets_is_casadis_automatic_hessian() -> None:
