@@ -68,10 +68,29 @@ def evade_target(
     return out
 
 
+def kept_apart(planned_xy: FloatArray, prev_xy: FloatArray, separation_m: float) -> FloatArray:
+    """Best-effort waypoints [M, 2] no closer than separation_m to each other where the UAVs'
+    previous waypoints prev_xy [M, 2] were: a UAV whose planned waypoint comes within
+    separation_m of another UAV's holds at its previous one instead (14i before communication:
+    two UAVs served by one BS share its link-optimal point), until no moved UAV is too close."""
+    out = np.array(planned_xy, dtype=float)
+    prev = np.asarray(prev_xy, dtype=float)
+    for _ in range(len(out)):
+        gap = np.linalg.norm(out[:, None] - out[None], axis=-1)
+        np.fill_diagonal(gap, np.inf)
+        close = np.any(gap < separation_m, axis=1)
+        moved = close & np.any(out != prev, axis=1)
+        if not moved.any():
+            break
+        out[moved] = prev[moved]
+    return out
+
+
 def best_effort(problem: SlotProblem, reason: str) -> SlotPlan:
     """The plan of a slot no method can solve (status and fallback "infeasible"): the
-    link-optimal waypoints, or where the vehicles coast to when the planner respects their
-    dynamics; either way away from the target first, inside the operating area. With the
+    link-optimal waypoints (a UAV that would come within D_s of another holds instead), or where
+    the vehicles coast to when the planner respects their dynamics; either way away from the
+    target first, inside the operating area. With the
     vehicle model a UAV that coasts toward another UAV, the target or a keep-out point, or that
     could no longer dodge the target, flies its evasive leg instead (planning/evasion.py), its
     end velocity in the plan."""
@@ -91,8 +110,9 @@ def best_effort(problem: SlotProblem, reason: str) -> SlotPlan:
         )
         plan = problem.plan(np.clip(xy, *cons.area_bounds()), comm.eta, report)
         return replace(plan, uav_velocity_mps=velocity)
+    apart = kept_apart(best, inp.prev_xy_m, SafetyMargins.of(s).separation_m)
     xy = evade_target(
-        best, inp.prev_xy_m, inp.lead.state_pred[:2], cons.clearance_m, problem.max_step_m
+        apart, inp.prev_xy_m, inp.lead.state_pred[:2], cons.clearance_m, problem.max_step_m
     )
     xy = np.clip(xy, *cons.area_bounds())  # the vehicles' geofence would clamp it anyway
     return problem.plan(xy, comm.eta, report)
