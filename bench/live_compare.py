@@ -47,6 +47,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from seeds import parse_seeds  # noqa: E402
 
 from isac_mission.bus import tcp_loopback  # noqa: E402
 from isac_mission.experiment.bootstrap import (  # noqa: E402
@@ -83,14 +86,6 @@ PHASE_KEYS = (
 TARGETS = {"pcrb_from11": 0.20, "step_from11_m": 0.10}
 """Live within this fraction of simulate's mean over seeds (the live service's targets)."""
 TARGET_HEADS = {"pcrb_from11": "tr(PCRB) 11..N", "step_from11_m": "step 11..N"}
-
-
-def parse_seeds(text: str) -> list[int]:
-    """'1..10' or '1,2,5' or '3'."""
-    if ".." in text:
-        a, b = text.split("..", 1)
-        return list(range(int(a), int(b) + 1))
-    return [int(x) for x in text.split(",") if x.strip()]
 
 
 def default_methods() -> list[str]:

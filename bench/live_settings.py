@@ -30,6 +30,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from seeds import parse_seeds  # noqa: E402
 
 from isac_mission.bus import tcp_loopback  # noqa: E402
 from isac_mission.cli.embedded import run_embedded  # noqa: E402
@@ -49,13 +52,6 @@ VARIANTS = {
     "rule+5": LiveSettings(safety_margin_m=5.0, vehicle_model=True),
 }
 LIVE_TOL_M = 1.0
-
-
-def parse_seeds(text: str) -> list[int]:
-    if ".." in text:
-        a, b = text.split("..", 1)
-        return list(range(int(a), int(b) + 1))
-    return [int(x) for x in text.split(",") if x.strip()]
 
 
 def options(

@@ -31,6 +31,9 @@ from scipy.stats import chi2
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from seeds import parse_seeds  # noqa: E402
 
 from isac_mission.config import Scenario, load_scenario  # noqa: E402
 from isac_mission.experiment.bootstrap import paired_bootstrap, reduction_of_rms  # noqa: E402
@@ -40,13 +43,6 @@ from isac_mission.quiet import quiet_highs_banner  # noqa: E402
 from isac_mission.types import FloatArray  # noqa: E402
 
 APPROACH_SLOTS = 10
-
-
-def parse_seeds(text: str) -> list[int]:
-    if ".." in text:
-        a, b = text.split("..")
-        return list(range(int(a), int(b) + 1))
-    return [int(x) for x in text.split(",") if x.strip()]
 
 
 def constant_velocity(s: Scenario, kappa: float) -> Scenario:

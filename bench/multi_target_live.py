@@ -38,6 +38,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from seeds import parse_seeds  # noqa: E402
 
 from isac_mission.bus import tcp_loopback  # noqa: E402
 from isac_mission.cli.embedded import run_embedded  # noqa: E402
@@ -53,13 +56,6 @@ from tests.support.ports import free_port_block, sitl_ports  # noqa: E402
 
 APPROACH_SLOTS = 10
 """Slots 1..10 are the approach; 11..N the tracking phase (as bench/live_compare.py)."""
-
-
-def parse_seeds(text: str) -> list[int]:
-    if ".." in text:
-        a, b = text.split("..")
-        return list(range(int(a), int(b) + 1))
-    return [int(x) for x in text.split(",") if x.strip()]
 
 
 def fly_live(
