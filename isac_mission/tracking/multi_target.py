@@ -32,6 +32,12 @@ refutes the track. Two refutations in a row that agree move the track there, its
 refuted slot is no hit for a track not yet confirmed, so a ghost is not confirmed before its
 repair.
 
+With the IMM (`TrackerSettings.imm`, tracker.motion imm; tracking/imm.py): each track carries
+its modes, its belief their 4-D moment-matched marginal; a report's association row of the track
+comes from the mixture of its modes (`mode_rows`), each mode takes the PDA update with those
+marginals and its likelihood of the report, and the mode probabilities follow after the slot's
+reports; the track's bound takes the modes' noise mixed by their predicted probabilities.
+
 A restart: `saved` gives what the tracker carries from a slot to the next (`TrackerState`,
 written to a live trace's slot line: records/tracks.py), and `restored` makes a tracker
 that goes on from it exactly (`serve --resume`).
