@@ -331,12 +331,7 @@ class ImmConfig(Section):
         for i, row in enumerate(value):
             if len(row) != r:
                 raise ValueError(f"row {i} has {len(row)} entries, not {r}: it must be square")
-            bad = [p for p in row if not 0.0 <= p <= 1.0]
-            if bad:
-                raise ValueError(f"row {i}: {bad[0]:g} is not a probability in [0, 1]")
-            total = math.fsum(row)
-            if abs(total - 1.0) > PROBABILITY_SUM_TOL:
-                raise ValueError(f"row {i} sums to {total:.12g}, not 1")
+            _check_distribution(row, f"row {i}: ", f"row {i} sums")
         return value
 
     @field_validator("initial_probabilities")
@@ -345,13 +340,19 @@ class ImmConfig(Section):
         modes = info.data.get("modes")
         if modes is not None and len(value) != len(modes):
             raise ValueError(f"{len(value)} probabilities for {len(modes)} modes")
-        bad = [p for p in value if not 0.0 <= p <= 1.0]
-        if bad:
-            raise ValueError(f"{bad[0]:g} is not a probability in [0, 1]")
-        total = math.fsum(value)
-        if abs(total - 1.0) > PROBABILITY_SUM_TOL:
-            raise ValueError(f"they sum to {total:.12g}, not 1")
+        _check_distribution(value, "", "they sum")
         return value
+
+
+def _check_distribution(values: list[float], where: str, sums: str) -> None:
+    """ValueError unless values are probabilities summing to 1 (within PROBABILITY_SUM_TOL);
+    the message starts with `where` (an entry out of [0, 1]) or `sums` (the total)."""
+    bad = [p for p in values if not 0.0 <= p <= 1.0]
+    if bad:
+        raise ValueError(f"{where}{bad[0]:g} is not a probability in [0, 1]")
+    total = math.fsum(values)
+    if abs(total - 1.0) > PROBABILITY_SUM_TOL:
+        raise ValueError(f"{sums} to {total:.12g}, not 1")
 
 
 @dataclass(frozen=True)
