@@ -16,7 +16,7 @@ measurements: `mode_updates`; one UAV's unlabelled report with the caller's PDA 
 `mode_pda_updates`) and its measurement likelihood; (4) mode probabilities mu_j ~ c_j L_j
 (`with_likelihoods`). The rest of the system reads `ImmBelief.marginal()`, the 4-D moment-matched
 Gaussian. `mixed_kappa` gives the white-noise intensity of a track's bound under this model:
-the modes' own, mixed by their probabilities. Pure numpy and scipy.
+the modes' own, mixed by their probabilities. Pure numpy.
 """
 
 from __future__ import annotations
@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, cast
 
 import numpy as np
-from scipy.special import logsumexp
 
 from isac_mission.model.motion import ConstantVelocity, ct_jacobian, ct_transition
 from isac_mission.model.radar import measure, measurement_jacobian
@@ -253,6 +252,52 @@ def mode_updates(
     return ImmBelief(means, covs, belief.probabilities.copy()), log_lik
 
 
+@dataclass(frozen=True)
+class ModePredictions:
+    """Each mode's predicted measurement for one UAV's report: z_hat [r, 2] (range m, radial
+    velocity m/s), H [r, 2, 5], S [r, 2, 2] = H P H^T + R, S_inv [r, 2, 2] and
+    log det(2 pi S) [r]. Computed once per track and report: the association row and the
+    modes' updates take the same."""
+
+    z_hat: FloatArray
+    H: FloatArray
+    S: FloatArray
+    S_inv: FloatArray
+    log_det_2pi_S: FloatArray
+
+    def distances2(self, z: FloatArray) -> FloatArray:
+        """[r, k]: each measurement's squared Mahalanobis distance from each mode's z_hat."""
+        nu = z[None, :, :] - self.z_hat[:, None, :]
+        return np.asarray(np.einsum("jkd,jde,jke->jk", nu, self.S_inv, nu))
+
+
+def mode_predictions(belief: ImmBelief, uav_xy: FloatArray, r_pair: FloatArray) -> ModePredictions:
+    """ModePredictions of every mode of belief for a report taken at uav_xy [2] with measurement
+    variances r_pair [2] (m^2, m^2/s^2)."""
+    xy = np.asarray(uav_xy, dtype=float).reshape(1, 2)
+    R = np.diag(np.asarray(r_pair, dtype=float))
+    r = len(belief.probabilities)
+    z_hat = np.empty((r, 2))
+    H = np.empty((r, 2, N_STATE))
+    for j in range(r):
+        z_hat[j] = measure(belief.means[j, :4], xy)
+        H[j] = _padded_jacobian(belief.means[j], xy)
+    S = np.einsum("jdn,jnm,jem->jde", H, belief.covariances, H) + R
+    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+    S_inv = np.empty_like(S)
+    S_inv[:, 0, 0], S_inv[:, 1, 1] = S[:, 1, 1] / det, S[:, 0, 0] / det
+    S_inv[:, 0, 1], S_inv[:, 1, 0] = -S[:, 0, 1] / det, -S[:, 1, 0] / det
+    return ModePredictions(z_hat, H, S, S_inv, np.log((2 * math.pi) ** 2 * det))
+
+
+def _log_sum_exp(terms: FloatArray) -> float:
+    """log sum exp(terms [n]), shifted by the maximum (-inf when every term is)."""
+    top = float(np.max(terms))
+    if not math.isfinite(top):
+        return top
+    return top + math.log(float(np.sum(np.exp(terms - top))))
+
+
 def mode_pda_updates(
     belief: ImmBelief,
     z: FloatArray,
@@ -262,10 +307,12 @@ def mode_pda_updates(
     detection_prob: float,
     clutter_density: float,
     gate_prob: float,
+    predicted: ModePredictions | None = None,
 ) -> tuple[ImmBelief, FloatArray]:
     """(updated belief, log-likelihoods [r]) for one UAV's unlabelled report z [k, 2] (range m,
     radial velocity m/s) taken at uav_xy [2] with variances r_pair [2] (m^2, m^2/s^2), and the
     caller's association marginals beta [k + 1] (the miss last; from the mixed prediction).
+    predicted: `mode_predictions(belief, uav_xy, r_pair)` when the caller has it already.
 
     Mode j: association.pda_update with z_hat_j, H_j [2, 5], S_j = H_j P_j H_j^T + R, and the
     IMM-PDAF mode likelihood (clutter_density lambda per m * m/s, P_d, P_g)
@@ -276,23 +323,19 @@ def mode_pda_updates(
     the likelihood is smooth in the state; outside the gate gamma a measurement's density is
     below exp(-gamma / 2) of the peak: 1 % at P_g = 0.99). k = 0 gives log(1 - P_d P_g)."""
     z = np.asarray(z, dtype=float).reshape(-1, 2)
-    xy = np.asarray(uav_xy, dtype=float).reshape(1, 2)
-    R = np.diag(np.asarray(r_pair, dtype=float))
+    pred = predicted if predicted is not None else mode_predictions(belief, uav_xy, r_pair)
+    beta = np.asarray(beta, dtype=float)
     means = np.empty_like(belief.means)
     covs = np.empty_like(belief.covariances)
-    log_lik = np.empty(len(belief.probabilities))
     log_pd = math.log(detection_prob / clutter_density) if detection_prob > 0 else -math.inf
+    log_n = -0.5 * (pred.log_det_2pi_S[:, None] + pred.distances2(z))
+    miss = math.log1p(-detection_prob * gate_prob)
+    log_lik = np.empty(len(belief.probabilities))
     for j in range(len(log_lik)):
-        x, P = belief.means[j], belief.covariances[j]
-        z_hat = measure(x[:4], xy)
-        H = _padded_jacobian(x, xy)
-        S = H @ P @ H.T + R
-        means[j], covs[j] = pda_update(x, P, z_hat, H, S, z, np.asarray(beta, dtype=float))
-        nu = z - z_hat
-        _, logdet = np.linalg.slogdet(2 * math.pi * S)
-        log_n = -0.5 * (logdet + np.einsum("kd,de,ke->k", nu, np.linalg.inv(S), nu))
-        terms = np.concatenate([[math.log1p(-detection_prob * gate_prob)], log_pd + log_n])
-        log_lik[j] = float(logsumexp(terms))
+        means[j], covs[j] = pda_update(
+            belief.means[j], belief.covariances[j], pred.z_hat[j], pred.H[j], pred.S[j], z, beta
+        )
+        log_lik[j] = _log_sum_exp(np.concatenate([[miss], log_pd + log_n[j]]))
     return ImmBelief(means, covs, belief.probabilities.copy()), log_lik
 
 
@@ -321,6 +364,7 @@ def mode_rows(
     detection_prob: float,
     clutter_density: float,
     gate: float,
+    predicted: ModePredictions | None = None,
 ) -> ModeRows:
     """The IMM-JPDA association row of one track (Blom and Bloem, "Probabilistic data
     association avoiding track coalescence", IEEE T-AC 2000): each measurement of the report
@@ -328,26 +372,15 @@ def mode_rows(
     modes' predictions, sum_j c_j P_d N(z; z_hat_j, S_j) / lambda (c_j the predicted mode
     probabilities), and is in the track's gate gamma when it is in some mode's. So a
     measurement only the manoeuvring mode expects (a turn that has just begun) is the track's,
-    where the moment-matched prediction would gate it out."""
+    where the moment-matched prediction would gate it out. predicted: as mode_pda_updates."""
     z = np.asarray(z, dtype=float).reshape(-1, 2)
-    xy = np.asarray(uav_xy, dtype=float).reshape(1, 2)
-    R = np.diag(np.asarray(r_pair, dtype=float))
-    k = len(z)
-    ratio, gated, d2_min = np.zeros(k), np.zeros(k, dtype=bool), np.full(k, np.inf)
-    for j, c in enumerate(belief.probabilities):
-        x, P = belief.means[j], belief.covariances[j]
-        H = _padded_jacobian(x, xy)
-        S = H @ P @ H.T + R
-        nu = z - measure(x[:4], xy)
-        d2 = np.einsum("kd,de,ke->k", nu, np.linalg.inv(S), nu)
-        norm = 1.0 / math.sqrt(float(np.linalg.det(2 * math.pi * S)))
-        inside = d2 <= gate
-        ratio += np.where(
-            inside, c * detection_prob * norm * np.exp(-0.5 * d2) / clutter_density, 0.0
-        )
-        gated |= inside
-        d2_min = np.minimum(d2_min, d2)
-    return ModeRows(ratio, gated, d2_min)
+    pred = predicted if predicted is not None else mode_predictions(belief, uav_xy, r_pair)
+    d2 = pred.distances2(z)
+    inside = d2 <= gate
+    density = np.exp(-0.5 * (pred.log_det_2pi_S[:, None] + d2))
+    weight = belief.probabilities[:, None] * detection_prob / clutter_density
+    ratio = np.where(inside, weight * density, 0.0).sum(axis=0)
+    return ModeRows(ratio, inside.any(axis=0), d2.min(axis=0, initial=np.inf))
 
 
 def with_likelihoods(

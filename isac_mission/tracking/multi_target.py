@@ -69,11 +69,13 @@ from isac_mission.tracking.ekf import ekf_predict
 from isac_mission.tracking.imm import (
     ImmBelief,
     ImmModel,
+    ModePredictions,
     imm_model,
     imm_predict,
     imm_start,
     mixed_kappa,
     mode_pda_updates,
+    mode_predictions,
     mode_rows,
     with_likelihoods,
 )
@@ -405,10 +407,15 @@ class MultiTargetTracker:
             return np.zeros(0, dtype=bool)
         density = max(s.clutter_density, _MIN_CLUTTER_DENSITY)
         h = Hypotheses.of(z_hat, S, z, pd, density, self._gate, s.gate_prob)
+        predicted: dict[int, ModePredictions] = {}
         for i, t in enumerate(self._tracks):
             if t.modes is not None:
                 r_pair = sensing.variances(z_hat[i, :1], np.array([eta]))
-                mode_rows(t.modes, z, uav_xy, r_pair, float(pd[i]), density, self._gate).put(h, i)
+                predicted[i] = mode_predictions(t.modes, uav_xy, r_pair)
+                row = mode_rows(
+                    t.modes, z, uav_xy, r_pair, float(pd[i]), density, self._gate, predicted[i]
+                )
+                row.put(h, i)
         if s.association == "jpda":
             beta = jpda(h)
         else:
@@ -433,7 +440,15 @@ class MultiTargetTracker:
                 # Each mode takes the report with the marginals of the mixed prediction.
                 r_pair = sensing.variances(z_hat[i, :1], np.array([eta]))
                 t.modes, log_lik = mode_pda_updates(
-                    t.modes, z, uav_xy, r_pair, beta[i], float(pd[i]), density, s.gate_prob
+                    t.modes,
+                    z,
+                    uav_xy,
+                    r_pair,
+                    beta[i],
+                    float(pd[i]),
+                    density,
+                    s.gate_prob,
+                    predicted[i],
                 )
                 before = 0.0 if t.log_likelihoods is None else t.log_likelihoods
                 t.log_likelihoods = before + log_lik
