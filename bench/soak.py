@@ -14,7 +14,10 @@ live settings, the loop target as the truth; about 2 min for 3600 slots): the sl
 best effort (infeasible), by the evasion guard (evasive) and fallen back otherwise, and the slots
 where a UAV came closer than D_s to the true target or to another UAV along the flown legs
 (bench/horizon_fleet.py's `flown_gaps_m`), with the nearest distances.
-Run: python bench/soak.py [--slots 3600] [--speed 20] [--method horizon] [--target loop|cv]
+The racetrack target (`--target racetrack`, tests/support/soak.py) flies laps that turn at the
+scenario's manoeuvre bound and change speed between 10 and 30 m/s: with --config
+config/manoeuvring.yaml, a target manoeuvring at 4 m/s^2 tracked by the interacting multiple model.
+Run: python bench/soak.py [--slots 3600] [--speed 20] [--method horizon] [--target loop|cv|racetrack]
      [--tracemalloc] [--offline] [--out DIR (keep the live trace)]
 """
 
@@ -62,12 +65,12 @@ def main() -> None:
     ap.add_argument("--slots", type=int, default=3600)
     ap.add_argument("--speed", type=float, default=20.0)
     ap.add_argument("--no-lockstep", action="store_true")
-    ap.add_argument("--target", choices=("loop", "cv"), default="loop")
+    ap.add_argument("--target", choices=("loop", "cv", "racetrack"), default="loop")
     ap.add_argument(
         "--method",
         choices=METHODS,
-        default=live_default_method(multi_target=False),
-        help="Planning method (default: the live default, horizon).",
+        default=None,
+        help="Planning method (default: the live default for the scenario).",
     )
     ap.add_argument("--config", default=str(ROOT / "config" / "paper.yaml"))
     ap.add_argument("--tracemalloc", action="store_true")
@@ -78,7 +81,10 @@ def main() -> None:
     args = ap.parse_args()
     quiet_highs_banner()
     s = soak_scenario(load_scenario(args.config), args.slots, args.target)
+    args.method = args.method or live_default_method(multi_target=s.multi_target)
     if args.offline:
+        if args.target == "racetrack":
+            ap.error("--offline flies the loop or the cv target (the racetrack: live only)")
         offline_soak(s, args.method, args.target)
         return
     t0 = time.monotonic()

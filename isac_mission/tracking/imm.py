@@ -380,7 +380,8 @@ def mode_rows(
     density = np.exp(-0.5 * (pred.log_det_2pi_S[:, None] + d2))
     weight = belief.probabilities[:, None] * detection_prob / clutter_density
     ratio = np.where(inside, weight * density, 0.0).sum(axis=0)
-    return ModeRows(ratio, inside.any(axis=0), d2.min(axis=0, initial=np.inf))
+    gated = np.asarray(inside.any(axis=0), dtype=bool)
+    return ModeRows(ratio, gated, d2.min(axis=0, initial=np.inf))
 
 
 def with_likelihoods(

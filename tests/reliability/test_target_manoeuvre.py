@@ -1,10 +1,14 @@
-"""A live mission against a target that manoeuvres at the scenario's bound toward a UAV: no
-telemetry sample closer than D_s to the true target (docs/model.md, "Safety").
+"""Live missions against a target that manoeuvres at the scenario's bound: no telemetry sample
+closer than D_s to the true target (docs/model.md, "Safety").
 
-The target starts 900 m from UAV 0, flying at 30 m/s (faster than the UAVs) straight at it, and
-turns toward where the UAV would be (on the offline plan of the same mission) at up to a_T =
-`target_motion.max_accel_mps2` all the way (tests/support/soak.py, `pursuit_path`); the world
-flies that path. The offline twin of this mission is asserted too, along the flown legs.
+Pursuit: the target starts 900 m from UAV 0, flying at 30 m/s (faster than the UAVs) straight at
+it, and turns toward where the UAV would be (on the offline plan of the same mission) at up to
+a_T = `target_motion.max_accel_mps2` all the way (tests/support/soak.py, `pursuit_path`); the
+world flies that path. The offline twin of this mission is asserted too, along the flown legs.
+
+Racetrack: config/manoeuvring.yaml (six UAVs, the interacting multiple model) with its target
+flying laps that turn at a_T = 4 m/s^2 and change speed between 10 and 30 m/s (`racetrack_legs`),
+for --soak-slots slots (240 by default, 3.4 laps; 3600 at full size), the live default method.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from isac_mission.experiment.closed_loop import SlotOutcome, draw_run_noise, run
 from isac_mission.model.vehicle import hermite_position
 from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.slot import Method
-from tests.support.soak import pursuit_path, run_soak
+from tests.support.soak import pursuit_path, racetrack_lap_s, run_soak, soak_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 TARGET_SPEED_MPS = 30.0
@@ -97,3 +101,24 @@ async def test_a_target_manoeuvring_at_the_bound_toward_a_uav_stays_d_safe_away(
     assert counts.samples >= s.M * s.N
     assert counts.target_under_d_safe == 0, counts.render(s.d_safe)
     assert counts.nearest_target_m < 3 * s.d_safe, counts.render(s.d_safe)
+
+
+async def test_a_target_on_racetrack_laps_at_the_bound_stays_d_safe_away(
+    soak_slots: int, tmp_path: Path
+) -> None:
+    cfg = yaml.safe_load((ROOT / "config" / "manoeuvring.yaml").read_text())
+    cfg["uavs"]["altitude_m"] = 50  # take-off and landing in seconds; the planar problem is alike
+    config = tmp_path / "racetrack.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    s = soak_scenario(load_scenario(config), soak_slots, "racetrack")
+    assert s.a_target == 4.0 and s.tracker_motion == "imm"
+    assert soak_slots * s.dt > 2 * racetrack_lap_s(s.a_target)  # every leg flown at least twice
+    result = await run_soak(s, tmp_path / "out", speed=5.0, lockstep=True)
+    counts = result.proximity
+    print(f"\nracetrack: {soak_slots} slots; {counts.render(s.d_safe)}")
+    assert result.live.report.counters["slots"] == soak_slots
+    assert [p.slot for p in result.samples] == list(range(1, soak_slots + 1))
+    assert counts.samples >= s.M * s.N
+    assert counts.target_under_d_safe == 0, counts.render(s.d_safe)
+    assert counts.uav_under_d_safe == 0, counts.render(s.d_safe)
+    assert counts.nearest_target_m < 3 * s.d_safe, counts.render(s.d_safe)  # the UAVs were close

@@ -36,7 +36,7 @@ import statistics
 import time
 import tracemalloc
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
 
@@ -44,20 +44,22 @@ import numpy as np
 
 from isac_mission.bus import BusSettings, ZenohBus, tcp_loopback
 from isac_mission.config import Scenario
+from isac_mission.config.targets import Leg
 from isac_mission.errors import MessageError
 from isac_mission.planning.registry import live_default_method
 from isac_mission.planning.slot import Method
+from isac_mission.records.tracks import TracksSlot
 from isac_mission.service.assembly import LiveOptions, run_serve
 from isac_mission.service.ground.report import SlotEvent
 from isac_mission.service.mission_result import LiveResult
 from isac_mission.types import FloatArray
-from isac_mission.wire import Keys, TelemetryMsg, TruthMsg, decode
+from isac_mission.wire import Keys, TelemetryMsg, TruthMsg, TruthSetMsg, decode
 from sim.world import run_world
 from sim.world_options import WorldOptions
 from tests.support.ports import free_port_block, sitl_ports
 from tests.support.soak_safety import ProximityCounter, ProximityCounts
 
-TargetKind = Literal["loop", "cv"]
+TargetKind = Literal["loop", "cv", "racetrack"]
 
 LOOP_CENTRE_XY_M = (1500.0, 1600.0)
 LOOP_RADIUS_M = 450.0
@@ -80,6 +82,35 @@ def loop_corners(radius_m: float = LOOP_RADIUS_M) -> tuple[tuple[float, float], 
     )
 
 
+RACETRACK_START_XY_M = (1300.0, 1400.0)
+RACETRACK_SPEED_MPS = (10.0, 20.0, 30.0)
+"""The racetrack's slowest, turning and fastest speeds (m/s)."""
+RACETRACK_ALONG_MPS2 = 2.0
+"""Its speed changes' along-track acceleration (m/s^2)."""
+
+
+def racetrack_legs(laps: int, max_accel_mps2: float) -> tuple[Leg, ...]:
+    """`laps` closed laps of a racetrack flown from RACETRACK_START_XY_M heading east at the
+    turning speed v_t: on each straight v_t -> v_max -> v_min -> v_t at +-RACETRACK_ALONG_MPS2
+    (400 m at the defaults), then a half circle to the left at v_t and the manoeuvre bound,
+    omega = a_T / v_t (0.2 rad/s, radius 100 m at 4 m/s^2). Each lap ends where and as it began."""
+    v_min, v_turn, v_max = RACETRACK_SPEED_MPS
+    a = RACETRACK_ALONG_MPS2
+    omega = max_accel_mps2 / v_turn
+    straight = (
+        Leg("accelerate", (v_max - v_turn) / a, accel_mps2=a),
+        Leg("accelerate", (v_max - v_min) / a, accel_mps2=-a),
+        Leg("accelerate", (v_turn - v_min) / a, accel_mps2=a),
+    )
+    half_circle = Leg("turn", math.pi / omega, turn_rate_radps=omega)
+    return (*straight, half_circle, *straight, half_circle) * laps
+
+
+def racetrack_lap_s(max_accel_mps2: float) -> float:
+    """One racetrack lap's duration (s) at the manoeuvre bound max_accel_mps2 (m/s^2)."""
+    return sum(leg.duration_s for leg in racetrack_legs(1, max_accel_mps2))
+
+
 def loop_radius_for_lap(lap_s: float) -> float:
     """The circumradius whose loop takes `lap_s` seconds at LOOP_SPEED_MPS."""
     return LOOP_SPEED_MPS * lap_s / (2 * LOOP_SIDES * math.sin(math.pi / LOOP_SIDES))
@@ -89,7 +120,8 @@ def loop_radius_for_lap(lap_s: float) -> float:
 class SoakSample:
     """Taken right after slot `slot` was processed: wall (time.monotonic) and process CPU
     (time.process_time) seconds, resident set size in bytes, the slot's planning time (ms), the
-    nearest UAV's distance to the true target at the slot's measurements (m; NaN without truth)
+    nearest UAV's distance to the nearest true target at the slot's measurements (m; NaN without
+    truth)
     and the largest entry of the slot's PCRB information J."""
 
     slot: int
@@ -137,8 +169,23 @@ def soak_scenario(
     base: Scenario, slots: int, target: TargetKind = "loop", loop_radius_m: float = LOOP_RADIUS_M
 ) -> Scenario:
     """`base` for `slots` slots; for the loop target, the tracker's prior is the loop's start
-    (west point, heading north) so that the first slots do not start from a wrong cue."""
+    (west point, heading north) so that the first slots do not start from a wrong cue; for the
+    racetrack, base's first target flies `racetrack_legs` at base's manoeuvre bound a_T to the
+    end (a known target, as the loop's), the only target."""
     s = base.with_changes(N=slots)
+    if target == "racetrack":
+        laps = math.ceil(slots * s.dt / racetrack_lap_s(s.a_target)) + 1
+        x0 = (*RACETRACK_START_XY_M, RACETRACK_SPEED_MPS[1], 0.0)
+        spec = replace(
+            s.targets[0],
+            x0=x0,
+            motion="legs",
+            legs=racetrack_legs(laps, s.a_target),
+            first_slot=0,
+            last_slot=slots,
+            prior_known=True,
+        )
+        return s.with_changes(targets=(spec,), x0=np.array(x0))
     if target == "loop":
         corners = loop_corners(loop_radius_m)
         first, second = np.array(corners[0]), np.array(corners[1])
@@ -190,7 +237,7 @@ async def run_soak(
     opts = LiveOptions(
         speed=speed,
         lockstep=lockstep,
-        method=method or live_default_method(multi_target=False),
+        method=method or live_default_method(multi_target=s.multi_target),
         seed=seed,
         out_dir=out_dir,
         zenoh_endpoint=endpoint,
@@ -220,31 +267,34 @@ async def run_soak(
     heap: dict[str, tracemalloc.Snapshot] = {}
     t_start = time.monotonic()
 
-    def on_slot(ev: SlotEvent) -> None:
-        rec = ev.record
-        truth = rec.target_true
-        distance = (
-            math.nan
-            if truth is None
-            else float(np.min(np.linalg.norm(np.asarray(rec.uav_xy_m) - truth[:2], axis=1)))
-        )
+    def take(
+        slot: int, solve_ms: float, uav_xy_m: FloatArray, truth: FloatArray, j_max: float
+    ) -> None:
+        """Sample slot `slot` (truth [T, 4], NaN rows: not in the scene)."""
+        present = truth[np.all(np.isfinite(truth), axis=1), :2]
+        gaps = np.linalg.norm(uav_xy_m[:, None, :] - present[None, :, :], axis=2)
+        distance = float(np.min(gaps)) if gaps.size else math.nan
         sample = SoakSample(
-            rec.slot,
-            time.monotonic(),
-            time.process_time(),
-            rss_bytes(),
-            rec.solve_ms,
-            distance,
-            float(np.max(np.abs(rec.J))),
+            slot, time.monotonic(), time.process_time(), rss_bytes(), solve_ms, distance, j_max
         )
         samples.append(sample)
-        if trace_malloc and ev.record.slot == quarter:
+        if trace_malloc and slot == quarter:
             tracemalloc.start(1)
-        if trace_malloc and ev.record.slot == s.N and tracemalloc.is_tracing():
+        if trace_malloc and slot == s.N and tracemalloc.is_tracing():
             heap["end"] = tracemalloc.take_snapshot()
             tracemalloc.stop()
         if on_sample is not None:
             on_sample(sample)
+
+    def on_slot(ev: SlotEvent) -> None:
+        rec = ev.record
+        truth = np.full((1, 4), np.nan) if rec.target_true is None else rec.target_true[None]
+        xy = np.asarray(rec.uav_xy_m, dtype=float)
+        take(rec.slot, rec.solve_ms, xy, truth, float(np.max(np.abs(rec.J))))
+
+    def on_tracks(slot: TracksSlot, _latency_s: float) -> None:
+        solve_ms = 1e3 * slot.plan.report.solve_s
+        take(slot.slot, solve_ms, np.asarray(slot.uav_xy_m), np.asarray(slot.truth), math.nan)
 
     counter = ProximityCounter(s.d_safe, s.N)
     observer_up = asyncio.Event()
@@ -255,7 +305,7 @@ async def run_soak(
     world_stop = asyncio.Event()
     world = asyncio.create_task(run_world(s, world_opts, world_stop))
     try:
-        live = await run_serve(s, opts, asyncio.Event(), on_slot)
+        live = await run_serve(s, opts, asyncio.Event(), on_slot, on_tracks=on_tracks)
     finally:
         world_stop.set()
         await asyncio.wait_for(world, timeout=60.0)
@@ -285,6 +335,7 @@ async def _observe(
     the mission, until cancelled; `up` is set once the subscription is declared."""
     keys = Keys(s.mission_id)
     telemetry, truth = f"{keys.prefix}/telemetry/", keys.truth
+    truth_type = TruthSetMsg if s.multi_target else TruthMsg
     settings = hub.model_copy(update={"connect": (ground_endpoint,)})
     with ZenohBus.open(settings) as bus:
         async with bus.subscribe(keys.everything, maxsize=65536) as sub:
@@ -294,7 +345,7 @@ async def _observe(
                     if key.startswith(telemetry):
                         counter.on_telemetry(decode(TelemetryMsg, payload, n_uavs=s.M))
                     elif key == truth:
-                        counter.on_truth(decode(TruthMsg, payload))
+                        counter.on_truth(decode(truth_type, payload))
                 except MessageError:
                     continue
 

@@ -3,10 +3,10 @@ or to another UAV (the issue's "Safety" target), counted online with bounded mem
 
 Every telemetry sample of the mission (stamped with a slot 0..N-1, at or after slot 0's truth) is
 checked, in the horizontal plane (the constraints 14i and 14j are planar; the UAVs fly at H):
-- against the true target at t, linearly interpolated between the truths of the slots around t
-  (the world publishes the truth once per slot; the scripted loop target is exact on its
-  straight legs, about 1 m off at its 15-degree corners), so a sample waits for the truth of
-  the end of its slot;
+- against the true target at t (every target in the scene, on a multi-target mission: the
+  nearest), linearly interpolated between the truths of the slots around t (the world publishes
+  the truth once per slot; the interpolation is within a dt^2 / 8 of the path: 0.5 m at
+  4 m/s^2), so a sample waits for the truth of the end of its slot;
 - against every other UAV at t: that UAV's latest sample moved on with its velocity to t.
 """
 
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from isac_mission.types import FloatArray
-from isac_mission.wire import TelemetryMsg, TruthMsg
+from isac_mission.wire import TelemetryMsg, TruthMsg, TruthSetMsg
 
 
 @dataclass(frozen=True)
@@ -117,10 +117,11 @@ class ProximityCounter:
         self._waiting.append((msg.t_s, msg.slot, msg.uav, xy))
         self._judge()
 
-    def on_truth(self, msg: TruthMsg) -> None:
+    def on_truth(self, msg: TruthMsg | TruthSetMsg) -> None:
         if any(t == msg.t_s for t, _ in self._truths):
             return  # a copy
-        self._truths.append((msg.t_s, np.asarray(msg.target_x[:2], dtype=float)))
+        states = msg.states if isinstance(msg, TruthSetMsg) else msg.target_states
+        self._truths.append((msg.t_s, np.asarray(states, dtype=float)[:, :2]))
         self._truths.sort(key=lambda tp: tp[0])
         del self._truths[:-TRUTHS_KEPT]
         self._judge()
@@ -138,7 +139,11 @@ class ProximityCounter:
             if t > t_last:
                 keep.append(waiting)  # waits for the next truth
                 continue
-            d = float(np.linalg.norm(xy - self._target_at(t)))
+            in_scene = self._target_at(t)
+            in_scene = in_scene[np.all(np.isfinite(in_scene), axis=1)]
+            if len(in_scene) == 0:
+                continue  # no target in the scene at t
+            d = float(np.min(np.linalg.norm(xy - in_scene, axis=1)))
             self.counts.samples += 1
             self.counts.nearest_target_m = min(self.counts.nearest_target_m, d)
             if d < self.d_safe_m:
@@ -147,8 +152,9 @@ class ProximityCounter:
         self._waiting = keep
 
     def _target_at(self, t: float) -> FloatArray:
-        """The true target position at t, linearly between the kept truths around t (the
-        earliest kept one for a sample older than all of them)."""
+        """[T, 2]: every target's true position at t (NaN: not in the scene at one of the two
+        truths), linearly between the kept truths around t (the earliest kept one for a sample
+        older than all of them)."""
         truths = self._truths
         for (t0, p0), (t1, p1) in itertools.pairwise(truths):
             if t <= t1:
