@@ -85,10 +85,12 @@ def horizon_bound_traces(
     xy: FloatArray,
     eta: FloatArray,
     sensing: SensingParams,
+    offsets: FloatArray | None = None,
 ) -> FloatArray:
     """tr(PCRB) [L] along a horizon plan xy [L, M, 2], eta [L, M] by the bound's recursion
-    (tracking/pcrb.bound_along), every J_M at the predicted state of its slot."""
-    return bound_along(s.motion, s.dt, x_pred, J_pred, xy, eta, sensing).traces
+    (tracking/pcrb.bound_along), every J_M at the predicted state of its slot (plus its path
+    offset [L, 4], a manoeuvring belief's: `TargetBelief.path_offsets`; None: none)."""
+    return bound_along(s.motion, s.dt, x_pred, J_pred, xy, eta, sensing, offsets).traces
 
 
 def predicted_clearances(s: Scenario, target_cov_pred: FloatArray, length: int) -> FloatArray:
@@ -201,6 +203,7 @@ def horizon_slot_data(
         x_pred=np.asarray(x_pred, dtype=float),
         J_pred=np.asarray(inp.lead.prior_information, dtype=float),
         clearance_m=sample_clearances(s, predicted_clearances(s, target_cov_pred, length), x_pred),
+        path_offset=inp.lead.path_offsets(length),
     )
     if targets is None or len(targets) == 1:
         return data
@@ -214,7 +217,17 @@ def horizon_slot_data(
         J_pred=np.array([b.prior_information for b in targets], dtype=float),
         clearance_m=np.array(clearances),
         target_weight=np.array([b.weight for b in targets], dtype=float),
+        path_offset=target_offsets(targets, length),
     )
+
+
+def target_offsets(targets: tuple[TargetBelief, ...], length: int) -> FloatArray | None:
+    """[T, length, 4] (m, m/s): every target's path offsets (`TargetBelief.path_offsets`, zeros
+    for a target without a manoeuvre); None when none has one."""
+    if all(b.manoeuvre is None for b in targets):
+        return None
+    zeros = np.zeros((length, 4))
+    return np.array([o if (o := b.path_offsets(length)) is not None else zeros for b in targets])
 
 
 def sample_clearances(s: Scenario, clearance_m: FloatArray, x_pred: FloatArray) -> FloatArray:
@@ -369,8 +382,9 @@ class PerSlotPlan:
 class HorizonValue:
     """The horizon objective of a plan (xy [L, M, 2] m, eta [L, M]): sum_l weights_l tr(PCRB_l)
     by the bound's recursion (`horizon_bound_traces`) from each target's prediction x_pred
-    [T, 4] and prior information J_pred [T, 4, 4], the targets' traces summed with their
-    weights target_weight [T] (None: one target, unweighted)."""
+    [T, 4] and prior information J_pred [T, 4, 4] (and path offsets [T, L, 4], None: none),
+    the targets' traces summed with their weights target_weight [T] (None: one target,
+    unweighted)."""
 
     s: Scenario
     weights: FloatArray
@@ -378,16 +392,22 @@ class HorizonValue:
     J_pred: FloatArray
     sensing: SensingParams
     target_weight: FloatArray | None = None
+    offsets: FloatArray | None = None
 
     @classmethod
     def of(
-        cls, s: Scenario, x_pred: FloatArray, J_pred: FloatArray, sensing: SensingParams
+        cls,
+        s: Scenario,
+        x_pred: FloatArray,
+        J_pred: FloatArray,
+        sensing: SensingParams,
+        offsets: FloatArray | None = None,
     ) -> HorizonValue:
         """The value of s's horizon (its weights, `horizon_weights`) for the lead target's
-        prediction x_pred [4] and prior information J_pred [4, 4]."""
+        prediction x_pred [4], prior information J_pred [4, 4] and path offsets [L, 4]."""
         cfg = s.planner.horizon
         weights = horizon_weights(cfg.length, cfg.discount, cfg.terminal_weight)
-        return cls(s, weights, x_pred, J_pred, sensing)
+        return cls(s, weights, x_pred, J_pred, sensing, None, offsets)
 
     @classmethod
     def of_targets(
@@ -395,9 +415,11 @@ class HorizonValue:
     ) -> HorizonValue:
         """The value for the targets: one target's `of` (its weight not applied: it scales
         the objective only, which the NLP divides by its start value), several weighted."""
-        if len(targets) == 1:
-            return cls.of(s, targets[0].state_pred, targets[0].prior_information, sensing)
         cfg = s.planner.horizon
+        if len(targets) == 1:
+            b = targets[0]
+            offsets = b.path_offsets(cfg.length)
+            return cls.of(s, b.state_pred, b.prior_information, sensing, offsets)
         weights = horizon_weights(cfg.length, cfg.discount, cfg.terminal_weight)
         return cls(
             s,
@@ -406,23 +428,29 @@ class HorizonValue:
             np.array([b.prior_information for b in targets], dtype=float),
             sensing,
             np.array([b.weight for b in targets], dtype=float),
+            target_offsets(targets, cfg.length),
         )
 
     def target_traces(self, xy: FloatArray, eta: FloatArray) -> FloatArray:
         """tr(PCRB) [T, L] of each target along the plan."""
         x_pred = np.asarray(self.x_pred, dtype=float).reshape(-1, 4)
         J_pred = np.asarray(self.J_pred, dtype=float).reshape(-1, 4, 4)
+        offsets: list[FloatArray | None] = [None] * len(x_pred)
+        if self.offsets is not None:
+            offsets = list(np.asarray(self.offsets, dtype=float).reshape(len(x_pred), -1, 4))
         return np.array(
             [
-                horizon_bound_traces(self.s, J, x, xy, eta, self.sensing)
-                for x, J in zip(x_pred, J_pred, strict=True)
+                horizon_bound_traces(self.s, J, x, xy, eta, self.sensing, o)
+                for x, J, o in zip(x_pred, J_pred, offsets, strict=True)
             ]
         )
 
     def traces(self, xy: FloatArray, eta: FloatArray) -> FloatArray:
         """tr(PCRB) [L] along the plan: one target's, or the targets' weighted sum."""
         if self.target_weight is None:
-            return horizon_bound_traces(self.s, self.J_pred, self.x_pred, xy, eta, self.sensing)
+            return horizon_bound_traces(
+                self.s, self.J_pred, self.x_pred, xy, eta, self.sensing, self.offsets
+            )
         return np.asarray(self.target_weight @ self.target_traces(xy, eta))
 
     def __call__(self, xy: FloatArray, eta: FloatArray) -> float:
@@ -700,7 +728,8 @@ def plan_horizon(
         why = f"its pairs within reach need a band of {width} (pair_band {kit_pair_bands(kit)})"
         return base.instead(why, "pairs beyond the band")
     if len(targets) == 1:
-        value = HorizonValue.of(s, lead.state_pred, J_pred, kit.sensing)
+        offsets = lead.path_offsets(s.planner.horizon.length)
+        value = HorizonValue.of(s, lead.state_pred, J_pred, kit.sensing, offsets)
         slot = HorizonSlot(s, inp, nlp, order, prev_v, target_cov_pred, value)
     else:
         value = HorizonValue.of_targets(s, targets, kit.sensing)

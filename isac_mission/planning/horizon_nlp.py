@@ -88,7 +88,9 @@ class HorizonSlotData:
     rate_min_bps: R_th (bit/s), the planning scenario's (an operator may change it; the NLP
     takes it as a bound: `_lower`). For T > 1 targets (in the NLP's order of targets): x_pred
     [T, 4], J_pred [T, 4, 4], clearance_m [T, L] and target_weight [T] (each target's weight in
-    the objective); one target has no weight (None).
+    the objective); one target has no weight (None). path_offset [T, L, 4] (m, m/s) or None
+    (zeros): each target's predicted state at the end of horizon slot h minus the straight
+    F^h x_pred (`TargetBelief.path_offsets`).
     """
 
     rate_min_bps: float
@@ -101,6 +103,7 @@ class HorizonSlotData:
     J_pred: FloatArray
     clearance_m: FloatArray
     target_weight: FloatArray | None = None
+    path_offset: FloatArray | None = None
 
     @property
     def n_targets(self) -> int:
@@ -111,6 +114,12 @@ class HorizonSlotData:
     def states(self) -> FloatArray:
         """Every target's predicted state [T, 4] (m, m/s)."""
         return np.asarray(self.x_pred, dtype=float).reshape(-1, 4)
+
+    def offsets(self, length: int) -> FloatArray:
+        """Every target's path offsets [T, length, 4] (m, m/s; zeros without any)."""
+        if self.path_offset is None:
+            return np.zeros((self.n_targets, length, 4))
+        return np.asarray(self.path_offset, dtype=float).reshape(self.n_targets, length, 4)
 
     def priors(self) -> FloatArray:
         """Every target's prior information [T, 4, 4]."""
@@ -262,6 +271,7 @@ class HorizonNLP:
             np.concatenate([J.reshape(-1, order="F") for J in data.priors()]),
             data.clearance_m,
             *weight,
+            data.offsets(self.length),
             *self._along(np.asarray(xy, dtype=float), np.asarray(eta, dtype=float), data)[:2],
             np.array([f_scale]),
         ]
@@ -280,7 +290,7 @@ class HorizonNLP:
         """The bound's recursion of every target along the plan (xy [L, M, 2], eta [L, M]):
         (scale_j [4 L T], scale_p [4 L T], lift [16 (L - 1) T]), target-major (`_along_one`)."""
         T, L = data.n_targets, self.length
-        states, priors = data.states(), data.priors()
+        states, priors, offsets = data.states(), data.priors(), data.offsets(L)
         parts = []
         for i in range(T):
             one_scales = None
@@ -289,7 +299,7 @@ class HorizonNLP:
                     scales[0][4 * L * i : 4 * L * (i + 1)],
                     scales[1][4 * L * i : 4 * L * (i + 1)],
                 )
-            parts.append(self._along_one(xy, eta, states[i], priors[i], one_scales))
+            parts.append(self._along_one(xy, eta, states[i], priors[i], one_scales, offsets[i]))
         if T == 1:
             return parts[0]
         return (
@@ -305,8 +315,10 @@ class HorizonNLP:
         x_pred: FloatArray,
         J_pred: FloatArray,
         scales: tuple[FloatArray, FloatArray] | None = None,
+        offsets: FloatArray | None = None,
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """One target's (x_pred [4], J_pred [4, 4]) bound recursion along the plan (xy
+        """One target's (x_pred [4], J_pred [4, 4], path offsets [L, 4] or None) bound
+        recursion along the plan (xy
         [L, M, 2], eta [L, M]): (scale_j [4 L], scale_p [4 L], lift [16 (L - 1)]). The scales are
         1 / sqrt of the diagonals of J_l and of the next slot's predicted covariance P_l+1 (the
         last scale_p unused: ones), or the given ones; lift the lifted variables there in those
@@ -320,6 +332,7 @@ class HorizonNLP:
             xy,
             eta,
             self._sensing,
+            offsets,
         )
         L = self.length
         scale_j, scale_p = np.ones((L, 4)), np.ones((L, 4))

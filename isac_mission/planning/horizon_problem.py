@@ -2,7 +2,8 @@
 
     min  sum_i a_i sum_l w_l tr(C_il),  C_il = (J_pred,il + J_M(Q_l, eta_l; x_il))^-1,
          J_pred,i1 = target i's prior information, J_pred,il+1 = (F C_il F^T + W)^-1,
-         x_il = F^(l-1) x_pred,i (the motion model's prediction), over the T targets i
+         x_il = F^(l-1) x_pred,i + o_il (the motion model's prediction, and the belief's
+         departure o_il from it: a manoeuvring track's curve; 0 otherwise), over the T targets i
          (a_i their weights; one target: no weight, the single-target problem as it was)
     s.t. for every horizon slot l and UAV m (slot n's association kept over the horizon):
          eta_lm R~(|q_lm - w_k(m)| + e) >= R_th                       (14a, with the link margin)
@@ -19,8 +20,9 @@ with w_l = discount^(l-1) (times terminal_weight on the last slot). The derivati
 CasADi's automatic differentiation, but the Lagrangian's Hessian is assembled through each
 slot's information (planning/horizon_hessian.py: the same matrix at 0.4 of the operations at
 M = 24). Everything that changes per slot is a parameter: the UAVs' positions and velocities, the
-serving and control BSs, the keep-out points, each target's predicted state, prior information
-and clearances c_il, the targets' weights (T > 1) and the objective's scale.
+serving and control BSs, the keep-out points, each target's predicted state, path offsets o_il
+(linear between slot ends at the leg samples), prior information and clearances c_il, the
+targets' weights (T > 1) and the objective's scale.
 
 Lifted: what IPOPT solves has the scaled predicted covariance Pt_l = E_l P_l+1 E_l of every horizon
 slot but the last as 16 variables (per target: target-major, target i's L - 1 blocks after
@@ -43,6 +45,7 @@ planning/horizon_nlp.py.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -51,6 +54,7 @@ import casadi as ca
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.model.motion import MotionModel
 from isac_mission.model.vehicle import end_accelerations, hermite_position, velocity_control_points
 from isac_mission.planning.horizon_hessian import LiftedSlot, horizon_hess_lag, vech
 from isac_mission.planning.legs import chord_point_clearance_m
@@ -112,7 +116,9 @@ class HorizonSymbols:
     [M 2] (m), v0 [M 2] (m/s), serving, control [M 2] (m), keep_out [n_keep_out 2] (m), x_pred
     [4 T] (m, m/s; target i's at 4 i), j_pred [4, 4 T] (target i's the columns 4 i..4 i + 3),
     clearance [L T] (m; target i's at L i), target_weight [T] (T > 1 only; one target has no
-    weight), scale_j, scale_p [4 L T] (the Jacobi scalings, numbers taken at the start point so
+    weight), path_offset [4 L T] (m, m/s: target i's predicted state at the end of horizon slot h
+    minus the straight F^h x_pred,i, at 4 (L i + h); zeros for a target that flies straight,
+    `TargetBelief.path_offsets`), scale_j, scale_p [4 L T] (the Jacobi scalings, numbers taken at the start point so
     that no derivative runs through them; target i's at 4 L i), f_scale [1]."""
 
     z: ca.SX
@@ -128,6 +134,7 @@ class HorizonSymbols:
     j_pred: ca.SX
     clearance: ca.SX
     target_weight: ca.SX
+    path_offset: ca.SX
     scale_j: ca.SX
     scale_p: ca.SX
     f_scale: ca.SX
@@ -161,6 +168,7 @@ class HorizonSymbols:
             j_pred=ca.SX.sym("j_pred", 4, 4 * T),
             clearance=ca.SX.sym("clearance", L * T),
             target_weight=ca.SX.sym("target_weight", T if T > 1 else 0),
+            path_offset=ca.SX.sym("path_offset", 4 * L * T),
             scale_j=ca.SX.sym("scale_j", 4 * L * T),
             scale_p=ca.SX.sym("scale_p", 4 * L * T),
             f_scale=ca.SX.sym("f_scale"),
@@ -187,6 +195,7 @@ class HorizonSymbols:
             ca.reshape(self.j_pred, 16 * self.n_targets, 1),
             self.clearance,
             *weight,
+            self.path_offset,
             self.scale_j,
             self.scale_p,
             self.f_scale,
@@ -195,6 +204,23 @@ class HorizonSymbols:
     def state(self, i: int) -> ca.SX:
         """Target i's predicted state [4] (m, m/s) at the end of slot n (one target: x_pred)."""
         return self.x_pred if self.n_targets == 1 else self.x_pred[4 * i : 4 * i + 4]
+
+    def offset(self, i: int, h: int) -> ca.SX:
+        """Target i's path offset [4] (m, m/s) at the end of horizon slot h (h = -1, the slot's
+        start: zeros)."""
+        if h < 0:
+            return ca.SX.zeros(4)
+        k = 4 * (i * self.length + h)
+        return self.path_offset[k : k + 4]
+
+    def predicted(self, i: int, t_s: float, motion: MotionModel) -> ca.SX:
+        """Target i's predicted position [2] (m) t_s after the end of slot n (-dt <= t_s <=
+        (L - 1) dt): `motion`'s from its state, plus its path offset, linear between the
+        slot ends around t_s."""
+        h, frac = _slot_of(t_s, self.dt_s)
+        off = (1.0 - frac) * self.offset(i, h - 1)[:2] + frac * self.offset(i, h)[:2]
+        straight: ca.SX = motion.position_after(self.state(i), t_s)
+        return straight + off
 
     def prior(self, i: int) -> ca.SX:
         """Target i's prior information [4, 4] (one target: j_pred)."""
@@ -323,12 +349,22 @@ def add_uav_slot_rows(
     add_uav_rows(rows, s, qm, em, sym.serving[bs], sym.control[bs], step2, link_m, S, limits)
     for frac in samples.fracs:
         for i in range(sym.n_targets):
-            p = s.motion.position_after(sym.state(i), (h - 1 + frac) * s.dt)
+            p = sym.predicted(i, (h - 1 + frac) * s.dt, s.motion)
             c2 = (sym.target_clearance(i, h) / S) ** 2
             add_clearance_row(rows, sym.along(h, m, frac) - p, c2, S)
         for k in range(int(sym.keep_out.numel()) // 2):
             gap = sym.along(h, m, frac) - sym.keep_out[2 * k : 2 * k + 2]
             add_clearance_row(rows, gap, samples.keep2, S)
+
+
+def _slot_of(t_s: float, dt_s: float) -> tuple[int, float]:
+    """(h, frac): t_s after the end of slot n lies at fraction frac of horizon slot h's leg,
+    from the end of slot h - 1 to the end of slot h (h = 0: from -dt_s to 0)."""
+    h = math.floor(t_s / dt_s + 1e-9) + 1
+    frac = t_s / dt_s - (h - 1)
+    if frac < 1e-9 and h > 0:
+        h, frac = h - 1, 1.0
+    return h, frac
 
 
 def add_pair_rows(
@@ -368,7 +404,7 @@ def add_slot(
     F = s.motion.transition(s.dt)
     T = sym.n_targets
     Fh = ca.DM(np.linalg.matrix_power(F, h))
-    x_l = [ca.mtimes(Fh, sym.state(i)) for i in range(T)]
+    x_l = [ca.mtimes(Fh, sym.state(i)) + sym.offset(i, h) for i in range(T)]
     J_info = [ca.SX.zeros(4, 4) for _ in range(T)]
     members: list[list[Member]] = [[] for _ in range(T)]
     for m in range(sym.M):
@@ -395,12 +431,13 @@ def add_terminal_rows(rows: NlpRows, sym: HorizonSymbols, s: Scenario) -> int:
     rows."""
     L, S, dt = s.planner.horizon.length, sym.step_m, s.dt
     T = sym.n_targets
-    target_end = [s.motion.position_after(sym.state(i), (L - 1) * dt) for i in range(T)]
+    target_end = [sym.predicted(i, (L - 1) * dt, s.motion) for i in range(T)]
     brake = s.a_max * dt**2 / S  # in units of S per slot squared
     for m in range(sym.M):
         for i in range(T):
             offset = (sym.q(L - 1, m) - target_end[i]) / S
-            relative = (sym.v(L - 1, m) - sym.state(i)[2:4]) * dt / S
+            target_v = sym.state(i)[2:4] + sym.offset(i, L - 1)[2:4]
+            relative = (sym.v(L - 1, m) - target_v) * dt / S
             stopping = ca.sumsqr(relative) / (2 * brake)
             clearance = sym.target_clearance(i, L - 1) / S
             rows.add(ca.norm_2(offset) - stopping - clearance, 0.0, float("inf"))

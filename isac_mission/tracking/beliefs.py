@@ -9,12 +9,21 @@ instant (the leg samples, the horizon's slots), and the target's weight in the o
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from isac_mission.model.motion import MotionModel, PredictedPath
 from isac_mission.types import FloatArray
+
+
+class PathOffsets(Protocol):
+    """A manoeuvring belief's departure from the straight prediction of its motion model."""
+
+    def offsets(self, n_slots: int) -> FloatArray:
+        """[n_slots, 4] (m, m/s): the predicted state at the end of slot n + h minus F^h times
+        the one at the end of slot n (h = 0..n_slots - 1; row 0 zeros)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -25,7 +34,10 @@ class TargetBelief:
     information (J_pred, in the state's inverse squared units); motion: the motion model that
     predicted it; cov_pred [4, 4] or None: the tracker's predicted covariance (the safety rule;
     None: prior_information^-1); weight: the target's weight in the objective (the sum over
-    targets of weight tr(PCRB)); track_id: the tracker's ID of it (0: the one labelled target).
+    targets of weight tr(PCRB)); track_id: the tracker's ID of it (0: the one labelled target);
+    manoeuvre: a manoeuvring track's departure from motion's straight path over the next slots
+    (the interacting multiple model's `ImmPath`: the receding horizon plans along it), None for
+    a belief that the motion model predicts alone.
     """
 
     state_pred: FloatArray
@@ -34,6 +46,11 @@ class TargetBelief:
     cov_pred: FloatArray | None = None
     weight: float = 1.0
     track_id: int = 0
+    manoeuvre: PathOffsets | None = None
+
+    def path_offsets(self, n_slots: int) -> FloatArray | None:
+        """[n_slots, 4] (m, m/s): `PathOffsets.offsets` of the manoeuvre; None without one."""
+        return None if self.manoeuvre is None else self.manoeuvre.offsets(n_slots)
 
     def position_at(self, t_s: float) -> Any:
         """The predicted position [2] t_s seconds after the prediction's instant (negative:

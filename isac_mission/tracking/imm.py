@@ -186,6 +186,31 @@ def imm_predict(model: ImmModel, belief: ImmBelief) -> ImmBelief:
     return ImmBelief(means, covs, mixed.probabilities)
 
 
+@dataclass(frozen=True)
+class ImmPath:
+    """The IMM's open-loop prediction of a track over the next slots (tracking/beliefs.py
+    `PathOffsets`): `predicted`, the modes predicted to the end of slot n, predicted on by
+    `imm_predict` (mixing every slot, no measurement); its offsets are the moment-matched mean's
+    departure from the straight constant-velocity path from the same start, the curve of a turn
+    that the turn mode follows, shrinking as the modes mix toward their long-run shares."""
+
+    model: ImmModel
+    predicted: ImmBelief
+
+    def offsets(self, n_slots: int) -> FloatArray:
+        """[n_slots, 4] (m, m/s): row h the mixture's mean at the end of slot n + h minus F^h
+        times the one at the end of slot n (row 0 zeros)."""
+        F = ConstantVelocity(0.0).transition(self.model.dt_s)
+        out = np.zeros((n_slots, 4))
+        belief = self.predicted
+        straight = belief.marginal().x
+        for h in range(1, n_slots):
+            belief = imm_predict(self.model, belief)
+            straight = F @ straight
+            out[h] = belief.marginal().x - straight
+        return out
+
+
 def _padded_jacobian(x: FloatArray, uav_xy: FloatArray) -> FloatArray:
     """H [2M, 5]: measurement_jacobian at x[:4] with a zero column for omega."""
     H4 = measurement_jacobian(x[:4], uav_xy)

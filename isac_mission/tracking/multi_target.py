@@ -69,6 +69,7 @@ from isac_mission.tracking.ekf import ekf_predict
 from isac_mission.tracking.imm import (
     ImmBelief,
     ImmModel,
+    ImmPath,
     ModePredictions,
     imm_model,
     imm_predict,
@@ -331,7 +332,12 @@ class MultiTargetTracker:
                 t.refuted = ekf_predict(t.refuted, s.F, s.W)
             if t.track_id > 0:
                 existence = 1.0 if t.confirmed else min(1.0, sum(t.hits) / s.confirm_hits)
-                out.append(TrackPrediction(t.track_id, t.confirmed, t.belief, t.J_pred, existence))
+                path = None if s.imm is None or t.modes is None else ImmPath(s.imm, t.modes)
+                out.append(
+                    TrackPrediction(
+                        t.track_id, t.confirmed, t.belief, t.J_pred, existence, manoeuvre=path
+                    )
+                )
         return tuple(out)
 
     def update(

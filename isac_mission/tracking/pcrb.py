@@ -136,10 +136,12 @@ def bound_along(
     xy: FloatArray,
     eta: FloatArray,
     sensing: SensingParams,
+    offsets: FloatArray | None = None,
 ) -> BoundAlong:
     """The recursion J_1 = J_pred + J_M,1, J_pred,l+1 = (F J_l^-1 F^T + W)^-1 along a plan xy
     [L, M, 2] (m), eta [L, M], every J_M at the target state the motion model predicts for its
-    slot (x_1 = x_pred [4], x_l+1 = F x_l, steps of dt_s)."""
+    slot (x_1 = x_pred [4], x_l+1 = F x_l, steps of dt_s) plus its offset [L, 4] (m, m/s; None:
+    none), a manoeuvring belief's departure from that straight path."""
     F, W = motion.transition(dt_s), motion.process_noise(dt_s)
     x = np.asarray(x_pred, dtype=float)
     prior = np.asarray(J_pred, dtype=float)
@@ -150,11 +152,12 @@ def bound_along(
         np.empty((L, 4, 4)),
     )
     for h in range(L):
-        d = np.linalg.norm(x[None, :2] - xy[h], axis=1)
-        J = prior + measurement_information(x, xy[h], sensing.variances(d, eta[h]))
+        at = x if offsets is None else x + offsets[h]
+        d = np.linalg.norm(at[None, :2] - xy[h], axis=1)
+        J = prior + measurement_information(at, xy[h], sensing.variances(d, eta[h]))
         J = 0.5 * (J + J.T)
         P = F @ scaled_inverse(J) @ F.T + W
-        states[h], information[h], next_covariance[h] = x, J, P
+        states[h], information[h], next_covariance[h] = at, J, P
         prior = scaled_inverse(0.5 * (P + P.T))
         x = F @ x
     return BoundAlong(states, information, next_covariance)

@@ -26,7 +26,7 @@ import numpy as np
 
 from isac_mission.model.motion import MotionModel
 from isac_mission.model.radar import SensingParams
-from isac_mission.tracking.beliefs import TargetBelief
+from isac_mission.tracking.beliefs import PathOffsets, TargetBelief
 from isac_mission.tracking.cycle import CycleModel, SlotPrediction, TrackState, predict, update
 from isac_mission.tracking.pcrb import Bound
 from isac_mission.types import FloatArray, Gaussian
@@ -40,22 +40,26 @@ class TrackPrediction:
     """One track before a slot's reports: track_id, confirmed, prediction (x [4], P [4, 4]),
     prior_information J_pred [4, 4] = (F C F^T + W)^-1 of its bound (what planning sees), and
     existence in (0, 1]: how far the track is on its way to confirmation (a confirmed track 1; a
-    tentative one its hits over the hits that confirm it)."""
+    tentative one its hits over the hits that confirm it); manoeuvre: an IMM track's predicted
+    curve (`TargetBelief.manoeuvre`), None otherwise."""
 
     track_id: int
     confirmed: bool
     prediction: Gaussian
     prior_information: FloatArray
     existence: float = 1.0
+    manoeuvre: PathOffsets | None = None
 
     def belief(self, motion: MotionModel) -> TargetBelief:
-        """The track as the planner takes it (tracking/beliefs.py), predicted by `motion`."""
+        """The track as the planner takes it (tracking/beliefs.py), predicted by `motion` (and
+        its manoeuvre, an IMM track's curve)."""
         return TargetBelief(
             self.prediction.x,
             self.prior_information,
             motion,
             self.prediction.P,
             track_id=self.track_id,
+            manoeuvre=self.manoeuvre,
         )
 
 
