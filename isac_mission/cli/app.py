@@ -21,6 +21,7 @@ from rich.console import Console
 from typer.core import TyperGroup
 
 from isac_mission.config import Scenario, load_scenario
+from isac_mission.config.loading import scenario_names
 from isac_mission.errors import ConfigError
 
 console = Console()
@@ -141,7 +142,7 @@ ConfigArg = Annotated[
     Path,
     typer.Argument(
         help="Scenario YAML file (e.g. config/paper.yaml), or the name of a shipped scenario "
-        "(paper, paper-literal, constrained, multi-target)."
+        f"({', '.join(scenario_names())})."
     ),
 ]
 

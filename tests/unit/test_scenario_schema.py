@@ -36,9 +36,9 @@ ROOT = Path(__file__).resolve().parents[2]
 OLD = Path(__file__).resolve().parent / "data" / "scenarios-0.1"
 OLD_FILES = sorted(OLD.glob("*.yaml"))
 SHIPPED = sorted((ROOT / "config").glob("*.yaml"))
-SINCE_THE_NEW_FORM = {"manoeuvring.yaml"}
+SINCE_THE_NEW_FORM = {"manoeuvring.yaml", "city-48.yaml", "city-96.yaml"}
 """Scenarios first shipped after the old form was deprecated, with what it never had (a target's
-legs, the tracker's IMM): they have no old form."""
+legs, the tracker's IMM, explicit BS positions): they have no old form."""
 FILTER = re.compile(r".* is deprecated. use ")
 """pyproject.toml's filterwarnings pattern: a warning it matches is an error outside
 pytest.warns, so a test or shipped config that used an old section unnoticed fails."""
