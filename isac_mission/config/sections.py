@@ -497,6 +497,23 @@ class HorizonConfig(Section):
         "whose pairs within reach fit neither flies the per-slot plan (planning/pairs.py; "
         "docs/model.md, 'The pairs within reach').",
     )
+    decompose: Literal["none", "targets"] = Field(
+        "none",
+        description="none: one NLP for the whole fleet (the reference); targets: the UAVs "
+        "grouped by their nearest target, groups that can couple within the horizon merged, "
+        "each group planned on its own with its share of the band and the fleet's association, "
+        "the plans recombined and checked, the per-slot plan where that fails "
+        "(planning/decomposed.py).",
+    )
+
+    @model_serializer(mode="wrap")
+    def _decompose_when_set(self, handler: SerializerFunctionWrapHandler) -> Any:
+        """The section as dumped (the trace's config): decompose left out at none, so that every
+        scenario of before the key existed dumps as it did."""
+        out = handler(self)
+        if isinstance(out, dict) and out.get("decompose") == "none":
+            del out["decompose"]
+        return out
 
 
 class PlannerConfig(Section):

@@ -26,7 +26,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -51,9 +50,8 @@ from isac_mission.planning.pairs import (
     pair_bands,
     pairs_within_reach,
 )
-from isac_mission.planning.per_slot import Proposed, polish_nlp
+from isac_mission.planning.per_slot import Proposed
 from isac_mission.planning.problem import (
-    PlansOnceToWarmUp,
     SlotInput,
     moving_targets,
     slot_association,
@@ -752,29 +750,3 @@ def plan_horizon(
 def proposed_plan(inp: SlotInput, kit: SolverKit) -> SlotPlan:
     """The `proposed` plan of inp with its end velocity (the horizon's per-slot plan)."""
     return with_end_velocity(Proposed().plan(inp, kit), inp, kit.scenario)
-
-
-class Horizon(PlansOnceToWarmUp):
-    """`horizon`: slots n..n+L-1 planned together on the bound's recursion, the first flown; the
-    polished per-slot plan is its start and its fallback."""
-
-    def plan(self, inp: SlotInput, kit: SolverKit) -> SlotPlan:
-        started_s = time.perf_counter()
-        return plan_horizon(inp, partial(proposed_plan, inp, kit), kit, started_s)
-
-    def prepare(self, kit: SolverKit) -> None:
-        """The polish's NLP and the horizon's built (the warm-up slot need not reach the
-        polish), for every target count of `prepared_target_counts`, then one slot planned."""
-        if kit.scenario.planner.polish:
-            polish_nlp(kit)
-        for n_targets in prepared_target_counts(kit.scenario):
-            for band in kit_pair_bands(kit):
-                horizon_nlp(kit, band, n_targets)
-        super().prepare(kit)
-
-
-def prepared_target_counts(s: Scenario) -> range:
-    """The target counts whose NLPs `Horizon.prepare` builds ahead of a mission: 1, and on a
-    scenario of several targets every count up to its number of targets (a slot with more
-    confirmed tracks, a false one among them, builds its NLP when it first meets that count)."""
-    return range(1, len(s.targets) + 1)

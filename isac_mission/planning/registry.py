@@ -95,7 +95,7 @@ REGISTRY: tuple[Registered, ...] = (
         "horizon",
         "Horizon",
         "receding horizon: L slots planned together on the bound, the first flown",
-        "isac_mission.planning.horizon:Horizon",
+        "isac_mission.planning.horizon_method:Horizon",
     ),
 )
 """Every method, in the order reports list them."""
