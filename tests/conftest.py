@@ -94,6 +94,12 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         items[:] = kept
 
 
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """matplotlib's font cache built before any test: on a fresh machine its first import runs
+    fc-list, a process the fast tier's guard refuses to whichever test imports it first."""
+    import matplotlib.font_manager  # noqa: F401
+
+
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     """No planner thread of an in-process live mission may be solving when pytest's interpreter
     shuts down (it would abort it: isac_mission/service/ground/planner_thread.py)."""

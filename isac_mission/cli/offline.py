@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -105,6 +107,31 @@ def simulate(
             "docs/model.md, 'Live service').",
         ),
     ] = False,
+    planner_workers: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            help="Solve the decomposed horizon's groups (planner.horizon.decompose: targets) "
+            "in parallel on a local Dask cluster of this many worker processes on 127.0.0.1 "
+            "(0: in this process, one after the other). The runs are then flown in this "
+            "process (--workers is not used).",
+        ),
+    ] = 0,
+    planner_scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="Solve the decomposed horizon's groups on the Dask scheduler at this address "
+            "instead, e.g. tcp://127.0.0.1:8786 (its workers need isac-mission installed).",
+        ),
+    ] = None,
+    planner_deadline: Annotated[
+        float,
+        typer.Option(
+            min=0.001,
+            help="Seconds a slot waits for its groups on the cluster before it flies the "
+            "per-slot plan (fallback `horizon: decomposed worker lost`).",
+        ),
+    ] = 120.0,
 ) -> None:
     """Offline closed loop (Section II-C) for every method, Monte Carlo with common random numbers."""
     from isac_mission.experiment.report import simulate_report
@@ -123,16 +150,94 @@ def simulate(
     if problem is not None:
         err_console.print(f"--methods: {problem}", highlight=False)
         raise typer.Exit(2)
-    quiet_highs_banner()
-    simulate_report(
+    report = partial(
+        simulate_report,
         s,
         chosen,
         runs=runs,
         seed=s.seed if seed is None else seed,
         out_dir=out if out is not None else Path("out") / f"simulate-{s.mission_id}",
-        workers=workers,
         plots=plots,
         console=console,
+    )
+    if planner_workers == 0 and planner_scheduler is None:
+        quiet_highs_banner()
+        report(workers=workers)
+        return
+    problem = planner_cluster_problem(s, chosen)
+    if problem is not None:
+        err_console.print(f"--planner-workers/--planner-scheduler: {problem}", highlight=False)
+        raise typer.Exit(2)
+    _simulate_on_planner_cluster(s, report, planner_scheduler, planner_workers, planner_deadline)
+
+
+def planner_cluster_problem(s: Scenario, methods: list[str]) -> str | None:
+    """Why a planner cluster would solve nothing in this simulation (None: it would): the
+    decomposed horizon is the only planner that hands groups to it."""
+    if "horizon" not in methods:
+        return "only the method `horizon` solves groups on a cluster; add it to --methods"
+    if s.planner.horizon.decompose != "targets":
+        return (
+            "only the decomposed horizon solves groups on a cluster; the scenario has "
+            f"planner.horizon.decompose: {s.planner.horizon.decompose} (set it to targets)"
+        )
+    return None
+
+
+def _simulate_on_planner_cluster(
+    s: Scenario,
+    report: Callable[..., object],
+    scheduler: str | None,
+    workers: int,
+    deadline_s: float,
+) -> None:
+    """`report` (the simulation) with the decomposed horizon's groups solved on a Dask
+    cluster (isac_mission/planner_cluster.py): the runs flown in this process, the executor
+    set on the kit they plan with (experiment/runs.kit_for, one per scenario and process)
+    for the simulation and taken off after it."""
+    from rich.markup import escape
+
+    from isac_mission.errors import MissingDependencyError
+    from isac_mission.experiment.runs import kit_for
+    from isac_mission.planner_cluster import (
+        LOOPBACK,
+        cluster_description,
+        group_executor,
+        is_loopback,
+        require_dask,
+    )
+    from isac_mission.planning.decomposed import use_group_executor
+
+    try:
+        require_dask()
+    except MissingDependencyError as err:
+        err_console.print(f"[bold red]simulate[/]: {escape(str(err))}", highlight=False)
+        raise typer.Exit(2) from None
+    if scheduler is not None:
+        where = f"the scheduler {scheduler}"
+        if not is_loopback(scheduler):
+            where += " (not loopback: the groups' inputs and plans leave this machine)"
+    else:
+        where = f"a local cluster of {workers} workers on {LOOPBACK}"
+    console.print(
+        f"planner: the decomposed horizon's groups solved on {escape(where)}, deadline "
+        f"{deadline_s:g} s a slot; the runs flown in this process",
+        highlight=False,
+    )
+    quiet_highs_banner()
+    kit = kit_for(s)
+    with group_executor(scheduler, workers, deadline_s) as executor:
+        console.print(f"planner cluster: {cluster_description(executor.client)}")
+        use_group_executor(kit, executor)
+        try:
+            report(workers=1)
+        finally:
+            use_group_executor(kit, None)
+    lost = f", last: {escape(executor.last_error)}" if executor.failures else ""
+    console.print(
+        f"planner cluster: {executor.slots} slots' groups solved on it, {executor.failures} "
+        f"flew the per-slot plan (decomposed worker lost){lost}",
+        highlight=False,
     )
 
 

@@ -62,17 +62,36 @@ polish, the convex problems) is built on first use and cached in the `Decomposed
 in the fleet's kit (`plan_decomposed`), per (group size, bandwidth budget): B is built into the
 NLPs; the target count is the sub-kit's own cache key (`horizon_nlp`).
 
-Pure: no clock but perf_counter for solve_s, no RNG, no I/O.
+**Where the groups are solved** (`DecomposedHorizon.executor`). By default (None) in this
+process, one after the other, as above. A caller may set a `GroupExecutor` instead (the fleet
+kit's planner: `use_group_executor(kit, executor)`; renewed kits share it): each group's
+sub-problem is then a `GroupJob` (its sub-scenario, its SlotInput, the kit's settings and a
+fingerprint of the sub-scenario, `sub_kit_fingerprint`: picklable data only), the jobs are
+handed to `executor.map` together and their plans gathered in group order, then recombined and
+checked as above. What runs a job, wherever the executor runs it, is `solve_group_job`: the
+sub-kit from this process's own cache (`worker_sub_kit`, by fingerprint; a worker process
+builds each sub-kit once and keeps it, nothing of it crosses the wire), then `plan_horizon` as
+in the serial path, so a job's plan is the serial path's. If the executor raises (a job raised,
+a worker died, the slot's deadline passed: the executor says which), the slot flies the
+centralized per-slot plan with the reason and the fallback `horizon: decomposed worker lost`
+(`WORKER_LOST`). The executor is made and owned outside planning/ (the Dask one:
+isac_mission/planner_cluster.py).
+
+Pure: no clock but perf_counter for solve_s, no RNG, no I/O (an executor is the caller's port;
+the per-process sub-kit cache of `worker_sub_kit` is state, not I/O).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import time
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -93,6 +112,7 @@ from isac_mission.planning.horizon import (
 from isac_mission.planning.horizon_problem import LegSamples
 from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.margins import SafetyMargins
+from isac_mission.planning.nlp_model import IpoptFactory, plain_ipopt
 from isac_mission.planning.pairs import REACH_SLACK_M, horizon_reach_m, pairs_within_reach
 from isac_mission.planning.problem import (
     SlotInput,
@@ -110,6 +130,13 @@ DECOMPOSED_KEY = "horizon-decomposed"
 
 SHARE_SUM_TOL = 1e-9
 """How far the recombined shares' sum may be from 1 (14c/14d; the exact check's own slack)."""
+
+WORKER_LOST = "decomposed worker lost"
+"""The fallback kind (after `horizon: `) of a slot whose groups' executor failed: a job raised,
+a worker died or the slot's deadline passed (`DecomposedHorizon.plan` with an executor)."""
+
+WORKER_KITS_MAX = 16
+"""How many sub-kits one process keeps in `worker_sub_kit`'s cache (the oldest dropped)."""
 
 
 @dataclass(frozen=True)
@@ -379,6 +406,117 @@ class GroupPlan:
     plan: SlotPlan
 
 
+def sub_kit_fingerprint(sub: Scenario, fast: bool, n_keep_out: int) -> str:
+    """A stable key (hex SHA-256) of the sub-kit that plans the group scenario `sub` with the
+    kit settings fast and n_keep_out: its trace config (JSON, keys sorted) without the UAVs'
+    start points (no problem is built on them: one group's kit serves every slot) and R_th (a
+    renewed kit takes another: `worker_sub_kit`), with M, B, fast and n_keep_out. Equal keys
+    are checked field by field where a kit is reused (`worker_sub_kit`), so a collision costs a
+    rebuild, never a wrong kit."""
+    config = dict(sub.trace_config())
+    config.pop("uav_start_xy", None)
+    config.pop("r_th", None)
+    text = json.dumps(
+        {"config": config, "M": sub.M, "B": sub.B, "fast": fast, "n_keep_out": n_keep_out},
+        sort_keys=True,
+        default=str,
+    )
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@dataclass(frozen=True)
+class GroupJob:
+    """One group's sub-problem as an independent job: picklable data only (numbers and config,
+    no solver), what `solve_group_job` plans wherever it runs.
+
+    index: the group's place in the slot's groups (0-based); group: the group; budget: its
+    share of the fleet's band (fraction of B); scenario: the group's sub-scenario
+    (`sub_scenario`, band B * budget); inp: its SlotInput (`group_input`); fast, n_keep_out:
+    the fleet kit's settings (SolverKit); kit_key: `sub_kit_fingerprint` of them (the worker's
+    cache key)."""
+
+    index: int
+    group: Group
+    budget: float
+    scenario: Scenario
+    inp: SlotInput
+    fast: bool
+    n_keep_out: int
+    kit_key: str
+
+
+class GroupExecutor(Protocol):
+    """Where a slot's groups are solved (module doc, "Where the groups are solved")."""
+
+    def map(self, jobs: Sequence[GroupJob]) -> Sequence[SlotPlan]:
+        """Each job's plan (`solve_group_job` of it, wherever it runs), in the jobs' order;
+        raises if any job could not be planned (it raised, its worker died, the slot's
+        deadline passed), naming why."""
+        ...
+
+
+_WORKER_KITS: dict[str, SolverKit] = {}
+"""This process's sub-kits by `sub_kit_fingerprint` (`worker_sub_kit`): in a worker process,
+every sub-kit it has planned with; never pickled."""
+
+
+def worker_sub_kit(job: GroupJob, ipopt: IpoptFactory = plain_ipopt) -> SolverKit:
+    """The sub-kit for `job` from this process's cache: the one of its fingerprint where it
+    differs from job.scenario in the UAVs' start points only and was built with `ipopt`,
+    renewed (its IPOPT problems kept) where it differs in R_th too, else built (no solve
+    lock: a worker process plans one job at a time) and kept, the oldest of WORKER_KITS_MAX
+    dropped. As `DecomposedHorizon.sub_kit` does for the serial path."""
+    cached = _WORKER_KITS.get(job.kit_key)
+    if cached is not None and cached.ipopt is ipopt:
+        changed = _differences(cached.scenario, job.scenario) - {"uav_start_xy"}
+        if not changed:
+            return cached
+        if changed <= {"r_th"}:
+            renewed = cached.renewed(cached.scenario.with_changes(r_th=job.scenario.r_th))
+            _WORKER_KITS[job.kit_key] = renewed
+            return renewed
+    _WORKER_KITS.pop(job.kit_key, None)
+    while len(_WORKER_KITS) >= WORKER_KITS_MAX:
+        _WORKER_KITS.pop(next(iter(_WORKER_KITS)))
+    built = SolverKit(job.scenario, fast=job.fast, n_keep_out=job.n_keep_out, ipopt=ipopt)
+    _WORKER_KITS[job.kit_key] = built
+    return built
+
+
+def worker_kit_count() -> int:
+    """How many sub-kits this process keeps (`worker_sub_kit`)."""
+    return len(_WORKER_KITS)
+
+
+def solve_group_job(job: GroupJob, ipopt: IpoptFactory = plain_ipopt) -> SlotPlan:
+    """The plan of one group's job: `plan_horizon` on the job's input with this process's
+    sub-kit (`worker_sub_kit`, IPOPT problems built by `ipopt`) and the per-slot plan of that
+    kit as its start and fallback, as the serial path plans a group (its solve_s from here)."""
+    kit = worker_sub_kit(job, ipopt)
+    return plan_horizon(job.inp, partial(proposed_plan, job.inp, kit), kit, time.perf_counter())
+
+
+def group_jobs(
+    inp: SlotInput,
+    kit: SolverKit,
+    groups: tuple[Group, ...],
+    budgets: FloatArray,
+    bs_of_uav: IntArray,
+) -> list[GroupJob]:
+    """The slot's groups as jobs, in group order: each group's input (`group_input`, the
+    fleet's association bs_of_uav [M]) and sub-scenario (`sub_scenario`, its budget of
+    budgets [G]) with the fleet kit's settings and the sub-kit's fingerprint."""
+    jobs = []
+    for i, (group, budget) in enumerate(zip(groups, budgets, strict=True)):
+        sub_inp = group_input(inp, group, bs_of_uav)
+        sub_s = sub_scenario(kit.scenario, sub_inp.prev_xy_m, float(budget))
+        key = sub_kit_fingerprint(sub_s, kit.fast, kit.n_keep_out)
+        jobs.append(
+            GroupJob(i, group, float(budget), sub_s, sub_inp, kit.fast, kit.n_keep_out, key)
+        )
+    return jobs
+
+
 def recombine(
     s: Scenario, parts: list[GroupPlan], value: HorizonValue
 ) -> tuple[FloatArray, FloatArray, IntArray, FloatArray | None, HorizonPlan]:
@@ -457,10 +595,15 @@ def fleet_refusal(
 
 class DecomposedHorizon:
     """The decomposed horizon of one fleet kit: its sub-kits, built on first use and kept per
-    (group size, bandwidth budget); each sub-kit keeps its horizon NLPs per target count."""
+    (group size, bandwidth budget); each sub-kit keeps its horizon NLPs per target count; and
+    where its groups are solved (`executor`)."""
 
     def __init__(self) -> None:
         self._kits: dict[tuple[int, float], tuple[weakref.ref[SolverKit], SolverKit]] = {}
+        self.executor: GroupExecutor | None = None
+        """Where the groups are solved (module doc): None, in this process one after the
+        other (the sub-kits above); else handed to it as `GroupJob`s (set by the caller:
+        `use_group_executor`)."""
 
     @property
     def kit_count(self) -> int:
@@ -505,7 +648,8 @@ class DecomposedHorizon:
         """The slot's decomposed horizon plan (module doc), or the centralized per-slot plan
         with the reason where a group's horizon fell back or the recombined plan fails the
         exact check. budgets [G]: the groups' shares of the band (None: |g| / M,
-        `fleet_share_budgets`); started_s: the perf_counter time planning began (solve_s)."""
+        `fleet_share_budgets`); started_s: the perf_counter time planning began (solve_s).
+        With an `executor`, the groups are solved by it (`_planned_on`), else here in turn."""
         s = kit.scenario
         v = inp.prev_velocity_mps
         measured = np.zeros((s.M, 2)) if v is None else np.asarray(v, dtype=float)
@@ -517,6 +661,10 @@ class DecomposedHorizon:
         if len(shares) != len(groups) or abs(float(shares.sum()) - 1.0) > SHARE_SUM_TOL:
             raise ValueError(f"{len(groups)} groups need budgets summing to 1, got {shares}")
         assoc = slot_association(inp, kit)
+        executor = self.executor
+        if executor is not None:
+            jobs = group_jobs(inp, kit, groups, shares, assoc)
+            return self._planned_on(executor, jobs, inp, kit, started_s, assoc, start_velocity)
         parts = []
         for group, budget in zip(groups, shares, strict=True):
             sub_inp = group_input(inp, group, assoc)
@@ -526,6 +674,35 @@ class DecomposedHorizon:
                 sub_inp, partial(proposed_plan, sub_inp, sub_kit), sub_kit, time.perf_counter()
             )
             parts.append(GroupPlan(group, float(budget), sub_inp, plan))
+        return self._recombined(inp, kit, started_s, parts, assoc, start_velocity)
+
+    def _planned_on(
+        self,
+        executor: GroupExecutor,
+        jobs: list[GroupJob],
+        inp: SlotInput,
+        kit: SolverKit,
+        started_s: float,
+        assoc: IntArray,
+        start_velocity: FloatArray,
+    ) -> SlotPlan:
+        """The groups' jobs solved by `executor` and recombined (`_recombined`); if it raises
+        or answers with another number of plans, the centralized per-slot plan with the
+        fallback `horizon: decomposed worker lost` and the error as the reason."""
+        try:
+            plans = list(executor.map(jobs))
+            if len(plans) != len(jobs):
+                raise RuntimeError(f"{len(plans)} plans for {len(jobs)} groups")
+        except Exception as err:  # whatever the executor met, the slot flies the per-slot plan
+            why = f"decomposed: the groups' executor failed ({type(err).__name__}: {err})"
+            base = proposed_plan(inp, kit)
+            return per_slot_instead(
+                base, "horizon", why, WORKER_LOST, time.perf_counter() - started_s
+            )
+        parts = [
+            GroupPlan(job.group, job.budget, job.inp, plan)
+            for job, plan in zip(jobs, plans, strict=True)
+        ]
         return self._recombined(inp, kit, started_s, parts, assoc, start_velocity)
 
     def _recombined(
@@ -592,3 +769,11 @@ def plan_decomposed(
     `DecomposedHorizon.plan`."""
     planner = kit.built(DECOMPOSED_KEY, DecomposedHorizon)
     return planner.plan(inp, kit, started_s, budgets)
+
+
+def use_group_executor(kit: SolverKit, executor: GroupExecutor | None) -> None:
+    """Solve the groups of the fleet kit `kit`'s decomposed horizon on `executor` from its
+    next plan on (None: in this process again, the default). The executor is kept in the
+    kit's `DecomposedHorizon`, which renewed kits share (`SolverKit.renewed`); a kit of another
+    fleet (planning/fleet.KitCache's sub-fleets) has its own and needs its own call."""
+    kit.built(DECOMPOSED_KEY, DecomposedHorizon).executor = executor
