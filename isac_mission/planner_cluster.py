@@ -7,8 +7,12 @@ planning/ stays pure: it defines what a group's job is (`GroupJob`), what runs i
 adapter behind that port. `group_executor` makes a Dask `Client` (a `LocalCluster` of
 `workers` single-threaded processes, or the client of a scheduler the user names) and a
 `DaskGroupExecutor` on it, which a caller sets on the fleet kit
-(`planning.decomposed.use_group_executor`): `simulate --planner-workers/--planner-scheduler`
-today (cli/offline.py), `run`/`serve` may pass the same object.
+(`planning.decomposed.use_group_executor`): `simulate`, `run` and `serve` with
+`--planner-workers/--planner-scheduler/--planner-deadline` (cli/planner_options.py, one
+definition of the options for the three), which resolve into a `PlannerCluster`; `simulate`
+opens it around its runs (cli/offline.py), `run` and `serve` around the mission
+(service/assembly.py, whose planner deadline defaults to `live_deadline_s` of the slot's
+planning budget).
 
 On a worker, a job runs `solve_on_worker`: this process's sub-kits (SolverKit of the group's
 sub-scenario; its IPOPT NLPs take seconds to build) are cached by the sub-scenario's
@@ -37,7 +41,8 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager, suppress
+from contextlib import AbstractContextManager, contextmanager, suppress
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
@@ -56,6 +61,13 @@ DEFAULT_DEADLINE_S = 120.0
 """How long (s) a slot waits for its groups' jobs before it flies the per-slot plan: generous,
 for offline missions (a cold worker builds a group's NLPs, seconds each); a live mission
 passes its slot budget."""
+
+LIVE_DEADLINE_FRACTION = 0.5
+"""A live slot's planner deadline as a fraction of its planning budget (`live_deadline_s`): the
+rest of the budget is left for what the slot plans around the jobs (the groups, the
+association, the recombination and its exact check) and, when the cluster is late, for the
+centralized per-slot plan it then flies, so that a late cluster costs the slot a fallback
+(`horizon: decomposed worker lost`), not a plan past its budget (a hold, status `timeout`)."""
 
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 
@@ -209,6 +221,66 @@ def cluster_description(client: Client) -> str:
     workers = info.get("workers", {})
     threads = sum(int(w.get("nthreads", 0)) for w in workers.values())
     return f"scheduler {info['address']}, {len(workers)} workers ({threads} threads)"
+
+
+def live_deadline_s(plan_budget_s: float | None) -> float:
+    """The default planner deadline (s) of a live slot whose planning may take plan_budget_s
+    wall seconds: LIVE_DEADLINE_FRACTION of it; without a budget (None) DEFAULT_DEADLINE_S, as
+    offline (a cold worker builds a group's NLPs; a dead cluster still costs a fallback, never
+    a mission stuck on a slot)."""
+    if plan_budget_s is None:
+        return DEFAULT_DEADLINE_S
+    return LIVE_DEADLINE_FRACTION * plan_budget_s
+
+
+@dataclass(frozen=True)
+class PlannerCluster:
+    """Where a command solves the decomposed horizon's groups, as its options gave it
+    (`--planner-workers`, `--planner-scheduler`, `--planner-deadline`): the scheduler at
+    `scheduler` (tcp://HOST:PORT) if given, else a local cluster of `workers` (>= 1)
+    single-threaded processes on 127.0.0.1; deadline_s: seconds a slot waits for its groups
+    (None: the command's default, `deadline_for`)."""
+
+    workers: int = 2
+    scheduler: str | None = None
+    deadline_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.scheduler is None and self.workers < 1:
+            raise ValueError(f"workers must be >= 1 for a local cluster (got {self.workers})")
+        if self.deadline_s is not None and not self.deadline_s > 0:
+            raise ValueError(f"the deadline must be > 0 s (got {self.deadline_s})")
+
+    @property
+    def leaves_the_machine(self) -> bool:
+        """Whether the groups' inputs and plans leave this machine (a non-loopback scheduler,
+        the user's explicit opt-in)."""
+        return self.scheduler is not None and not is_loopback(self.scheduler)
+
+    @property
+    def where(self) -> str:
+        """Where the groups are solved, in words (naming a scheduler off this machine)."""
+        if self.scheduler is None:
+            return f"a local cluster of {self.workers} workers on {LOOPBACK}"
+        if self.leaves_the_machine:
+            return (
+                f"the scheduler {self.scheduler} (not loopback: the groups' inputs and plans "
+                "leave this machine, unencrypted)"
+            )
+        return f"the scheduler {self.scheduler}"
+
+    def deadline_for(self, plan_budget_s: float | None = None) -> float:
+        """The deadline (s) a slot waits for its groups: deadline_s if given, else
+        `live_deadline_s(plan_budget_s)` (None, offline or a live slot without a budget:
+        DEFAULT_DEADLINE_S)."""
+        return self.deadline_s if self.deadline_s is not None else live_deadline_s(plan_budget_s)
+
+    def executor(
+        self, plan_budget_s: float | None = None
+    ) -> AbstractContextManager[DaskGroupExecutor]:
+        """`group_executor` of this cluster with `deadline_for(plan_budget_s)` (a context
+        manager yielding a DaskGroupExecutor; the local cluster stopped on exit)."""
+        return group_executor(self.scheduler, self.workers, self.deadline_for(plan_budget_s))
 
 
 @contextmanager

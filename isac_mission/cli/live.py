@@ -26,6 +26,12 @@ from isac_mission.cli.app import (
     err_console,
     load_or_exit,
 )
+from isac_mission.cli.planner_options import (
+    PlannerDeadlineOpt,
+    PlannerSchedulerOpt,
+    PlannerWorkersOpt,
+    checked_planner_cluster,
+)
 from isac_mission.cli.ports import (
     ZENOH_LISTEN_HINT,
     ZENOH_PORT_HINT,
@@ -108,7 +114,8 @@ class LiveCommand:
     may take (<= 0: no limit); link_outages, link_impairment: the embedded world's
     `--inject-link-loss` and `--impair-link`; vehicle_links: `serve --vehicle-link`;
     serve_console, console_address, console_public: the live console (default address
-    127.0.0.1:8080 + port_offset)."""
+    127.0.0.1:8080 + port_offset); planner_workers, planner_scheduler, planner_deadline_s:
+    the planner cluster (`cli/planner_options.py`; 0, None, None: none)."""
 
     config: Path
     serve_only: bool
@@ -132,6 +139,9 @@ class LiveCommand:
     serve_console: bool = False
     console_address: str | None = None
     console_public: bool = False
+    planner_workers: int = 0
+    planner_scheduler: str | None = None
+    planner_deadline_s: float | None = None
 
 
 def _live(command: LiveCommand) -> None:
@@ -196,6 +206,14 @@ def _checked_options(command: LiveCommand, s: Scenario) -> tuple[LiveOptions, st
     if problem is not None:
         err_console.print(f"--method: {problem}", highlight=False)
         raise typer.Exit(2)
+    planner_cluster = checked_planner_cluster(
+        s,
+        [method],
+        f"this mission flies `{method}` (--method horizon)",
+        command.planner_workers,
+        command.planner_scheduler,
+        command.planner_deadline_s,
+    )
     if command.resume:
         problem = resume_problem(s, out_dir / f"trace_{method}.jsonl", method)
         if problem is not None:
@@ -248,6 +266,7 @@ def _checked_options(command: LiveCommand, s: Scenario) -> tuple[LiveOptions, st
         plan_budget_s=command.plan_budget_s if command.plan_budget_s > 0 else None,
         link_outages=command.link_outages,
         link_impairment=command.link_impairment,
+        planner_cluster=planner_cluster,
     )
     return opts, ports.console
 
@@ -289,6 +308,9 @@ def run(
     console_address: LiveConsoleOpt = None,
     no_console: NoConsoleOpt = False,
     console_public: PublicOpt = False,
+    planner_workers: PlannerWorkersOpt = 0,
+    planner_scheduler: PlannerSchedulerOpt = None,
+    planner_deadline: PlannerDeadlineOpt = None,
 ) -> None:
     """The live system in one process: simulated vehicles (MAVLink), target and sensing, MAVLink
     bridges and the ground loop, over real loopback UDP and Zenoh."""
@@ -313,6 +335,9 @@ def run(
             serve_console=not no_console,
             console_address=console_address,
             console_public=console_public,
+            planner_workers=planner_workers,
+            planner_scheduler=planner_scheduler,
+            planner_deadline_s=planner_deadline,
         )
     )
 
@@ -351,6 +376,9 @@ def serve(
     console_address: LiveConsoleOpt = None,
     no_console: NoConsoleOpt = False,
     console_public: PublicOpt = False,
+    planner_workers: PlannerWorkersOpt = 0,
+    planner_scheduler: PlannerSchedulerOpt = None,
+    planner_deadline: PlannerDeadlineOpt = None,
 ) -> None:
     """The ground loop and the MAVLink bridges, for vehicles and sensing that run elsewhere
     (`isac-mission sim`, or real UAVs). The clock comes from the world over Zenoh."""
@@ -370,6 +398,9 @@ def serve(
             serve_console=not no_console,
             console_address=console_address,
             console_public=console_public,
+            planner_workers=planner_workers,
+            planner_scheduler=planner_scheduler,
+            planner_deadline_s=planner_deadline,
         )
     )
 

@@ -12,11 +12,18 @@ import typer
 from rich.table import Table
 
 from isac_mission.cli.app import ConfigArg, app, console, err_console, load_or_exit
+from isac_mission.cli.planner_options import (
+    PlannerDeadlineOpt,
+    PlannerSchedulerOpt,
+    PlannerWorkersOpt,
+    checked_planner_cluster,
+)
 from isac_mission.planning.registry import max_targets, methods_help
 from isac_mission.quiet import quiet_highs_banner
 
 if TYPE_CHECKING:
     from isac_mission.config import Scenario
+    from isac_mission.planner_cluster import PlannerCluster
 
 DEFAULT_METHODS = ("proposed", "sd", "aba", "crb", "horizon")
 
@@ -107,31 +114,9 @@ def simulate(
             "docs/model.md, 'Live service').",
         ),
     ] = False,
-    planner_workers: Annotated[
-        int,
-        typer.Option(
-            min=0,
-            help="Solve the decomposed horizon's groups (planner.horizon.decompose: targets) "
-            "in parallel on a local Dask cluster of this many worker processes on 127.0.0.1 "
-            "(0: in this process, one after the other). The runs are then flown in this "
-            "process (--workers is not used).",
-        ),
-    ] = 0,
-    planner_scheduler: Annotated[
-        str | None,
-        typer.Option(
-            help="Solve the decomposed horizon's groups on the Dask scheduler at this address "
-            "instead, e.g. tcp://127.0.0.1:8786 (its workers need isac-mission installed).",
-        ),
-    ] = None,
-    planner_deadline: Annotated[
-        float,
-        typer.Option(
-            min=0.001,
-            help="Seconds a slot waits for its groups on the cluster before it flies the "
-            "per-slot plan (fallback `horizon: decomposed worker lost`).",
-        ),
-    ] = 120.0,
+    planner_workers: PlannerWorkersOpt = 0,
+    planner_scheduler: PlannerSchedulerOpt = None,
+    planner_deadline: PlannerDeadlineOpt = None,
 ) -> None:
     """Offline closed loop (Section II-C) for every method, Monte Carlo with common random numbers."""
     from isac_mission.experiment.report import simulate_report
@@ -160,73 +145,43 @@ def simulate(
         plots=plots,
         console=console,
     )
-    if planner_workers == 0 and planner_scheduler is None:
+    cluster = checked_planner_cluster(
+        s,
+        chosen,
+        "add it to --methods",
+        planner_workers,
+        planner_scheduler,
+        planner_deadline,
+    )
+    if cluster is None:
         quiet_highs_banner()
         report(workers=workers)
         return
-    problem = planner_cluster_problem(s, chosen)
-    if problem is not None:
-        err_console.print(f"--planner-workers/--planner-scheduler: {problem}", highlight=False)
-        raise typer.Exit(2)
-    _simulate_on_planner_cluster(s, report, planner_scheduler, planner_workers, planner_deadline)
-
-
-def planner_cluster_problem(s: Scenario, methods: list[str]) -> str | None:
-    """Why a planner cluster would solve nothing in this simulation (None: it would): the
-    decomposed horizon is the only planner that hands groups to it."""
-    if "horizon" not in methods:
-        return "only the method `horizon` solves groups on a cluster; add it to --methods"
-    if s.planner.horizon.decompose != "targets":
-        return (
-            "only the decomposed horizon solves groups on a cluster; the scenario has "
-            f"planner.horizon.decompose: {s.planner.horizon.decompose} (set it to targets)"
-        )
-    return None
+    _simulate_on_planner_cluster(s, report, cluster)
 
 
 def _simulate_on_planner_cluster(
-    s: Scenario,
-    report: Callable[..., object],
-    scheduler: str | None,
-    workers: int,
-    deadline_s: float,
+    s: Scenario, report: Callable[..., object], cluster: PlannerCluster
 ) -> None:
-    """`report` (the simulation) with the decomposed horizon's groups solved on a Dask
-    cluster (isac_mission/planner_cluster.py): the runs flown in this process, the executor
-    set on the kit they plan with (experiment/runs.kit_for, one per scenario and process)
-    for the simulation and taken off after it."""
+    """`report` (the simulation) with the decomposed horizon's groups solved on `cluster`
+    (isac_mission/planner_cluster.py; its deadline `deadline_for()`, 120 s by default): the
+    runs flown in this process, the executor set on the kit they plan with
+    (experiment/runs.kit_for, one per scenario and process) for the simulation and taken off
+    after it."""
     from rich.markup import escape
 
-    from isac_mission.errors import MissingDependencyError
     from isac_mission.experiment.runs import kit_for
-    from isac_mission.planner_cluster import (
-        LOOPBACK,
-        cluster_description,
-        group_executor,
-        is_loopback,
-        require_dask,
-    )
+    from isac_mission.planner_cluster import cluster_description
     from isac_mission.planning.decomposed import use_group_executor
 
-    try:
-        require_dask()
-    except MissingDependencyError as err:
-        err_console.print(f"[bold red]simulate[/]: {escape(str(err))}", highlight=False)
-        raise typer.Exit(2) from None
-    if scheduler is not None:
-        where = f"the scheduler {scheduler}"
-        if not is_loopback(scheduler):
-            where += " (not loopback: the groups' inputs and plans leave this machine)"
-    else:
-        where = f"a local cluster of {workers} workers on {LOOPBACK}"
     console.print(
-        f"planner: the decomposed horizon's groups solved on {escape(where)}, deadline "
-        f"{deadline_s:g} s a slot; the runs flown in this process",
+        f"planner: the decomposed horizon's groups solved on {escape(cluster.where)}, "
+        f"deadline {cluster.deadline_for():g} s a slot; the runs flown in this process",
         highlight=False,
     )
     quiet_highs_banner()
     kit = kit_for(s)
-    with group_executor(scheduler, workers, deadline_s) as executor:
+    with cluster.executor() as executor:
         console.print(f"planner cluster: {cluster_description(executor.client)}")
         use_group_executor(kit, executor)
         try:

@@ -774,6 +774,6 @@ def plan_decomposed(
 def use_group_executor(kit: SolverKit, executor: GroupExecutor | None) -> None:
     """Solve the groups of the fleet kit `kit`'s decomposed horizon on `executor` from its
     next plan on (None: in this process again, the default). The executor is kept in the
-    kit's `DecomposedHorizon`, which renewed kits share (`SolverKit.renewed`); a kit of another
-    fleet (planning/fleet.KitCache's sub-fleets) has its own and needs its own call."""
+    kit's `DecomposedHorizon`, which renewed kits share (`SolverKit.renewed`); the kits of the
+    smaller fleets (planning/fleet.KitCache's) take it from the full fleet's kit."""
     kit.built(DECOMPOSED_KEY, DecomposedHorizon).executor = executor

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from isac_mission.config import Scenario
+from isac_mission.planning.decomposed import DECOMPOSED_KEY, DecomposedHorizon, use_group_executor
 from isac_mission.planning.fallback import NO_BS, OPERATOR_HOLD, hold_plan
 from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.registry import planner
@@ -45,7 +46,13 @@ the five), at M = 12 the one-out fleet only (8 s)."""
 class KitCache:
     """Solver kits per set of active vehicles (the full fleet's kit is given). Kits of the same
     size share their IPOPT problems (they depend on the fleet's size and the number of keep-out
-    points, not on which vehicles), kept in the full kit so that renewed kits keep them too."""
+    points, not on which vehicles), kept in the full kit so that renewed kits keep them too.
+
+    A sub-fleet's kit solves the decomposed horizon's groups where the full kit does: the
+    full kit's executor (`decomposed.use_group_executor`: a planner cluster, or None for this
+    process) is passed to every kit `for_active` returns, as of that call. The full kit is the
+    one place the executor is set: every KitCache made on it or on a kit renewed from it (an
+    operator's R_th, a timed-out plan's renewal: they share its DecomposedHorizon) follows it."""
 
     def __init__(
         self, full: SolverKit, method: Method = "proposed", base_keep_out: int = 0
@@ -74,7 +81,16 @@ class KitCache:
             kit = self._sub_kit(active)
             warm_up(kit, self.method)
             self._kits[active] = kit
+        self._groups_where_the_full_kit_solves_them(kit)
         return kit
+
+    def _groups_where_the_full_kit_solves_them(self, kit: SolverKit) -> None:
+        """Set the full kit's group executor on the sub-fleet's kit `kit` (class doc); nothing
+        for a scenario whose horizon is not decomposed (no executor to pass)."""
+        if self.full.scenario.planner.horizon.decompose != "targets":
+            return
+        executor = self.full.built(DECOMPOSED_KEY, DecomposedHorizon).executor
+        use_group_executor(kit, executor)
 
     def build_ahead(self, budget_s: float = BUILD_AHEAD_BUDGET_S) -> list[int]:
         """Build the IPOPT problems of the fleets with one, two, ... vehicles out (an operator's

@@ -12,14 +12,24 @@ Everything talks over real loopback UDP MAVLink and a real Zenoh session. Missio
 (docs/service.md): the bridges arm the vehicles, take off to H, fly to the start points and enter
 offboard; the world starts slot 0 when all of them are there (`start="offboard"`); the ground
 loop then plans slot 1, and so on to slot N. At the end, or on a stop request, the vehicles land.
+
+The planner cluster (`LiveOptions.planner_cluster`, `--planner-workers/--planner-scheduler`;
+isac_mission/planner_cluster.py): `run_mission` starts it (or connects to the scheduler)
+before anything else of the mission and closes it after everything, the landing included,
+however the mission ends (`_planner_executor`); `fly_mission` sets its executor on the full
+fleet's kit, where every kit the ground loop plans with finds it (the kits renewed for an
+operator's R_th or after a timeout share it: SolverKit.renewed; a sub-fleet's kit takes it from
+the full kit: planning/fleet.KitCache). Its deadline defaults to `live_deadline_s` of the
+slot's planning budget.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import contextvars
 import logging
-from collections.abc import Callable, Coroutine
+from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,6 +47,8 @@ from isac_mission.mavwire.ports import (
 )
 from isac_mission.mavwire.serial_link import parse_vehicle_links
 from isac_mission.nlp_cache import CompiledNlpCache
+from isac_mission.planner_cluster import DaskGroupExecutor, PlannerCluster, cluster_description
+from isac_mission.planning.decomposed import GroupExecutor, use_group_executor
 from isac_mission.planning.fleet import prepare_fleet
 from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.slot import Method
@@ -61,6 +73,11 @@ CLOCK_WAIT_S = 60.0
 """Wall seconds the mission waits for the world's clock before it gives up."""
 WORLD_STOP_S = 30.0
 """Wall seconds a world beside the service may take to stop once the mission has ended."""
+CLUSTER_SLOTS = "planner cluster slots"
+"""The report's counter of the slots whose groups were all solved on the planner cluster."""
+CLUSTER_FALLBACKS = "planner cluster fallbacks"
+"""The report's counter of the slots the planner cluster failed (a job raised, a worker died,
+the deadline passed): each flew the per-slot plan, fallback `horizon: decomposed worker lost`."""
 
 
 @dataclass(frozen=True)
@@ -109,6 +126,10 @@ class LiveOptions:
     (isac_mission.config.impairment)."""
     plan_budget_s: float | None = 1.0
     """Wall seconds a slot's planning may take (GroundSettings.plan_budget_s)."""
+    planner_cluster: PlannerCluster | None = None
+    """Where the decomposed horizon's groups are solved (None: in this process, one after the
+    other): a local Dask cluster or a scheduler's, for the mission (module doc); its deadline,
+    when not given, `live_deadline_s(plan_budget_s)`."""
 
     @property
     def trace_path(self) -> Path:
@@ -192,10 +213,18 @@ async def run_mission(
     stopping: Stopping,
     progress: Progress = SILENT,
     world: WorldBeside | None = None,
+    executor: GroupExecutor | None = None,
 ) -> LiveResult:
-    """The live mission: the ground's Zenoh session listening on `ground_endpoint` (and
-    connecting to `opts.zenoh_connect`), `world` beside the service when given (None: the world,
-    or real vehicles and sensing, run elsewhere: `serve`), and `fly_mission` on the session."""
+    """The live mission: the planner cluster of `opts.planner_cluster` started (module doc),
+    the ground's Zenoh session listening on `ground_endpoint` (and connecting to
+    `opts.zenoh_connect`), `world` beside the service when given (None: the world, or real
+    vehicles and sensing, run elsewhere: `serve`), and `fly_mission` on the session; then the
+    cluster closed. executor: where the decomposed horizon's groups are solved, owned by the
+    caller (a notebook's, a test's), instead of opts.planner_cluster (ValueError with both).
+    A Dask executor's tally is put in the report's counters at the end (CLUSTER_SLOTS,
+    CLUSTER_FALLBACKS)."""
+    if executor is not None and opts.planner_cluster is not None:
+        raise ValueError("give the mission an executor or a planner cluster, not both")
     hub = secured_settings(
         s.security.zenoh,
         s.mission_id,
@@ -203,17 +232,84 @@ async def run_mission(
         listen=(ground_endpoint(s, opts),),
         connect=opts.zenoh_connect,
     )
-    with ZenohBus.open(hub) as bus:
-        if world is None:
-            return await fly_mission(s, opts, bus, stopping, progress)
-        world_stop = asyncio.Event()
-        world_task = asyncio.create_task(world.run(world_stop))
+    async with _planner_executor(opts, progress) as opened:
+        groups = executor if executor is not None else opened
+        with ZenohBus.open(hub) as bus:
+            if world is None:
+                result = await fly_mission(s, opts, bus, stopping, progress, executor=groups)
+            else:
+                world_stop = asyncio.Event()
+                world_task = asyncio.create_task(world.run(world_stop))
+                try:
+                    result = await fly_mission(s, opts, bus, stopping, progress, world, groups)
+                finally:
+                    world_stop.set()
+                    async with asyncio.timeout(WORLD_STOP_S):
+                        await world_task
+        if isinstance(groups, DaskGroupExecutor):
+            result.report.counters[CLUSTER_SLOTS] = groups.slots
+            result.report.counters[CLUSTER_FALLBACKS] = groups.failures
+        return result
+
+
+@contextlib.asynccontextmanager
+async def _planner_executor(
+    opts: LiveOptions, progress: Progress
+) -> AsyncIterator[GroupExecutor | None]:
+    """The executor of `opts.planner_cluster` for the mission (None without one): the local
+    cluster started, or the scheduler connected to, on a thread (it takes seconds; a scheduler
+    off this machine is a warning in the log), and closed on the way out whatever ended the
+    mission (a failure, a stop, a cancellation), with a line of what it solved."""
+    cluster = opts.planner_cluster
+    if cluster is None:
+        yield None
+        return
+    deadline_s = cluster.deadline_for(opts.plan_budget_s)
+    if cluster.leaves_the_machine:
+        log.warning(
+            "planner cluster: %s is not on this machine's loopback: the decomposed horizon's "
+            "groups (their inputs and plans) leave this machine, unencrypted",
+            cluster.scheduler,
+        )
+    progress.status(f"starting the planner cluster: {cluster.where}")
+    loop = asyncio.get_running_loop()
+    stack = contextlib.ExitStack()
+    # Opened and closed on threads, in one context (the Client keeps a context variable that
+    # it resets where it was set); shielded: a cancellation while the cluster starts still
+    # closes it once it is up.
+    context = contextvars.copy_context()
+
+    def close() -> Awaitable[None]:
+        return asyncio.shield(loop.run_in_executor(None, context.run, stack.close))
+
+    starting = loop.run_in_executor(
+        None, context.run, stack.enter_context, cluster.executor(opts.plan_budget_s)
+    )
+    try:
+        executor = await asyncio.shield(starting)
+    except BaseException:
+        with contextlib.suppress(BaseException):
+            await starting
+        await close()
+        raise
+    try:
+        where = await asyncio.to_thread(cluster_description, executor.client)
+        log.info("planner cluster: %s, deadline %g s a slot", where, deadline_s)
+        progress.status(f"planner cluster: {where}, deadline {deadline_s:g} s a slot")
+        yield executor
+    finally:
         try:
-            return await fly_mission(s, opts, bus, stopping, progress, world)
-        finally:
-            world_stop.set()
-            async with asyncio.timeout(WORLD_STOP_S):
-                await world_task
+            await close()
+        except Exception as err:  # the mission's own outcome stands; say what was left
+            log.warning("planner cluster: closing it failed (%s: %s)", type(err).__name__, err)
+        lost = f", last: {executor.last_error}" if executor.failures else ""
+        log.info(
+            "planner cluster closed: %d slots' groups solved on it, %d flew the per-slot plan "
+            "(decomposed worker lost)%s",
+            executor.slots,
+            executor.failures,
+            lost,
+        )
 
 
 async def run_serve(
@@ -225,12 +321,14 @@ async def run_serve(
     on_tracks: Callable[[TracksSlot, float], None] | None = None,
     leave: asyncio.Event | None = None,
     world: WorldBeside | None = None,
+    executor: GroupExecutor | None = None,
 ) -> LiveResult:
     """`run_mission` with the world elsewhere (or `world` beside it), its ports given as plain
     events and callbacks (for scripts and tests; `leave` None: the landing is always waited
-    for)."""
+    for; executor: as `run_mission`'s)."""
     stopping = Stopping(stop, leave or asyncio.Event())
-    return await run_mission(s, opts, stopping, Progress(on_status, on_slot, on_tracks), world)
+    progress = Progress(on_status, on_slot, on_tracks)
+    return await run_mission(s, opts, stopping, progress, world, executor)
 
 
 async def fly_mission(
@@ -240,11 +338,15 @@ async def fly_mission(
     stopping: Stopping,
     progress: Progress = SILENT,
     world: WorldBeside | None = None,
+    executor: GroupExecutor | None = None,
 ) -> LiveResult:
     """Bridges + ground loop on `bus`; the world (or real vehicles and sensing) elsewhere, or
-    `world` beside it (its tracker start is taken)."""
+    `world` beside it (its tracker start is taken); the decomposed horizon's groups solved on
+    `executor` (None: in this process), set on the full fleet's kit (module doc)."""
     planning = planning_scenario(s, opts)
     kit, compiled, ahead = await _solver_kit(planning, opts.method)
+    if executor is not None:
+        use_group_executor(kit, executor)
     progress.status(f"planner problems built for {planning.M} vehicles and, ahead, for {ahead}")
     time_source = ClockSimTime()
     fleet = BridgeFleet.from_scenario(
