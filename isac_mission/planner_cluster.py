@@ -39,14 +39,13 @@ scheduler address explicitly (a non-loopback address is the user's opt-in: `is_l
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, contextmanager, suppress
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
-from isac_mission.errors import MissingDependencyError
+from isac_mission import dask_cluster
 from isac_mission.planning.decomposed import GroupJob, solve_group_job
 from isac_mission.planning.nlp_model import IpoptFactory
 from isac_mission.types import SlotPlan
@@ -54,8 +53,6 @@ from isac_mission.types import SlotPlan
 if TYPE_CHECKING:
     from distributed import Client
 
-LOOPBACK = "127.0.0.1"
-PLANNER_EXTRA = "isac-mission[sweep]"
 
 DEFAULT_DEADLINE_S = 120.0
 """How long (s) a slot waits for its groups' jobs before it flies the per-slot plan: generous,
@@ -77,14 +74,9 @@ GroupSolve = Callable[[GroupJob], SlotPlan]
 
 def require_dask() -> None:
     """Raise MissingDependencyError (naming the extra) unless dask and distributed import."""
-    try:
-        import dask  # noqa: F401
-        import distributed  # noqa: F401
-    except ImportError as err:
-        raise MissingDependencyError(
-            f"solving the planner's groups on Dask needs dask and distributed ({err}): install "
-            f"the extra with `pip install '{PLANNER_EXTRA}'`, or plan without it (the default)"
-        ) from None
+    dask_cluster.require_dask(
+        "solving the planner's groups on Dask", "plan without it (the default)"
+    )
 
 
 def is_loopback(address: str) -> bool:
@@ -98,42 +90,13 @@ def is_loopback(address: str) -> bool:
 def planner_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Client]:
     """A Client of `scheduler` (e.g. tcp://127.0.0.1:8786) if given, else of a LocalCluster
     of `workers` single-threaded worker processes on 127.0.0.1 with the dashboards off and no
-    retry of a job whose worker died (module doc). Raises MissingDependencyError without Dask,
-    ValueError for workers < 1 without a scheduler."""
+    retry of a job whose worker died (module doc; isac_mission/dask_cluster.py). Raises
+    MissingDependencyError without Dask, ValueError for workers < 1 without a scheduler."""
     require_dask()
-    from distributed import Client, LocalCluster
-
-    if scheduler is not None:
-        with Client(scheduler) as client:  # type: ignore[no-untyped-call]
-            yield client
-        return
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1 for a local cluster (got {workers})")
-    import dask
-
-    # No statistical profiler (it samples every thread every 10 ms: CPU the solves need), and a
-    # job whose worker died is not retried: the slot flies its per-slot plan instead, and a job
-    # that kills its worker (a crash in IPOPT on this input) cannot take the others with it.
-    # Nannies pass this config on to the workers they start.
-    settings = {
-        "distributed.worker.profile.enabled": False,
-        "distributed.scheduler.allowed-failures": 0,
-    }
-    with dask.config.set(settings):
-        cluster = LocalCluster(  # type: ignore[no-untyped-call]
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            host=LOOPBACK,
-            scheduler_port=0,
-            dashboard_address=None,
-            worker_dashboard_address=None,
-            silence_logs=logging.ERROR,
-            # The scheduler always serves health/metrics over HTTP: keep it on a random
-            # loopback port (not 8787) and without the Bokeh dashboard.
-            scheduler_kwargs={"dashboard": False, "dashboard_address": f"{LOOPBACK}:0"},
-        )
-    with cluster, Client(cluster) as client:  # type: ignore[no-untyped-call]
+    # A job whose worker died is not retried: the slot flies its per-slot plan instead, and a
+    # job that kills its worker (a crash in IPOPT on this input) cannot take the others with it.
+    no_retry = {"distributed.scheduler.allowed-failures": 0}
+    with dask_cluster.dask_client(scheduler, workers, no_retry) as client:
         yield client
 
 
@@ -261,7 +224,7 @@ class PlannerCluster:
     def where(self) -> str:
         """Where the groups are solved, in words (naming a scheduler off this machine)."""
         if self.scheduler is None:
-            return f"a local cluster of {self.workers} workers on {LOOPBACK}"
+            return f"a local cluster of {self.workers} workers on {dask_cluster.LOOPBACK}"
         if self.leaves_the_machine:
             return (
                 f"the scheduler {self.scheduler} (not loopback: the groups' inputs and plans "

@@ -110,7 +110,7 @@ from isac_mission.planning.horizon import (
     sample_clearances,
 )
 from isac_mission.planning.horizon_problem import LegSamples
-from isac_mission.planning.kit import SolverKit
+from isac_mission.planning.kit import SolverKit, changed_fields
 from isac_mission.planning.margins import SafetyMargins
 from isac_mission.planning.nlp_model import IpoptFactory, plain_ipopt
 from isac_mission.planning.pairs import REACH_SLACK_M, horizon_reach_m, pairs_within_reach
@@ -384,17 +384,6 @@ def group_input(inp: SlotInput, group: Group, bs_of_uav: IntArray) -> SlotInput:
     )
 
 
-def _differences(a: Scenario, b: Scenario) -> set[str]:
-    """The fields in which scenarios a and b differ (arrays by value)."""
-    out = set()
-    for f in dataclasses.fields(a):
-        x, y = getattr(a, f.name), getattr(b, f.name)
-        same = x is y or (np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y)
-        if not same:
-            out.add(f.name)
-    return out
-
-
 @dataclass(frozen=True)
 class GroupPlan:
     """A group's plan: the group, its bandwidth budget (fraction of B), its input and its plan
@@ -468,7 +457,7 @@ def worker_sub_kit(job: GroupJob, ipopt: IpoptFactory = plain_ipopt) -> SolverKi
     dropped. As `DecomposedHorizon.sub_kit` does for the serial path."""
     cached = _WORKER_KITS.get(job.kit_key)
     if cached is not None and cached.ipopt is ipopt:
-        changed = _differences(cached.scenario, job.scenario) - {"uav_start_xy"}
+        changed = changed_fields(cached.scenario, job.scenario) - {"uav_start_xy"}
         if not changed:
             return cached
         if changed <= {"r_th"}:
@@ -621,7 +610,7 @@ class DecomposedHorizon:
         entry = self._kits.get(key)
         if entry is not None:
             owner, cached = entry
-            changed = _differences(cached.scenario, sub) - {"uav_start_xy"}
+            changed = changed_fields(cached.scenario, sub) - {"uav_start_xy"}
             if not changed and owner() is kit:
                 return cached
             if changed <= {"r_th"}:

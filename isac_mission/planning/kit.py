@@ -85,7 +85,7 @@ class SolverKit:
         their 14a rows (nlp_model.lower_at_rate); ValueError otherwise. Rebuilt instead, they made the next plans of a live mission time
         out (seconds of build, a compile in the background)."""
         s = self.scenario if scenario is None else scenario
-        if s is not self.scenario and (changed := _changed_fields(self.scenario, s) - {"r_th"}):
+        if s is not self.scenario and (changed := changed_fields(self.scenario, s) - {"r_th"}):
             raise ValueError(f"a renewed kit may change R_th only, not {', '.join(changed)}")
         kit = SolverKit(
             s,
@@ -98,7 +98,7 @@ class SolverKit:
         return kit
 
 
-def _changed_fields(a: Scenario, b: Scenario) -> set[str]:
+def changed_fields(a: Scenario, b: Scenario) -> set[str]:
     """The names of the fields in which scenarios a and b differ (arrays by value)."""
     out = set()
     for f in dataclasses.fields(a):

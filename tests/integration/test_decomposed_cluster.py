@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import psutil
 import pytest
 import yaml
 from distributed import Client
@@ -35,6 +34,7 @@ from isac_mission.planning.kit import SolverKit
 from isac_mission.planning.slot import plan_slot
 from isac_mission.types import SlotPlan
 from tests.support import two_clusters as scene
+from tests.support.ports import listening_hosts
 
 SLOTS = 4
 """Consecutive slots flown on each path."""
@@ -49,17 +49,6 @@ def client() -> Iterator[Client]:
         yield c
 
 
-def _listening_hosts() -> set[str]:
-    """IP addresses of every listening / unconnected inet socket of this process and children."""
-    me = psutil.Process()
-    hosts: set[str] = set()
-    for proc in [me, *me.children(recursive=True)]:
-        for conn in proc.net_connections(kind="inet"):
-            if conn.status == psutil.CONN_LISTEN or not conn.raddr:
-                hosts.add(conn.laddr.ip)
-    return hosts
-
-
 def _fly(kit: SolverKit, slots: int = SLOTS, manoeuvre: bool = False) -> list[SlotPlan]:
     """`slots` consecutive slots of the two-clusters scene planned with `kit` (`horizon`),
     each flown exactly; manoeuvre: the targets' beliefs carry an IMM path (ImmPath)."""
@@ -70,22 +59,6 @@ def _fly(kit: SolverKit, slots: int = SLOTS, manoeuvre: bool = False) -> list[Sl
         plans.append(plan_slot(inp, kit, "horizon"))
         inp = scene.next_input(s, slot + 1, plans[-1], manoeuvre=manoeuvre)
     return plans
-
-
-def _assert_same_plan(a: SlotPlan, b: SlotPlan) -> None:
-    """Positions, shares, BSs, end velocities, the bound and the horizon: exactly equal."""
-    np.testing.assert_array_equal(a.uav_xy_m, b.uav_xy_m)
-    np.testing.assert_array_equal(a.bandwidth_share, b.bandwidth_share)
-    np.testing.assert_array_equal(a.bs_of_uav, b.bs_of_uav)
-    assert a.pcrb_trace == b.pcrb_trace
-    assert (a.uav_velocity_mps is None) == (b.uav_velocity_mps is None)
-    if a.uav_velocity_mps is not None and b.uav_velocity_mps is not None:
-        np.testing.assert_array_equal(a.uav_velocity_mps, b.uav_velocity_mps)
-    assert a.horizon is not None and b.horizon is not None
-    np.testing.assert_array_equal(a.horizon.uav_xy_m, b.horizon.uav_xy_m)
-    np.testing.assert_array_equal(a.horizon.bandwidth_share, b.horizon.bandwidth_share)
-    np.testing.assert_array_equal(a.horizon.pcrb_trace, b.horizon.pcrb_trace)
-    assert a.report.fallback == b.report.fallback
 
 
 @pytest.mark.timeout(120)
@@ -115,7 +88,7 @@ def test_two_workers_plan_every_slot_as_the_serial_path_does(
     on_cluster = _fly(kit, manoeuvre=manoeuvre)
     assert executor.slots == SLOTS and executor.failures == 0
     for a, b in zip(serial, on_cluster, strict=True):
-        _assert_same_plan(a, b)
+        scene.assert_same_plan(a, b)
 
     # The jobs ran in the worker processes, which built one sub-kit each at most for the four
     # slots (the groups' sub-scenarios differ in their UAVs' start points only; none where an
@@ -131,7 +104,7 @@ def test_two_workers_plan_every_slot_as_the_serial_path_does(
     assert all(w["nthreads"] == 1 for w in info["workers"].values())
     assert is_loopback(info["address"]) and info["address"].startswith("tcp://127.0.0.1:")
     assert all(a.startswith("tcp://127.0.0.1:") for a in info["workers"])
-    assert _listening_hosts() == {"127.0.0.1"}
+    assert listening_hosts() == {"127.0.0.1"}
 
 
 @pytest.mark.timeout(60)
@@ -149,7 +122,7 @@ def test_a_scheduler_given_by_its_address_plans_as_the_serial_path(client: Clien
         on_scheduler = _fly(kit, slots=2)
     assert executor.slots == 2 and executor.failures == 0
     for a, b in zip(serial, on_scheduler, strict=True):
-        _assert_same_plan(a, b)
+        scene.assert_same_plan(a, b)
 
 
 @pytest.mark.timeout(60)
@@ -165,7 +138,7 @@ def test_an_operators_new_rate_reaches_the_workers_sub_kits(client: Client) -> N
     faster = s.with_changes(r_th=3 * s.r_th)
     plan = plan_slot(inp, kit.renewed(faster), "horizon")
     assert plan.report.fallback == ""
-    _assert_same_plan(plan, plan_slot(inp, serial_kit.renewed(faster), "horizon"))
+    scene.assert_same_plan(plan, plan_slot(inp, serial_kit.renewed(faster), "horizon"))
     distance = np.linalg.norm(plan.uav_xy_m - s.bs_xy[plan.bs_of_uav], axis=1)
     assert np.all(rate(plan.bandwidth_share, distance, s.dH, s.rho0, s.B) >= faster.r_th)
 
@@ -212,7 +185,7 @@ def test_a_worker_killed_mid_slot_costs_that_slot_the_per_slot_plan_only(
         inp = scene.next_input(s, slot, plan)
         plan = plan_slot(inp, kit, "horizon")
         assert plan.report.fallback == "", plan.report.reason
-        _assert_same_plan(plan, plan_slot(inp, serial_kit, "horizon"))
+        scene.assert_same_plan(plan, plan_slot(inp, serial_kit, "horizon"))
     assert executor.slots == 3 and executor.failures == 1
 
 
@@ -237,21 +210,7 @@ def test_a_slot_past_its_deadline_flies_the_per_slot_plan(client: Client) -> Non
     assert executor.slots == 1 and executor.failures == 1
 
 
-TWO_TARGETS = {
-    "mission_id": "two-clusters",
-    "timing": {"duration_s": 5},
-    "area": {"size_m": [4500, 2000]},
-    "radio": {"bs_capacity": 3},
-    "base_stations": {"count": 2, "xy_m": [[1000, 300], [3500, 300]]},
-    "uavs": {"start_xy_m": [[800, 900], [1200, 900], [3700, 900], [3300, 900]]},
-    "targets": [
-        {"name": "west", "initial_state": [1000, 1000, 0, 10]},
-        {"name": "east", "initial_state": [3500, 1000, 0, 10]},
-    ],
-    "planner": {"horizon": {"length": 3, "decompose": "targets"}},
-}
-"""The two clusters with both targets in the scene (tracked, not given): `simulate` plans them
-as two groups."""
+TWO_TARGETS = scene.two_targets_config(5)
 
 
 def _trace_slots(path: Path) -> list[dict[str, Any]]:

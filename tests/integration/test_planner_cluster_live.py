@@ -50,7 +50,7 @@ from isac_mission.service.assembly import (
 from isac_mission.service.mission_result import LiveResult
 from isac_mission.types import SlotPlan
 from tests.support import two_clusters as scene
-from tests.support.ports import free_port_block, sitl_ports
+from tests.support.ports import free_port_block, listening_hosts, sitl_ports
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -140,18 +140,6 @@ def _workers() -> list[psutil.Process]:
     ]
 
 
-def _listening_hosts() -> set[str]:
-    """IP addresses of every listening or unconnected inet socket of this process and its
-    children."""
-    me = psutil.Process()
-    hosts: set[str] = set()
-    for proc in [me, *me.children(recursive=True)]:
-        for conn in proc.net_connections(kind="inet"):
-            if conn.status == psutil.CONN_LISTEN or not conn.raddr:
-                hosts.add(conn.laddr.ip)
-    return hosts
-
-
 def _assert_flown(result: LiveResult, s: Scenario) -> list[TracksSlot]:
     """Every slot flown and traced, and every vehicle landed; the slots."""
     slots = result.multi_target_slots
@@ -164,19 +152,9 @@ def _assert_flown(result: LiveResult, s: Scenario) -> list[TracksSlot]:
 
 
 def _assert_same_group_plan(a: SlotPlan, b: SlotPlan) -> None:
-    """A group's plans equal to the bit: positions, shares, BSs, end velocities, the bound and
-    the horizon, and no fallback in either."""
-    np.testing.assert_array_equal(a.uav_xy_m, b.uav_xy_m)
-    np.testing.assert_array_equal(a.bandwidth_share, b.bandwidth_share)
-    np.testing.assert_array_equal(a.bs_of_uav, b.bs_of_uav)
-    assert a.pcrb_trace == b.pcrb_trace
-    assert (a.uav_velocity_mps is None) == (b.uav_velocity_mps is None)
-    if a.uav_velocity_mps is not None and b.uav_velocity_mps is not None:
-        np.testing.assert_array_equal(a.uav_velocity_mps, b.uav_velocity_mps)
-    assert a.horizon is not None and b.horizon is not None
-    np.testing.assert_array_equal(a.horizon.uav_xy_m, b.horizon.uav_xy_m)
-    np.testing.assert_array_equal(a.horizon.bandwidth_share, b.horizon.bandwidth_share)
-    assert a.report.fallback == b.report.fallback == ""
+    """A group's plans equal to the bit (`assert_same_plan`), and no fallback in either."""
+    scene.assert_same_plan(a, b)
+    assert a.report.fallback == ""
 
 
 async def test_a_lockstep_mission_on_two_planner_workers_flies_the_serial_missions_plans(
@@ -203,7 +181,7 @@ async def test_a_lockstep_mission_on_two_planner_workers_flies_the_serial_missio
     def look(o: TracksSlot, _stop: asyncio.Event) -> None:
         if o.slot == 2:
             during["workers"] = _workers()
-            during["hosts"] = _listening_hosts()
+            during["hosts"] = listening_hosts()
 
     opts = _options(s, tmp_path / "cluster", PlannerCluster(workers=2))
     result = await _fly(s, opts, look)

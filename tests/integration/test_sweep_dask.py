@@ -18,6 +18,7 @@ from isac_mission.experiment.sweep.cluster import cluster_addresses, dask_client
 from isac_mission.experiment.sweep.grid import expand_grid, parse_grid
 from isac_mission.experiment.sweep.runs import TaskRow, make_tasks, run_serial
 from isac_mission.experiment.sweep.summary import aggregate
+from tests.support.ports import listening_hosts
 
 ROOT = Path(__file__).resolve().parents[2]
 # Wall-clock solve times differ between runs; everything else must be identical.
@@ -27,17 +28,6 @@ TIMING_FIELDS = {"solve_median_ms"}
 def _numbers(row: Any) -> dict[str, Any]:
     """Every field but the timings and a multi-target run's figures (compared on their own)."""
     return {k: v for k, v in asdict(row).items() if k not in TIMING_FIELDS | {"figures"}}
-
-
-def _listening_hosts() -> set[str]:
-    """IP addresses of every listening / unconnected inet socket of this process and children."""
-    me = psutil.Process()
-    hosts: set[str] = set()
-    for proc in [me, *me.children(recursive=True)]:
-        for conn in proc.net_connections(kind="inet"):
-            if conn.status == psutil.CONN_LISTEN or not conn.raddr:
-                hosts.add(conn.laddr.ip)
-    return hosts
 
 
 def _http_status(url: str) -> int:
@@ -70,7 +60,7 @@ def test_dask_sweep_equals_serial_and_binds_loopback() -> None:
         assert len(info["workers"]) == 2
         assert all(w["nthreads"] == 1 for w in info["workers"].values())
         addresses = cluster_addresses(client)
-        hosts = _listening_hosts()
+        hosts = listening_hosts()
         status_code = _http_status(f"http://127.0.0.1:{info['services']['dashboard']}/status")
         distributed_rows = run_dask(client, tasks, done.append)
         # The work really ran in the worker processes (their pids are not ours).

@@ -7,7 +7,6 @@ the config key."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 import pytest
@@ -30,6 +29,7 @@ from isac_mission.planning.problem import slot_association
 from isac_mission.planning.slot import SlotInput, plan_slot
 from isac_mission.tracking.beliefs import TargetBelief
 from isac_mission.types import SlotPlan
+from tests.support.two_clusters import scenario as _scenario
 
 REACH_M = 75.0
 """A UAV's reach over the horizon in the crafted geometries (3 slots at 25 m/s)."""
@@ -114,27 +114,6 @@ def test_a_target_nearest_to_no_uav_joins_its_nearest_uavs_group() -> None:
 # The two-cluster scenario: two targets SEPARATION_M apart, each with two UAVs 200 m off it and
 # a BS below it, mirror-symmetric about the middle (so the centralized optimum splits the band
 # 1/2 : 1/2 at every horizon slot); the BSs' capacity 3 does not bind (2 UAVs each).
-
-
-def _scenario(separation_m: float = 2500.0, decompose: str = "targets", **planner: Any) -> Scenario:
-    x1, x2 = 1000.0, 1000.0 + separation_m
-    return parse_scenario(
-        {
-            "timing": {"duration_s": 5},
-            "area": {"size_m": [separation_m + 2000.0, 2000.0]},
-            "radio": {"bs_capacity": 3},
-            "base_stations": {"count": 2, "xy_m": [[x1, 300.0], [x2, 300.0]]},
-            "uavs": {
-                "start_xy_m": [[x1 - 200, 900], [x1 + 200, 900], [x2 + 200, 900], [x2 - 200, 900]]
-            },
-            "targets": [{"initial_state": [x1, 1000.0, 0.0, 10.0]}],
-            "planner": {
-                "horizon": {"length": 3, "decompose": decompose, **planner.pop("horizon", {})},
-                **planner,
-            },
-        },
-        f"two clusters {separation_m:g} m apart",
-    )
 
 
 def _input(s: Scenario, separation_m: float = 2500.0) -> SlotInput:

@@ -241,3 +241,17 @@ def free_port_offsets(
                 s.close()
         return offsets
     raise RuntimeError(f"no {count} free port offsets for TCP {tcp} and UDP {udp}")
+
+
+def listening_hosts() -> set[str]:
+    """IP addresses of every listening or unconnected inet socket of this process and its
+    children (psutil)."""
+    import psutil
+
+    me = psutil.Process()
+    hosts: set[str] = set()
+    for proc in [me, *me.children(recursive=True)]:
+        for conn in proc.net_connections(kind="inet"):
+            if conn.status == psutil.CONN_LISTEN or not conn.raddr:
+                hosts.add(conn.laddr.ip)
+    return hosts

@@ -117,3 +117,38 @@ def die_if_flagged(flag: str, index: int, job: GroupJob) -> SlotPlan:
     if job.index == index and Path(flag).exists():
         os._exit(1)
     return solve_on_worker(job)
+
+
+def two_targets_config(duration_s: float) -> dict[str, Any]:
+    """The two clusters as a scenario mapping with both targets in the scene (tracked, not given:
+    `simulate`, `run` and `serve` plan them as two groups), `duration_s` seconds long."""
+    return {
+        "mission_id": "two-clusters",
+        "timing": {"duration_s": duration_s},
+        "area": {"size_m": [4500, 2000]},
+        "radio": {"bs_capacity": 3},
+        "base_stations": {"count": 2, "xy_m": [[1000, 300], [3500, 300]]},
+        "uavs": {"start_xy_m": [[800, 900], [1200, 900], [3700, 900], [3300, 900]]},
+        "targets": [
+            {"name": "west", "initial_state": [1000, 1000, 0, 10]},
+            {"name": "east", "initial_state": [3500, 1000, 0, 10]},
+        ],
+        "planner": {"horizon": {"length": 3, "decompose": "targets"}},
+    }
+
+
+def assert_same_plan(a: SlotPlan, b: SlotPlan) -> None:
+    """Positions, shares, BSs, end velocities, the bound and the horizon: exactly equal, and the
+    same fallback."""
+    np.testing.assert_array_equal(a.uav_xy_m, b.uav_xy_m)
+    np.testing.assert_array_equal(a.bandwidth_share, b.bandwidth_share)
+    np.testing.assert_array_equal(a.bs_of_uav, b.bs_of_uav)
+    assert a.pcrb_trace == b.pcrb_trace
+    assert (a.uav_velocity_mps is None) == (b.uav_velocity_mps is None)
+    if a.uav_velocity_mps is not None and b.uav_velocity_mps is not None:
+        np.testing.assert_array_equal(a.uav_velocity_mps, b.uav_velocity_mps)
+    assert a.horizon is not None and b.horizon is not None
+    np.testing.assert_array_equal(a.horizon.uav_xy_m, b.horizon.uav_xy_m)
+    np.testing.assert_array_equal(a.horizon.bandwidth_share, b.horizon.bandwidth_share)
+    np.testing.assert_array_equal(a.horizon.pcrb_trace, b.horizon.pcrb_trace)
+    assert a.report.fallback == b.report.fallback

@@ -35,20 +35,7 @@ from isac_mission.planning.kit import SolverKit
 from isac_mission.types import SlotPlan
 from tests.support import two_clusters as scene
 
-TWO_TARGETS: dict[str, Any] = {
-    "mission_id": "two-clusters",
-    "timing": {"duration_s": 10},
-    "area": {"size_m": [4500, 2000]},
-    "radio": {"bs_capacity": 3},
-    "base_stations": {"count": 2, "xy_m": [[1000, 300], [3500, 300]]},
-    "uavs": {"start_xy_m": [[800, 900], [1200, 900], [3700, 900], [3300, 900]]},
-    "targets": [
-        {"name": "west", "initial_state": [1000, 1000, 0, 10]},
-        {"name": "east", "initial_state": [3500, 1000, 0, 10]},
-    ],
-    "planner": {"horizon": {"length": 3, "decompose": "targets"}},
-}
-"""Two far-apart groups of two UAVs around two targets, the horizon decomposed by targets."""
+TWO_TARGETS = scene.two_targets_config(10)
 
 
 @pytest.fixture

@@ -11,70 +11,37 @@ scheduler address explicitly.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
-from isac_mission.errors import MissingDependencyError
+from isac_mission import dask_cluster
 from isac_mission.experiment.sweep.runs import SweepTask, TaskRow, run_task
 from isac_mission.quiet import quiet_highs_banner
 
 if TYPE_CHECKING:
     from distributed import Client
 
-LOOPBACK = "127.0.0.1"
-SWEEP_EXTRA = "isac-mission[sweep]"
+LOOPBACK = dask_cluster.LOOPBACK
+SWEEP_EXTRA = dask_cluster.DASK_EXTRA
 
 
 def require_dask() -> None:
     """Raise MissingDependencyError (naming the `sweep` extra) unless dask and distributed import."""
-    try:
-        import dask  # noqa: F401
-        import distributed  # noqa: F401
-    except ImportError as err:
-        raise MissingDependencyError(
-            f"a Dask sweep needs dask and distributed ({err}): install the extra with "
-            f"`pip install '{SWEEP_EXTRA}'`, or run the sweep without Dask (--serial)"
-        ) from None
+    dask_cluster.require_dask("a Dask sweep", "run the sweep without Dask (--serial)")
 
 
 @contextmanager
 def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Client]:
     """A Client of `scheduler` (e.g. tcp://HOST:8786) if given, else of a LocalCluster of
-    `workers` single-threaded worker processes on 127.0.0.1 with the dashboards off.
+    `workers` single-threaded worker processes on 127.0.0.1 with the dashboards off
+    (isac_mission/dask_cluster.py), HiGHS's banner quieted on its workers.
 
     Raises MissingDependencyError if Dask is not installed."""
     require_dask()
-    from distributed import Client, LocalCluster
-
-    if scheduler is not None:
-        with Client(scheduler) as client:  # type: ignore[no-untyped-call]
-            yield client
-        return
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1 for a local cluster (got {workers})")
-    import dask
-
-    # The workers' statistical profiler samples every thread's stack every 10 ms; it costs the
-    # CPU-bound missions several per cent and nobody reads it here. Nannies pass this config on
-    # to the worker processes they start.
-    with dask.config.set({"distributed.worker.profile.enabled": False}):
-        cluster = LocalCluster(  # type: ignore[no-untyped-call]
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            host=LOOPBACK,
-            scheduler_port=0,
-            dashboard_address=None,
-            worker_dashboard_address=None,
-            silence_logs=logging.ERROR,
-            # The scheduler always serves health/metrics over HTTP: keep it on a random loopback
-            # port (not 8787) and without the Bokeh dashboard.
-            scheduler_kwargs={"dashboard": False, "dashboard_address": f"{LOOPBACK}:0"},
-        )
-    with cluster, Client(cluster) as client:  # type: ignore[no-untyped-call]
-        client.run(quiet_highs_banner)
+    with dask_cluster.dask_client(scheduler, workers) as client:
+        if scheduler is None:
+            client.run(quiet_highs_banner)
         yield client
 
 
